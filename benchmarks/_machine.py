@@ -1,0 +1,24 @@
+"""Machine description printed under every benchmark table."""
+
+import os
+import platform
+from datetime import datetime, timezone
+
+
+def machine_line() -> str:
+    """One line: date, CPU model, cores, Python and numpy/scipy versions."""
+    import numpy
+    import scipy
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    now = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    return (f"{now}; {cpu}; {os.cpu_count()} cores; Python {platform.python_version()}; "
+            f"numpy {numpy.__version__}; scipy {scipy.__version__}")

@@ -1,0 +1,1220 @@
+"""Command line interface: parse -> call the library -> print a table or JSON.
+
+Every command accepts ``--json`` (JSON alone on stdout) and shows examples in
+``--help``. Errors the user can fix print one line on stderr and exit with
+status 2; no traceback unless ``DISCHARGELAB_DEBUG=1``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Optional
+
+import click
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+from .errors import DischargelabError
+
+CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
+
+@click.group(context_settings=CONTEXT)
+@click.version_option(package_name="dischargelab")
+def app() -> None:
+    """Turn a battery discharge test into a battery model and a UAV endurance estimate.
+
+    \b
+    Typical use:
+      dischargelab fit discharge.csv --cells 4 -o battery.json
+      dischargelab predict battery.json --current 20 --cutoff 3.0
+      dischargelab curves battery.json --currents 5,10,20 --cutoff 3.0 -o curves.png
+      dischargelab demo
+    """
+
+
+out = Console(highlight=False, soft_wrap=True)
+err = Console(stderr=True, highlight=False, soft_wrap=True)
+
+JSON_HELP = "Print the result as JSON alone on stdout (for scripts)."
+
+
+def print_json(data) -> None:
+    """Write JSON (NaN/inf as null) alone on stdout."""
+    sys.stdout.write(json.dumps(_json_safe(data), indent=2) + "\n")
+
+
+def _json_safe(value):
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def table(title: str, columns: list[str], rows: list[list]) -> Table:
+    """A rich table with right-aligned numeric columns."""
+    t = Table(title=Text(title), title_justify="left")
+    for i, name in enumerate(columns):
+        t.add_column(Text(name), justify="left" if i == 0 else "right")
+    for row in rows:
+        t.add_row(*[Text(str(x)) for x in row])
+    return t
+
+
+def parse_number_list(text: str, what: str) -> list[float]:
+    """Parse ``"1,5,10"`` into floats; raises a one-line error naming the option."""
+    try:
+        values = [float(x) for x in text.replace(";", ",").split(",") if x.strip()]
+    except ValueError:
+        raise DischargelabError(f"{what} must be numbers separated by commas, e.g. 1,5,10; "
+                                f"got {text!r}") from None
+    if not values:
+        raise DischargelabError(f"{what} is empty; give numbers separated by commas, e.g. 1,5,10")
+    return values
+
+
+def parse_assignments(items: list[str], what: str) -> dict[str, str]:
+    """Parse repeated ``NAME=VALUE`` options into a dict."""
+    result = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            raise DischargelabError(f"{what} expects NAME=VALUE, got {item!r}")
+        result[name.strip()] = value.strip()
+    return result
+
+
+# --- core commands: fit, predict, curves, demo, presets ---
+
+PARAMETER_HELP = "E0_V, R_ohm, K_V_per_Ah, A_V, B_per_Ah, C_Ah"
+
+
+def data_options(func):
+    """Options shared by every command that reads measured discharge files."""
+    options = [
+        click.option("--columns", metavar="SPEC",
+                     help="Map columns to canonical names by header name or 0-based index, e.g. "
+                          "time_s=0,current_A=1,voltage_V=2,temperature_C=4 (needed for "
+                          "headerless files with more than two columns)."),
+        click.option("--current", "current", metavar="A[,A...]",
+                     help="Constant discharge current [A] for files without a current column "
+                          "(one value for all files, or one per file)."),
+        click.option("--sign", type=click.Choice(["auto", "positive", "negative"]),
+                     default="auto", show_default=True,
+                     help="Sign of the DISCHARGE current in the file; auto detects and reports it."),
+        click.option("--segment", default="auto", show_default=True, metavar="auto|none|N",
+                     help="Which discharge to keep: auto (the main one), none (all rows) or the "
+                          "N-th segment (counting from 1) of a file holding several."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def load_curves(paths, columns=None, current=None, sign="auto", segment="auto"):
+    """Read files with :func:`dischargelab.io.read_discharge` into fit curves.
+
+    Returns (curves, metas). Raises DischargelabError with one line on bad input.
+    """
+    from .fit import Curve
+    from .io import parse_columns, read_discharge
+
+    paths = list(paths)
+    currents = [None] * len(paths)
+    if current:
+        values = parse_number_list(current, "--current")
+        if len(values) == 1:
+            currents = values * len(paths)
+        elif len(values) == len(paths):
+            currents = values
+        else:
+            raise DischargelabError(f"--current has {len(values)} values for {len(paths)} files; "
+                                    f"give one value or one per file")
+    if segment not in ("auto", "none"):
+        try:
+            segment = int(segment)
+        except ValueError:
+            raise DischargelabError(f"--segment must be auto, none or an integer, "
+                                    f"got {segment!r}") from None
+    column_map = parse_columns(columns) if columns else None
+    curves, metas = [], []
+    for path, amps in zip(paths, currents):
+        data, meta = read_discharge(path, columns=column_map, current_A=amps, sign=sign,
+                                    segment=segment)
+        name = Path(path).stem
+        curves.append(Curve.from_frame(data, meta, name=name))
+        metas.append(meta)
+    return curves, metas
+
+
+def _parse_bounds(items) -> dict:
+    bounds = {}
+    for name, text in parse_assignments(items, "--bound").items():
+        lo, sep, hi = text.partition(":")
+        try:
+            bounds[name] = (float(lo), float(hi))
+        except ValueError:
+            raise DischargelabError(f"--bound expects NAME=LOW:HIGH, e.g. C_Ah=2.5:3.5; "
+                                    f"got {name}={text}") from None
+        if not sep:
+            raise DischargelabError(f"--bound expects NAME=LOW:HIGH, got {name}={text}")
+    return bounds
+
+
+def _parse_fixed(items, e0) -> dict:
+    fixed = {}
+    for name, text in parse_assignments(items, "--fix").items():
+        try:
+            fixed[name] = float(text)
+        except ValueError:
+            raise DischargelabError(f"--fix {name} needs a number, got {text!r}") from None
+    if e0 is not None:
+        fixed["E0_V"] = float(e0)
+    return fixed
+
+
+def _fmt(value, digits=4):
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "n/a"
+    return f"{value:.{digits}g}"
+
+
+def _print_fit(result, battery_path=None):
+    from .model import PARAMETER_NAMES
+
+    rows = []
+    for n in PARAMETER_NAMES:
+        v = result.parameters.as_dict()[n]
+        if n in result.fixed:
+            rows.append([n, _fmt(v, 6), "fixed", ""])
+        else:
+            lo, hi = result.ci95[n]
+            rows.append([n, _fmt(v, 6), _fmt(result.stderr[n], 3), f"[{_fmt(lo)}, {_fmt(hi)}]"])
+    out.print(table(f"Cell model ({result.cells_series}S{result.strings_parallel}P pack, "
+                    f"{len(result.curves)} curve(s), {result.n_samples} samples, "
+                    f"{result.elapsed_s * 1000:.0f} ms)",
+                    ["parameter", "value", "std. error", "95 % interval"], rows))
+    out.print(f"RMSE {result.rmse_V * 1000:.2f} mV per cell "
+              f"({result.rmse_V * result.cells_series * 1000:.1f} mV pack)")
+    if result.paper_mode:
+        for c, fitted in zip(result.curves, result.fit_currents_A):
+            out.print(f"paper mode: fitted current {fitted:.4g} A vs measured "
+                      f"{c.mean_current_A / result.strings_parallel:.4g} A (not a validation)")
+    for note in result.notes:
+        out.print(f"note: {note}", markup=False)
+    for warning in result.warnings:
+        out.print(f"[bold yellow]warning:[/] {warning}")
+    if battery_path:
+        out.print(f"battery file written to {battery_path}")
+
+
+@app.command("fit")
+@click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@data_options
+@click.option("--cells", default=1, show_default=True, type=click.IntRange(1),
+              help="Cells in series in the measured pack (the model is per cell).")
+@click.option("--parallel", default=1, show_default=True, type=click.IntRange(1),
+              help="Strings in parallel in the measured pack.")
+@click.option("--e0", type=float, metavar="V",
+              help="Fix E0 [V per cell] (e.g. read from a low-rate curve).")
+@click.option("--fix", "fix", multiple=True, metavar="NAME=VALUE",
+              help=f"Fix a parameter (repeatable). Names: {PARAMETER_HELP}.")
+@click.option("--bound", "bound", multiple=True, metavar="NAME=LOW:HIGH",
+              help="Override a parameter's bounds (repeatable).")
+@click.option("--paper-mode", is_flag=True,
+              help="Reproduce the paper: E0 given (--e0), current fitted with R, K, A, B, C. "
+                   "Degenerate by construction; prints why.")
+@click.option("--no-rest", is_flag=True,
+              help="Ignore the rest voltage logged before the load step.")
+@click.option("--nominal-capacity", type=float, metavar="AH",
+              help="Nominal cell capacity [Ah] from the datasheet; defines C-rates later "
+                   "(default: the capacity measured in the lowest-rate file).")
+@click.option("--name", default="", help="Label stored in the battery file.")
+@click.option("--chemistry", type=click.Choice(["lipo", "li-ion", "lifepo4"]),
+              help="Chemistry stored in the battery file (sets default cutoffs later).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Write the battery file (JSON) here.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="Save the data-vs-model plot (PNG, SVG or PDF).")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def fit_cmd(data, columns, current, sign, segment, cells, parallel, e0, fix, bound, paper_mode,
+            no_rest, nominal_capacity, name, chemistry, output, plot_path, as_json):
+    """Fit the battery model to one or more discharge files.
+
+    Several files (at different currents) are fitted together with shared
+    parameters: the cure for the E0/R ambiguity of a single constant current.
+
+    \b
+    Examples:
+      dischargelab fit run.csv --cells 4 -o battery.json --plot fit.png
+      dischargelab fit Q30_1C.csv --columns time_s=0,current_A=1,voltage_V=2 -o cell.json
+      dischargelab fit c10.csv c1.csv c4.csv --columns time_s=0,current_A=1,voltage_V=2
+      dischargelab fit 1C_discharge_U.txt --current 2.28 --e0 3.9
+      dischargelab fit zippy.csv --cells 2 --e0 3.85 --paper-mode
+    """
+    from .fit import fit_battery
+
+    curves, metas = load_curves(data, columns, current, sign, segment)
+    fixed = _parse_fixed(fix, e0)
+    result = fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
+                         bounds=_parse_bounds(bound), paper_mode=paper_mode,
+                         use_rest=not no_rest)
+    battery = result.battery
+    label = name or ", ".join(c.name for c in curves)
+    from dataclasses import replace as _replace
+
+    extra = dict(battery.extra)
+    if nominal_capacity is not None:
+        if not nominal_capacity > 0:
+            raise DischargelabError("--nominal-capacity must be a positive number of Ah")
+        extra["nominal_capacity_Ah"] = float(nominal_capacity)
+    battery = _replace(battery, name=label, chemistry=chemistry, extra=extra)
+    if output:
+        battery.save(output)
+    if plot_path:
+        from .plot import save
+
+        save(result.plot(), plot_path)
+    if as_json:
+        doc = result.to_dict()
+        doc["name"] = label
+        if output:
+            doc["battery_file"] = str(output)
+        print_json(doc)
+        return
+    for meta in metas:
+        summary = meta.get("summary")
+        if summary:
+            out.print(f"{meta.get('source', '')}: {summary}", markup=False)
+    _print_fit(result, output)
+    if not output:
+        out.print("(not saved: add -o battery.json to keep this model)")
+
+
+def _cutoff_options(func):
+    func = click.option("--cutoff-pack", type=float, metavar="V",
+                        help="Cutoff voltage of the whole pack [V] (instead of --cutoff).")(func)
+    func = click.option("--cutoff", type=float, metavar="V",
+                        help="Cutoff voltage per cell [V], e.g. 3.0 for LiPo, 2.5 for Li-ion.")(func)
+    func = click.option("--parallel", type=click.IntRange(1), default=None,
+                        help="Strings in parallel (default: as in the battery file).")(func)
+    func = click.option("--cells", type=click.IntRange(1), default=None,
+                        help="Cells in series (default: as in the battery file).")(func)
+    return func
+
+
+def _battery_and_cutoff(battery_arg, cells, parallel, cutoff, cutoff_pack):
+    from .model import load_battery
+
+    battery = load_battery(battery_arg).with_pack(cells, parallel)
+    if cutoff is None and cutoff_pack is None:
+        raise DischargelabError("give a cutoff: --cutoff V per cell (e.g. 3.0 LiPo, 2.5 Li-ion) "
+                                "or --cutoff-pack V")
+    if cutoff is not None and cutoff_pack is not None:
+        raise DischargelabError("give either --cutoff (per cell) or --cutoff-pack, not both")
+    return battery, {"cutoff_cell_V": cutoff, "cutoff_pack_V": cutoff_pack}
+
+
+@app.command("predict")
+@click.argument("battery")
+@click.option("--current", type=float, metavar="A", help="Constant pack current [A].")
+@click.option("--c-rate", type=float, metavar="X",
+              help="Constant current as a C-rate of the rated capacity (nominal, or measured "
+                   "in the lowest-rate fitted curve).")
+@click.option("--power", type=float, metavar="W", help="Constant pack power [W].")
+@_cutoff_options
+@click.option("--soc", type=click.FloatRange(0, 100, min_open=True), default=100.0,
+              show_default=True, help="Initial state of charge [%] of the model capacity.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="Save the voltage curve (PNG, SVG or PDF).")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
+              help="Save the simulated time series as CSV.")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff_pack, soc,
+                plot_path, csv_path, as_json):
+    """Predict a constant-current or constant-power discharge until the cutoff.
+
+    BATTERY is a battery file from `fit` or a preset name (see `presets`).
+
+    \b
+    Examples:
+      dischargelab predict battery.json --current 20 --cutoff 3.0
+      dischargelab predict battery.json --c-rate 2 --cutoff 2.5 --json
+      dischargelab predict battery.json --power 250 --cells 4 --cutoff 3.3 --plot p.png
+      dischargelab predict hacker-4100-4s-lifepo4 --current 50 --cutoff-pack 10
+    """
+    from .simulate import simulate_current, simulate_power
+
+    chosen = [x is not None for x in (current, c_rate, power)]
+    if sum(chosen) != 1:
+        raise DischargelabError("give exactly one load: --current A, --c-rate X or --power W")
+    bat, cut = _battery_and_cutoff(battery, cells, parallel, cutoff, cutoff_pack)
+    q0 = (1.0 - soc / 100.0) * bat.capacity_Ah
+    if power is not None:
+        result = simulate_power(bat, power, initial_charge_Ah=q0, **cut)
+    else:
+        amps = current if current is not None else c_rate * bat.rated_capacity_Ah
+        result = simulate_current(bat, amps, initial_charge_Ah=q0, **cut)
+    if plot_path:
+        from .plot import save
+
+        ax = result.plot()
+        ax.axhline(result.cutoff_pack_V, color="0.4", ls="--", lw=0.8)
+        ax.set_title(f"{result.steps[0].describe()}: {result.time_to_cutoff_s / 60:.1f} min to "
+                     f"{result.cutoff_pack_V:.2f} V", fontsize=10)
+        save(ax, plot_path)
+    if csv_path:
+        result.to_pandas().to_csv(csv_path, index=False)
+    summary = result.to_dict()
+    if as_json:
+        print_json(summary)
+        return
+    load = (f"{summary['current_A']:.4g} A" if "current_A" in summary
+            else f"{summary['power_W']:.4g} W")
+    rows = [["load", load],
+            ["cutoff", f"{summary['cutoff_V']:.3f} V/cell ({summary['cutoff_pack_V']:.2f} V pack)"],
+            ["time to cutoff", f"{summary['time_to_cutoff_s']:.0f} s "
+                               f"({summary['time_to_cutoff_s'] / 60:.2f} min)"],
+            ["charge delivered", f"{summary['capacity_Ah']:.4g} Ah"],
+            ["energy delivered", f"{summary['energy_Wh']:.4g} Wh"],
+            ["ended by", summary["ended_by"]]]
+    out.print(table(f"Prediction ({bat.cells_series}S{bat.strings_parallel}P)",
+                    ["quantity", "value"], rows))
+
+
+@app.command("curves")
+@click.argument("battery")
+@click.option("--currents", metavar="A,A,...", help="Pack currents [A], e.g. 1,5,10.")
+@click.option("--c-rates", metavar="X,X,...", help="C-rates, e.g. 0.5,1,2,4.")
+@click.option("--powers", metavar="W,W,...", help="Pack powers [W], e.g. 50,100,200.")
+@_cutoff_options
+@click.option("--x", "x_axis", type=click.Choice(["charge", "time"]), default="charge",
+              show_default=True, help="Horizontal axis.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Save the plot (PNG, SVG or PDF).")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cutoff_pack, x_axis,
+               output, as_json):
+    """Simulate a family of discharges (like the paper's Figs 5, 7 and 10).
+
+    \b
+    Examples:
+      dischargelab curves battery.json --currents 1,5,10 --cutoff 3.0 -o curves.png
+      dischargelab curves battery.json --c-rates 0.5,1,2,4 --cutoff 2.5 --x time -o c.png
+      dischargelab curves battery.json --powers 100,200,400 --cutoff 3.3 --json
+    """
+    from .simulate import curve_family
+
+    given = [x for x in (currents, c_rates, powers) if x]
+    if len(given) != 1:
+        raise DischargelabError("give exactly one of --currents, --c-rates or --powers")
+    bat, cut = _battery_and_cutoff(battery, cells, parallel, cutoff, cutoff_pack)
+    if powers:
+        results = curve_family(bat, powers_W=parse_number_list(powers, "--powers"), **cut)
+    else:
+        values = parse_number_list(currents or c_rates, "--currents" if currents else "--c-rates")
+        if c_rates:
+            values = [x * bat.rated_capacity_Ah for x in values]
+        results = curve_family(bat, values, **cut)
+    if output:
+        from .plot import plot_family, save
+
+        save(plot_family(results, x=x_axis), output)
+    rows = [r.to_dict() for r in results]
+    if as_json:
+        print_json(rows)
+        return
+    unit = "W" if powers else "A"
+    key = "power_W" if powers else "current_A"
+    out.print(table(f"Discharges to {rows[0]['cutoff_V']:.3f} V/cell "
+                    f"({bat.cells_series}S{bat.strings_parallel}P)",
+                    [f"load [{unit}]", "time [min]", "charge [Ah]", "energy [Wh]", "ended by"],
+                    [[f"{r[key]:.4g}", f"{r['time_to_cutoff_s'] / 60:.2f}",
+                      f"{r['capacity_Ah']:.4g}", f"{r['energy_Wh']:.4g}", r["ended_by"]]
+                     for r in rows]))
+    if output:
+        out.print(f"plot written to {output}")
+
+
+@app.command("presets")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def presets_cmd(as_json):
+    """List the built-in battery presets (the paper's Tables 2-4, E0 assumed).
+
+    \b
+    Example:
+      dischargelab predict zippy-1100-2s --current 1.1 --cutoff 3.0
+    """
+    from .model import preset_table
+
+    rows = preset_table()
+    if as_json:
+        print_json(rows)
+        return
+    out.print(table("Presets (per-cell coefficients; E0 assumed = nominal cell voltage)",
+                    ["preset", "pack", "E0 [V]", "R [ohm]", "K [V/Ah]", "A [V]", "B [1/Ah]",
+                     "C [Ah]"],
+                    [[r["preset"], f"{r['cells_series']}S {r['chemistry']}", r["E0_V"],
+                      r["R_ohm"], r["K_V_per_Ah"], r["A_V"], r["B_per_Ah"], r["C_Ah"]]
+                     for r in rows]))
+
+
+@app.command("demo")
+@click.option("--out", "out_dir", default="demo-out", show_default=True,
+              type=click.Path(file_okay=False), help="Folder for the plots and battery files.")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def demo_cmd(out_dir, as_json):
+    """Run the whole method on the bundled Samsung 30Q data (C/10, 1C, 4C).
+
+    Fits the cell on 1C alone and on all three rates together, predicts each
+    measured rate, and writes battery files and plots to --out.
+
+    \b
+    Example:
+      dischargelab demo --out demo-out
+    """
+    from .demo import run_demo
+
+    summary = run_demo(Path(out_dir), console=None if as_json else out)
+    if as_json:
+        print_json(summary)
+
+
+def main(argv: Optional[list[str]] = None) -> None:
+    """Entry point of the ``dischargelab`` command."""
+    debug = os.environ.get("DISCHARGELAB_DEBUG") == "1"
+    try:
+        code = app.main(args=argv, prog_name="dischargelab", standalone_mode=False)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(exc.exit_code)
+    except click.exceptions.Abort:
+        err.print("aborted")
+        sys.exit(130)
+    except KeyboardInterrupt:
+        err.print("interrupted")
+        sys.exit(130)
+    except BrokenPipeError:
+        sys.exit(1)
+    except DischargelabError as exc:
+        if debug:
+            raise
+        err.print(f"error: {exc}", markup=False)
+        sys.exit(2)
+    except (OSError, ValueError) as exc:
+        if debug:
+            raise
+        err.print(f"error: {exc}", markup=False)
+        sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+# --- calibration and load commands ---
+
+def _read_pairs_interactively() -> list[tuple[float, float]]:
+    """Ask for REAL,MEASURED pairs on stdin until an empty line or end of input."""
+    from .acquire.calibration import parse_pair
+
+    err.print("Type one point per line as MULTIMETER_V,LOGGER_V (e.g. 11.88,2.71); "
+              "an empty line ends.", markup=False)
+    pairs: list[tuple[float, float]] = []
+    while True:
+        try:
+            text = click.prompt(f"point {len(pairs) + 1}", default="", show_default=False,
+                                err=True)
+        except click.exceptions.Abort:
+            break
+        if not text.strip():
+            break
+        try:
+            pairs.append(parse_pair(text, len(pairs) + 1))
+        except DischargelabError as exc:
+            err.print(f"  {exc}; try again", markup=False)
+    return pairs
+
+
+@app.command("calibrate")
+@click.option("--pair", "pairs", multiple=True, metavar="REAL,MEASURED",
+              help="Multimeter reading and logger reading of one voltage [V] (repeat).")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
+              help="CSV of points: two columns (multimeter, logger) or named real_V,measured_V.")
+@click.option("--divider", default="", metavar="NAME",
+              help="Name of the divider (stored; selects rows of a CSV 'divider' column).")
+@click.option("--meter-percent", default=0.8, show_default=True, type=click.FloatRange(0),
+              help="Multimeter accuracy, percent of reading (paper: Minipa ET-1002).")
+@click.option("--meter-digits", default=5, show_default=True, type=click.IntRange(0),
+              help="Multimeter accuracy, digits.")
+@click.option("--meter-resolution", default=0.01, show_default=True,
+              type=click.FloatRange(0, min_open=True), metavar="V",
+              help="Multimeter resolution on the range used [V].")
+@click.option("--adc-bits", default=10, show_default=True, type=click.IntRange(1, 32),
+              help="Logger ADC bits (Arduino Uno: 10).")
+@click.option("--adc-reference", default=5.0, show_default=True,
+              type=click.FloatRange(0, min_open=True), metavar="V",
+              help="Logger ADC reference [V].")
+@click.option("--offset", type=click.Choice(["auto", "yes", "no"]), default="auto",
+              show_default=True, help="Fit an offset: only if significant (auto), always, never.")
+@click.option("--alpha", default=0.05, show_default=True, type=click.FloatRange(0, 1,
+              min_open=True, max_open=True), help="Significance level of the offset tests.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Write the calibration file (JSON) for 'acquire --calibration'.")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def calibrate_cmd(pairs, csv_path, divider, meter_percent, meter_digits, meter_resolution,
+                  adc_bits, adc_reference, offset, alpha, output, as_json):
+    """Find the logger's scale factor Ke = V_real / V_measured (paper eq. 7).
+
+    Give pairs of (multimeter reading, logger reading) taken with packs at
+    several voltages. The command fits Ke through the origin, adds an offset only
+    if it is significant (F-test and a chi-square test against the meter's stated
+    accuracy), lists the residual of every point, flags points outside the linear
+    range of the front end and prints the voltage resolution (ADC step x Ke).
+
+    \b
+    Examples:
+      dischargelab calibrate --pair 15.33,3.51 --pair 13.16,3.01 --pair 11.88,2.71 \\
+          --pair 11.26,2.57 --pair 7.67,1.74 --divider 3.3k -o cal.json
+      dischargelab calibrate --csv points.csv --divider 2.7k --json
+      dischargelab calibrate -o cal.json          (type the points at the prompt)
+      dischargelab acquire --calibration cal.json ...
+    """
+    from .acquire.calibration import (MeterAccuracy, fit_calibration, parse_pair,
+                                      read_points_csv)
+
+    if csv_path and pairs:
+        raise DischargelabError("give the points either with --pair or with --csv, not both")
+    if csv_path:
+        real, measured = read_points_csv(csv_path, divider or None)
+    elif pairs:
+        parsed = [parse_pair(text, i) for i, text in enumerate(pairs, start=1)]
+        real, measured = [p[0] for p in parsed], [p[1] for p in parsed]
+    else:
+        parsed = _read_pairs_interactively()
+        if not parsed:
+            raise DischargelabError("no calibration points given; use --pair REAL,MEASURED, "
+                                    "--csv FILE or type them at the prompt")
+        real, measured = [p[0] for p in parsed], [p[1] for p in parsed]
+    meter = MeterAccuracy(meter_percent, meter_digits, meter_resolution)
+    result = fit_calibration(real, measured, divider=divider, meter=meter, adc_bits=adc_bits,
+                             adc_reference_V=adc_reference, alpha=alpha, offset=offset)
+    if output:
+        result.calibration.save(output)
+    if as_json:
+        data = result.to_dict()
+        data["output"] = output
+        print_json(data)
+        return
+    rows = [[f"{p.real_V:g}", f"{p.measured_V:g}", f"{p.ke:.4f}", f"{p.predicted_V:.3f}",
+             f"{p.residual_V * 1000:+.0f}",
+             "" if math.isnan(p.loo_residual_V) else f"{p.loo_residual_V * 1000:+.0f}",
+             f"{p.bound_V * 1000:.0f}", p.status] for p in result.points]
+    title = f"Calibration points{' (' + divider + ')' if divider else ''}"
+    out.print(table(title, ["meter V", "logger V", "Ke", "fit V", "resid mV", "LOO mV",
+                            "bound mV", "status"], rows))
+    out.print(result.report(), markup=False)
+    if output:
+        out.print(f"calibration written to {output}; use it with: dischargelab acquire "
+                  f"--calibration {output}", markup=False)
+
+
+# --- acquisition commands ---
+
+_ACQ_STATUS_HELP = ("exit status: 0 stopped by the user or --duration, 3 cutoff reached, "
+                    "4 over-temperature, 5 link lost (--give-up-after), 6 internal error, "
+                    "2 bad input")
+
+
+def _source_choices() -> list[str]:
+    from .acquire.sources import SOURCE_KINDS
+
+    return list(SOURCE_KINDS)
+
+
+def _acquire_summary_rows(result) -> list[list]:
+    s = result.summary
+
+    def num(key, fmt):
+        value = s.get(key)
+        return "-" if value is None else format(value, fmt)
+
+    rows = [["ended by", result.ended_by], ["message", result.message or "-"],
+            ["samples", s.get("samples", 0)], ["rows in file", s.get("rows_written", 0)],
+            ["test time [s]", num("duration_s", ".1f")],
+            ["first voltage [V]", num("first_voltage_V", ".3f")],
+            ["last voltage [V]", num("last_voltage_V", ".3f")],
+            ["min voltage [V]", num("min_voltage_V", ".3f")],
+            ["charge [Ah]", num("charge_Ah", ".4f")], ["energy [Wh]", num("energy_Wh", ".3f")]]
+    for key in ("frames_ok", "frames_lost", "frames_corrupt", "reconnects"):
+        if key in result.stats:
+            rows.append([key.replace("_", " "), result.stats[key]])
+    rows.append(["data file", str(result.out)])
+    return rows
+
+
+def _report_acquisition(result, as_json: bool) -> None:
+    if result.ended_by in ("cutoff", "over-temperature", "link-lost"):
+        err.print(f"\a\n*** {result.message or result.ended_by} ***\n*** load switched off, "
+                  f"test stopped; event recorded in {result.out} ***", style="bold red",
+                  markup=False)
+    if result.error:
+        err.print(f"error during the test: {result.error}", markup=False)
+    if as_json:
+        print_json(result.to_dict())
+    else:
+        out.print(table("Acquisition summary", ["", "value"], _acquire_summary_rows(result)))
+
+
+@app.command("acquire", epilog=_ACQ_STATUS_HELP)
+@click.option("--port", required=True, metavar="PORT",
+              help="Serial port of the logger (/dev/ttyACM0, COM3, a virtual device's path).")
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
+              help="Log file to create (dischargelab log CSV); never overwritten without --force.")
+@click.option("--source", "source_kind", default="arduino", show_default=True,
+              type=click.Choice(_source_choices()), help="Kind of instrument on --port.")
+@click.option("--cells", type=click.IntRange(1, 24), metavar="N",
+              help="Cells in series (default: inferred from the first voltage, with a warning).")
+@click.option("--chemistry", type=click.Choice(["lipo", "li-ion", "lifepo4"]), default="lipo",
+              show_default=True, help="Sets the per-cell cutoff (3.0 / 2.5 / 2.5 V).")
+@click.option("--cutoff-cell", type=click.FloatRange(0.5, 4.5), metavar="V",
+              help="Per-cell cutoff voltage [V], overriding the chemistry preset.")
+@click.option("--max-temp", type=float, default=60.0, show_default=True, metavar="C",
+              help="Over-temperature limit [degC] (needs a temperature sensor).")
+@click.option("--debounce", type=click.IntRange(1, 1000), default=3, show_default=True,
+              metavar="N", help="Consecutive samples beyond a limit before it trips.")
+@click.option("--rate", "rate_Hz", type=click.FloatRange(min=0.0003, min_open=False),
+              default=1.0, show_default=True, metavar="HZ", help="Sample rate [Hz].")
+@click.option("--calibration", "calibration_path", type=click.Path(dir_okay=False),
+              help="Calibration file from 'dischargelab calibrate' (Ke and offset).")
+@click.option("--ke", type=click.FloatRange(min=0, min_open=True), metavar="X",
+              help="Divider gain Ke = V_real / V_measured (paper eq. 7; 4.38 for its 3.3 kOhm "
+                   "divider).")
+@click.option("--current", "current_A", type=click.FloatRange(min=0, min_open=True),
+              metavar="A", help="Known constant discharge current [A] (for Ah and Wh; the "
+                                "EBC load's set current).")
+@click.option("--current-sensor", metavar="NAME",
+              help="Current sensor on A1: acs712-5a, acs712-20a, acs712-30a or "
+                   "shunt:V_PER_A[:ZERO_V].")
+@click.option("--thermistor", is_flag=True,
+              help="10 kOhm NTC (B 3950) on A2 with a 10 kOhm resistor to 5 V.")
+@click.option("--switch-load", is_flag=True,
+              help="Close the load relay (pin D7) at start; it is opened at any end.")
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0, min_open=True),
+              metavar="S", help="Stop after this much test time [s].")
+@click.option("--plot", is_flag=True, help="Also open a live plot window (needs a display).")
+@click.option("--live/--no-live", default=True, show_default=True,
+              help="Terminal panel; --no-live prints a line every --every seconds.")
+@click.option("--quiet", is_flag=True, help="Same as --no-live.")
+@click.option("--every", "every_s", type=click.FloatRange(min=0.1), default=10.0,
+              show_default=True, metavar="S", help="Seconds between lines without the panel.")
+@click.option("--force", is_flag=True, help="Overwrite an existing --out file.")
+@click.option("--logview", "logview_path", type=click.Path(dir_okay=False), metavar="FILE",
+              help="Also write LogView OpenFormat lines to FILE (or a serial port).")
+@click.option("--baud", type=click.IntRange(1200), metavar="BAUD",
+              help="Serial baud rate (default: the source's own, 115200 for the Arduino).")
+@click.option("--give-up-after", "give_up_s", type=click.FloatRange(min=0, min_open=True),
+              metavar="S", help="End the test if the link stays down this long [s] "
+                                "(default: keep reconnecting until stopped).")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_temp, debounce,
+                rate_Hz, calibration_path, ke, current_A, current_sensor, thermistor,
+                switch_load, duration_s, plot, live, quiet, every_s, force, logview_path, baud,
+                give_up_s, as_json):
+    """Log a discharge test from a serial instrument, with live view and safety cutoff.
+
+    The producer/consumer program of the paper (section 3.2): samples are
+    calibrated, written to a crash-safe log file (fsync every 0.5 s), shown live
+    and checked against the cutoff; on a cutoff the load is switched off, the
+    event is recorded and the command exits with status 3. Ctrl-C stops cleanly.
+
+    \b
+    Examples:
+      dischargelab acquire --port /dev/ttyACM0 --out run.csv --cells 3 --ke 4.38 --current 2
+      dischargelab acquire --port COM3 --out run.csv --calibration cal.json --rate 2 --plot
+      dischargelab acquire --port /dev/ttyACM0 --out run.csv --ke 4.38 --current-sensor \\
+          acs712-20a --thermistor --chemistry lifepo4 --cells 4 --quiet --every 30
+      dischargelab acquire --source ebc-a20 --port /dev/ttyUSB0 --out run.csv --cells 2 \\
+          --current 1.7
+    """
+    from .acquire.session import AcquireSettings, prepare_acquisition
+    from .acquire.sensors import Thermistor, current_sensor as make_current_sensor
+
+    if calibration_path and ke is not None:
+        raise DischargelabError("give either --calibration or --ke, not both")
+    calibration = None
+    if calibration_path:
+        from .acquire.calibration import load_calibration
+
+        calibration = load_calibration(calibration_path)
+    elif ke is not None:
+        from .acquire.calibration import Calibration
+
+        calibration = Calibration(gain=ke)
+    if logview_path:
+        from importlib.util import find_spec
+
+        if find_spec("dischargelab.acquire.logview") is None:
+            raise DischargelabError("--logview is not available in this installation")
+    settings = AcquireSettings(
+        port=port, out=Path(out_path), source=source_kind, cells=cells, chemistry=chemistry,
+        cutoff_cell_V=cutoff_cell, max_temperature_C=max_temp, debounce_samples=debounce,
+        rate_Hz=rate_Hz, calibration=calibration, current_A=current_A,
+        current_sensor=make_current_sensor(current_sensor) if current_sensor else None,
+        thermistor=Thermistor() if thermistor else None, baudrate=baud,
+        switch_load=switch_load, duration_s=duration_s, force=force, logview=logview_path,
+        give_up_after_s=give_up_s)
+    acquisition = prepare_acquisition(settings)
+    view = "live" if live and not quiet and not as_json and err.is_terminal else "lines"
+    console = err if as_json else out
+    result = acquisition.run(view=view, console=console, every_s=every_s, plot=plot)
+    _report_acquisition(result, as_json)
+    sys.exit(result.exit_status)
+
+
+@app.command("virtual-device")
+@click.option("--battery", default="zippy-1100-2s", show_default=True, metavar="PRESET|FILE",
+              help="Battery preset or battery file driving the simulated pack.")
+@click.option("--cells", type=click.IntRange(1, 24), metavar="N",
+              help="Cells in series (default: the battery's).")
+@click.option("--current", "current_A", type=click.FloatRange(min=0), metavar="A",
+              help="Load current [A] (default 1C).")
+@click.option("--rate", "rate_Hz", type=click.FloatRange(min=0.0003), default=1.0,
+              show_default=True, metavar="HZ", help="Sample rate at power-up (the host sets it).")
+@click.option("--speed", type=click.FloatRange(min=0, min_open=True), default=1.0,
+              show_default=True, metavar="X", help="Battery seconds per wall second.")
+@click.option("--ke", "divider_gain", type=click.FloatRange(min=0, min_open=True), default=4.38,
+              show_default=True, metavar="X", help="Divider gain of the simulated front end.")
+@click.option("--noise-mV", "noise_mV", type=click.FloatRange(min=0), default=2.0,
+              show_default=True, metavar="MV", help="RMS noise at the ADC pin [mV].")
+@click.option("--drop-bytes", type=click.FloatRange(0, 1, max_open=True), default=0.0,
+              show_default=True, metavar="P", help="Probability of losing each sample byte.")
+@click.option("--corrupt", type=click.FloatRange(0, 1), default=0.0, show_default=True,
+              metavar="P", help="Probability of flipping 1-3 bits in a sample frame.")
+@click.option("--disconnect-after", type=click.FloatRange(min=0), metavar="S",
+              help="Simulate an unplugged cable this many seconds after START.")
+@click.option("--disconnect-for", type=click.FloatRange(min=0), default=2.0, show_default=True,
+              metavar="S", help="How long the disconnect lasts.")
+@click.option("--disconnect-mode", type=click.Choice(["close", "silent"]), default="close",
+              show_default=True, help="close: the port vanishes and returns reset; silent: the "
+                                      "board stops answering.")
+@click.option("--baud", type=click.IntRange(min=0), default=0, show_default=True, metavar="BAUD",
+              help="Pace output like a UART at this baud rate (0 = unpaced).")
+@click.option("--relay", is_flag=True, help="Model a load relay switched by the host.")
+@click.option("--link", type=click.Path(dir_okay=False), metavar="PATH",
+              help="Create the port symlink here (default: a temporary directory).")
+@click.option("--record", type=click.Path(dir_okay=False), metavar="FILE",
+              help="Write every produced frame and its fate to this CSV.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Noise and fault seed.")
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0, min_open=True),
+              metavar="S", help="Exit after this many wall seconds (default: until Ctrl-C).")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def virtual_device_cmd(battery, cells, current_A, rate_Hz, speed, divider_gain, noise_mV,
+                       drop_bytes, corrupt, disconnect_after, disconnect_for, disconnect_mode,
+                       baud, relay, link, record, seed, duration_s, as_json):
+    """Run a virtual Arduino logger on a pseudo-terminal, driven by the battery model.
+
+    Prints the port path, then answers the host like the firmware until Ctrl-C.
+
+    \b
+    Examples:
+      dischargelab virtual-device --battery zippy-1100-2s --speed 60
+      dischargelab virtual-device --link /tmp/ttyDLAB --corrupt 0.01 --drop-bytes 0.001
+      dischargelab virtual-device --disconnect-after 10 --disconnect-for 3 --record sent.csv
+    and in another terminal:
+      dischargelab acquire --port /tmp/ttyDLAB --out run.csv --ke 4.38 --current 1.1
+    """
+    import signal
+    import time as _time
+
+    from .acquire.virtual_device import VirtualDevice
+
+    device = VirtualDevice(battery, cells_series=cells, current_A=current_A, rate_Hz=rate_Hz,
+                           speed=speed, divider_gain=divider_gain, noise_mV=noise_mV,
+                           drop_bytes=drop_bytes, corrupt=corrupt,
+                           disconnect_after_s=disconnect_after, disconnect_for_s=disconnect_for,
+                           disconnect_mode=disconnect_mode, baudrate=baud or None, seed=seed,
+                           link=link, record=record, relay=relay)
+    port = device.start()
+    info = {"port": port, "battery": device.battery.name, "cells_series":
+            device.battery.cells_series, "current_A": device.current_A, "speed": speed,
+            "divider_gain": divider_gain}
+    if as_json:
+        print_json(info)
+    else:
+        out.print(port, markup=False)
+        err.print(f"virtual logger: {device.battery.name} ({device.battery.cells_series}S), "
+                  f"{device.current_A:g} A, x{speed:g}, Ke {divider_gain:g}; "
+                  f"connect with: dischargelab acquire --port {port} --ke {divider_gain:g} "
+                  f"--current {device.current_A:g} --out run.csv   (Ctrl-C stops)",
+                  markup=False)
+    sys.stdout.flush()
+
+    def _term(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _term)
+    end = None if duration_s is None else _time.monotonic() + duration_s
+    try:
+        while end is None or _time.monotonic() < end:
+            _time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        device.stop()
+    err.print(f"virtual logger stopped: {device.counts}", markup=False)
+
+
+@app.command("demo-acquire")
+@click.option("--out", "out_dir", default="demo-out", show_default=True,
+              type=click.Path(file_okay=False), help="Folder for the log, record and plot.")
+@click.option("--battery", default="nanotech-1700-2s", show_default=True, metavar="PRESET|FILE",
+              help="Battery driving the virtual logger.")
+@click.option("--seconds", "wall_seconds", type=click.FloatRange(min=5), default=45.0,
+              show_default=True, metavar="S", help="Wall-clock length of the discharge.")
+@click.option("--seed", type=int, default=1, show_default=True, help="Noise seed.")
+@click.option("--live/--no-live", default=True, show_default=True, help="Terminal panel.")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def demo_acquire_cmd(out_dir, battery, wall_seconds, seed, live, as_json):
+    """A complete simulated test: virtual logger -> acquisition -> cutoff -> fit.
+
+    A preset pack is discharged at 1C by a virtual logger on a pseudo-terminal
+    (time compressed to about --seconds), logged through the real serial path
+    until the cutoff trips, and the logged curve is fitted; the fitted
+    coefficients are printed next to the true ones.
+
+    \b
+    Examples:
+      dischargelab demo-acquire
+      dischargelab demo-acquire --battery zippy-1100-2s --seconds 30 --out /tmp/demo
+    """
+    from .acquire.demo import run_acquire_demo
+
+    view = "live" if live and not as_json and err.is_terminal else "lines"
+    summary = run_acquire_demo(out_dir, battery=battery, wall_seconds=wall_seconds, seed=seed,
+                               view=view, console=err if as_json else out)
+    if as_json:
+        print_json(summary)
+        return
+    out.print(f"ended by {summary['ended_by']}: {summary['message']}", markup=False)
+    rows = [[r["parameter"], f"{r['true']:.5g}", f"{r['fitted']:.5g}",
+             "fixed" if r["fixed"] else ("-" if r["stderr"] is None else f"{r['stderr']:.2g}")]
+            for r in summary["parameters"]]
+    rows.append(["E0 - R*i (cell)", f"{summary['E0_minus_Ri_true_V']:.5g}",
+                 f"{summary['E0_minus_Ri_fitted_V']:.5g}", ""])
+    out.print(table(f"Fitted vs true coefficients ({summary['battery']}, per cell)",
+                    ["parameter", "true", "fitted", "stderr"], rows))
+    out.print(f"fit RMSE {summary['rmse_V'] * 1000:.1f} mV per cell; logged "
+              f"{summary['samples']} samples, lost {summary['stats'].get('frames_lost', 0)}, "
+              f"corrupt {summary['stats'].get('frames_corrupt', 0)}", markup=False)
+    for w in summary["warnings"]:
+        out.print(f"warning: {w}", markup=False)
+    out.print(f"files: {summary['log']}, {summary['device_record']}, {summary['plot']}",
+              markup=False)
+
+
+# --- mission, validation and report commands ---
+
+
+def _duration_text(seconds) -> str:
+    if seconds is None or not math.isfinite(seconds):
+        return "-"
+    sign = "-" if seconds < 0 else ""
+    minutes, secs = divmod(abs(float(seconds)), 60.0)
+    return f"{sign}{int(minutes)} min {secs:04.1f} s"
+
+
+def _progress_callback(status, what: str):
+    def update(done, total):
+        status.update(f"{what}: {done}/{total}")
+    return update
+
+
+def _expand_paths(items) -> list[str]:
+    """Paths, with shell-style patterns expanded (quoted '*.csv' also works on Windows)."""
+    import glob
+
+    paths = []
+    for item in items:
+        matches = sorted(glob.glob(item)) if any(c in item for c in "*?[") else []
+        if any(c in item for c in "*?[") and not matches:
+            raise DischargelabError(f"no file matches {item!r}")
+        paths.extend(matches or [item])
+    return paths
+
+
+def _validation_cases(battery, paths, cutoff, columns, current, sign, segment, status=None):
+    from .io import parse_columns, read_discharge
+    from .validate import compare_discharge
+
+    paths = _expand_paths(paths)
+    currents = [None] * len(paths)
+    if current:
+        values = parse_number_list(current, "--current")
+        if len(values) == 1:
+            currents = values * len(paths)
+        elif len(values) == len(paths):
+            currents = values
+        else:
+            raise DischargelabError(f"--current has {len(values)} values for {len(paths)} files; "
+                                    f"give one value or one per file")
+    if segment not in ("auto", "none"):
+        try:
+            segment = int(segment)
+        except ValueError:
+            raise DischargelabError(f"--segment must be auto, none or an integer, "
+                                    f"got {segment!r}") from None
+    column_map = parse_columns(columns) if columns else None
+    cases = []
+    for k, (path, amps) in enumerate(zip(paths, currents)):
+        if status is not None:
+            status.update(f"validating {Path(path).name} ({k + 1}/{len(paths)})")
+        data, meta = read_discharge(path, columns=column_map, current_A=amps, sign=sign,
+                                    segment=segment)
+        cases.append(compare_discharge(battery, data, meta, cutoff))
+    return cases
+
+
+def _print_mission(result) -> None:
+    m = result.mission
+    unc = result.uncertainty
+    st = result.stretch
+    head = _duration_text(result.endurance_s)
+    if unc and unc.get("available"):
+        e = unc["endurance_s"]
+        head += (f"  (95 % interval {_duration_text(e['low'])} to {_duration_text(e['high'])}, "
+                 f"{unc['accepted']} draws)")
+    else:
+        head += "  (95 % interval unavailable: " + (
+            unc["reason"] if unc else "no uncertainty requested (--draws 0)") + ")"
+    label = "endurance, landing at the reserve" if st else "flight time"
+    out.print(f"{m.name}: {label} {head}", markup=False)
+    rows = [["battery", f"{m.battery.name or '-'} ({m.battery.cells_series}S"
+                        f"{m.battery.strings_parallel}P, {m.capacity_Ah:.3f} Ah)"],
+            ["cutoff / reserve", f"{m.cutoff_cell_V:g} V/cell ({m.cutoff_pack_V:.2f} V pack) / "
+                                 f"{m.reserve_pct:g} %"],
+            ["flight as planned", f"{_duration_text(result.flight_time_s)}"
+                                  f"{'' if result.completed else ' (NOT completed: ' + result.ended_by + ')'}"],
+            ["state of charge at landing", f"{result.soc_end_pct:.1f} %"],
+            ["reserve reached at", _duration_text(result.reserve_time_s)],
+            ["cutoff reached at", _duration_text(result.cutoff_time_s)],
+            ["lowest pack voltage", f"{result.min_voltage_V:.3f} V "
+                                    f"(margin {result.voltage_margin_V:.3f} V)"],
+            ["charge / energy used", f"{result.simulation.capacity_Ah:.3f} Ah / "
+                                     f"{result.simulation.energy_Wh_total:.1f} Wh"]]
+    if st:
+        rows.append([f"max {st['phase']}", f"{_duration_text(st['max_s'])} "
+                                          f"(limited by the {st['binding']})"])
+        if st["margin_s"] is not None:
+            rows.append([f"margin on {st['phase']}", _duration_text(st["margin_s"])])
+    out.print(table("Endurance", ["quantity", "value"], rows))
+    phase_rows = [[r["phase"] + (f" #{r['repetition']}" if r["repetition"] else ""), r["load"],
+                   f"{r['start_s']:.0f}", f"{r['duration_s']:.1f}", f"{r['mean_current_A']:.2f}",
+                   f"{r['charge_Ah']:.3f}", f"{r['end_voltage_V']:.3f}",
+                   f"{r['end_soc_pct']:.1f}"] for r in result.phases]
+    if len(phase_rows) > 30:
+        phase_rows = phase_rows[:12] + [["...", "", "", "", "", "", "", ""]] + phase_rows[-12:]
+    out.print(table("Phases", ["phase", "load", "start [s]", "duration [s]", "current [A]",
+                               "charge [Ah]", "end V", "end SOC [%]"], phase_rows))
+    for w in result.warnings:
+        out.print(f"warning: {w}", markup=False)
+
+
+@app.command("endurance")
+@click.argument("battery")
+@click.argument("mission", type=click.Path(dir_okay=False))
+@click.option("--cutoff", type=float, metavar="V",
+              help="Cutoff voltage per cell [V] (overrides the mission file).")
+@click.option("--reserve", type=click.FloatRange(0, 100, max_open=True), metavar="PCT",
+              help="State of charge to land with [%] (overrides the mission file).")
+@click.option("--draws", default=300, show_default=True, type=click.IntRange(0),
+              help="Parameter draws for the 95 % interval (0 = none; needs a fitted battery).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the draws.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="Save the flight profile plot (PNG, SVG or PDF).")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
+              help="Save voltage, current, power and state of charge through the flight (CSV).")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def endurance_cmd(battery, mission, cutoff, reserve, draws, seed, plot_path, csv_path, as_json):
+    """Fly a mission (TOML) on a battery: flight time, max cruise, margin and its interval.
+
+    BATTERY is a battery file from `fit` or a preset name; MISSION a TOML file of
+    phases (current, power or flight condition; duration, until cutoff/reserve,
+    repeat blocks; one phase may be `stretch = true`). See examples/missions/.
+
+    \b
+    Examples:
+      dischargelab endurance hacker-4100-4s-lifepo4 examples/missions/paper_table5.toml
+      dischargelab endurance battery.json mission.toml --reserve 25 --plot flight.png
+      dischargelab endurance battery.json mission.toml --draws 500 --json
+    """
+    from .mission import load_mission, run_mission
+
+    plan = load_mission(mission, battery=battery, cutoff_cell_V=cutoff, reserve_pct=reserve)
+    with err.status("flying the mission", spinner="dots") as status:
+        result = run_mission(plan, draws=draws, seed=seed,
+                             progress=_progress_callback(status, "parameter draws"))
+    if plot_path:
+        from .plot import save
+
+        save(result.plot(), plot_path)
+    if csv_path:
+        result.to_pandas().to_csv(csv_path, index=False)
+    if as_json:
+        print_json(result.to_dict())
+        return
+    _print_mission(result)
+    if plot_path:
+        out.print(f"plot: {plot_path}", markup=False)
+
+
+@app.command("validate")
+@click.argument("battery")
+@click.argument("data", nargs=-1, required=True)
+@click.option("--cutoff", type=float, metavar="V", required=True,
+              help="Cutoff voltage per cell [V] at which endurance is measured.")
+@data_options
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series of the measured pack (default: as in the battery file).")
+@click.option("--parallel", type=click.IntRange(1), default=None,
+              help="Strings in parallel of the measured pack (default: as in the battery file).")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="Save measured vs predicted curves (PNG, SVG or PDF).")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def validate_cmd(battery, data, cutoff, columns, current, sign, segment, cells, parallel,
+                 plot_path, as_json):
+    """Compare the model with measured discharges: endurance and voltage errors.
+
+    Each DATA file is predicted with its own measured current (constant or the
+    measured profile) and compared to the cutoff (paper section 4.4).
+
+    \b
+    Examples:
+      dischargelab validate battery.json run_2C.csv run_3C.csv --cutoff 3.0
+      dischargelab validate battery.json 'data/*.csv' --cutoff 2.5 --columns \\
+          time_s=0,current_A=1,voltage_V=2 --plot validation.png
+      dischargelab validate battery.json log.txt --current 2.28 --cutoff 3.0 --json
+    """
+    from .model import load_battery
+    from .validate import summarise
+
+    bat = load_battery(battery).with_pack(cells, parallel)
+    with err.status("validating", spinner="dots") as status:
+        cases = _validation_cases(bat, data, cutoff, columns, current, sign, segment, status)
+    if plot_path:
+        from .plot import plot_validation, save
+
+        save(plot_validation(cases), plot_path)
+    rows = [c.summary for c in cases]
+    summary = summarise(rows)
+    if as_json:
+        print_json({"battery": str(battery), "cutoff_cell_V": cutoff, "files": rows,
+                    "summary": summary})
+        return
+
+    def f(value, spec):
+        return "-" if value is None or not math.isfinite(value) else format(value, spec)
+
+    body = [[Path(r["file"]).name, f(r["current_A"], ".3g"), r["profile"],
+             f(r["endurance_measured_s"], ".0f"), f(r["endurance_predicted_s"], ".0f"),
+             f(r["endurance_error_s"], "+.0f"), f(r["endurance_error_pct"], "+.2f"),
+             f(r["voltage_rmse_pct"], ".2f"), f(r["voltage_max_error_pct"], ".2f"),
+             f(r["voltage_max_error_operational_pct"], ".2f"),
+             {True: "yes", False: "no", None: "?"}[r["in_fit"]]] for r in rows]
+    out.print(table(f"Validation to {cutoff:g} V/cell ({bat.cells_series}S{bat.strings_parallel}P)",
+                    ["file", "current [A]", "profile", "measured [s]", "predicted [s]",
+                     "error [s]", "error [%]", "V RMS [%]", "V max [%]", "V max >20% SOC [%]",
+                     "in fit"], body))
+    out.print(f"mean |endurance error| {f(summary['mean_abs_endurance_error_pct'], '.2f')} %, "
+              f"worst {f(summary['max_abs_endurance_error_pct'], '.2f')} %", markup=False)
+    for r in rows:
+        for w in r["warnings"]:
+            out.print(f"warning: {Path(r['file']).name}: {w}", markup=False)
+    if plot_path:
+        out.print(f"plot: {plot_path}", markup=False)
+
+
+@app.command("report")
+@click.argument("battery")
+@click.option("--mission", "mission_path", type=click.Path(dir_okay=False),
+              help="Mission TOML to fly and report.")
+@click.option("--validate", "validate_paths", multiple=True, metavar="DATA",
+              help="Measured discharge to validate against (repeat, or a quoted pattern "
+                   "such as 'runs/*.csv').")
+@click.option("--cutoff", type=float, metavar="V",
+              help="Cutoff per cell [V] for validation and curves (default: the mission's, "
+                   "else the chemistry's).")
+@data_options
+@click.option("--draws", default=300, show_default=True, type=click.IntRange(0),
+              help="Parameter draws for the mission's 95 % interval (0 = none).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the draws.")
+@click.option("--title", default=None, help="Page title.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
+              help="HTML file to write (one self-contained page).")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment,
+               draws, seed, title, output, as_json):
+    """Write one self-contained HTML report for the pilot: model, fit, mission, validation.
+
+    \b
+    Examples:
+      dischargelab report battery.json -o report.html
+      dischargelab report battery.json --mission mission.toml --validate 'runs/*.csv' \\
+          --cutoff 3.0 --columns time_s=0,current_A=1,voltage_V=2 -o report.html
+      dischargelab report hacker-4100-4s-lifepo4 \\
+          --mission examples/missions/paper_table5.toml -o table5.html
+    """
+    from .mission import load_mission, run_mission
+    from .model import CUTOFF_CELL_VOLTAGE_V, load_battery
+    from .report import write_report
+    from .validate import summarise
+
+    if not output.lower().endswith((".html", ".htm")):
+        raise DischargelabError(f"-o must name an .html file, got {output!r}")
+    bat = load_battery(battery)
+    result = None
+    cases = []
+    with err.status("building the report", spinner="dots") as status:
+        if mission_path:
+            status.update("flying the mission")
+            plan = load_mission(mission_path, battery=bat, cutoff_cell_V=cutoff)
+            result = run_mission(plan, draws=draws, seed=seed,
+                                 progress=_progress_callback(status, "parameter draws"))
+        if validate_paths:
+            cut = cutoff
+            if cut is None and result is not None:
+                cut = result.mission.cutoff_cell_V
+            if cut is None:
+                cut = CUTOFF_CELL_VOLTAGE_V.get(bat.chemistry or "")
+            if cut is None:
+                raise DischargelabError("give --cutoff V (per cell) for the validation: the "
+                                        "battery's chemistry is unknown")
+            cases = _validation_cases(bat, validate_paths, cut, columns, current, sign, segment,
+                                      status)
+        status.update("drawing plots")
+        label = battery if isinstance(battery, str) else None
+        path = write_report(output, bat if bat.name else label, mission_result=result,
+                            validation=cases, title=title, cutoff_cell_V=cutoff)
+    summary = {"report": str(path), "bytes": path.stat().st_size,
+               "mission": None if result is None else result.to_dict(),
+               "validation": [c.summary for c in cases],
+               "validation_summary": summarise([c.summary for c in cases]) if cases else None}
+    if as_json:
+        summary["mission"] = None if result is None else {
+            k: v for k, v in result.to_dict().items() if k != "phases"}
+        print_json(summary)
+        return
+    out.print(f"report written: {path} ({summary['bytes'] / 1024:.0f} KiB)", markup=False)
+    if result is not None:
+        _print_mission(result)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,134 @@
+"""The demo: the whole method on the bundled Samsung 30Q measurements.
+
+Data: Samsung INR18650-30Q cell S001 discharged at C/10 (0.3 A), 1C (3 A) and
+4C (12 A) to 2.5 V, from ARTS-Laboratory, "dataset-electrothermal-deformation-
+characterization-for-samsung-30Q-cell", CC BY-SA 4.0 (see NOTICE).
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+#: Bundled files and their nominal rates.
+DEMO_FILES = {"C/10": "Q30_S001_C10.csv", "1C": "Q30_S001_1C.csv", "4C": "Q30_S001_4C.csv"}
+#: Column layout of the bundled files (no header).
+DEMO_COLUMNS = {"time_s": 0, "current_A": 1, "voltage_V": 2, "temperature_C": 4}
+DEMO_CUTOFF_V = 2.5
+
+
+def demo_data_dir() -> Path:
+    """Folder holding the bundled Samsung 30Q files."""
+    return Path(str(resources.files("dischargelab") / "data" / "samsung30q"))
+
+
+def load_demo_curves():
+    """The bundled discharges as (curves, metas), keyed in DEMO_FILES order."""
+    from .fit import Curve
+    from .io import read_discharge
+
+    curves, metas = [], []
+    for rate, name in DEMO_FILES.items():
+        data, meta = read_discharge(demo_data_dir() / name, columns=DEMO_COLUMNS)
+        curves.append(Curve.from_frame(data, meta, name=rate))
+        metas.append(meta)
+    return curves, metas
+
+
+def run_demo(out_dir: Path, console=None) -> dict:
+    """Fit, predict and plot; write everything into ``out_dir``; return a summary dict."""
+    from dataclasses import replace
+
+    from .fit import fit_battery
+    from .plot import plot_family, save
+    from .simulate import curve_family
+    from .validate import validate_discharge
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    say = console.print if console is not None else (lambda *a, **k: None)
+    status = console.status if console is not None else _no_status
+
+    with status("reading the bundled Samsung 30Q discharges"):
+        curves, metas = load_demo_curves()
+    for curve, meta in zip(curves, metas):
+        say(f"[bold]{curve.name}[/]: {meta.get('summary', '')}")
+
+    with status("fitting"):
+        one = fit_battery(curves[1])
+        all_rates = fit_battery(curves)
+    models = {"fit on 1C": one, "fit on C/10 + 1C + 4C": all_rates}
+    files = {}
+    for label, res, stem in (("1C", one, "battery-1C"), ("C/10+1C+4C", all_rates, "battery")):
+        bat = replace(res.battery, name=f"Samsung 30Q cell S001, fitted on {label}",
+                      chemistry="li-ion")
+        files[stem + ".json"] = bat.save(out_dir / f"{stem}.json")
+        files[f"fit-{stem}.png"] = save(res.plot(), out_dir / f"fit-{stem}.png")
+
+    with status("predicting each measured rate"):
+        rows = []
+        for curve, meta in zip(curves, metas):
+            data = _frame(curve)
+            row = {"rate": curve.name, "current_A": curve.mean_current_A}
+            for label, res in models.items():
+                v = validate_discharge(res.battery, data, meta, cutoff_cell_V=DEMO_CUTOFF_V)
+                row["measured_s"] = v["endurance_measured_s"]
+                row[label] = v
+            rows.append(row)
+    family = curve_family(all_rates.battery, [0.3, 3.0, 6.0, 9.0, 12.0],
+                          cutoff_cell_V=DEMO_CUTOFF_V)
+    files["curves.png"] = save(plot_family(family), out_dir / "curves.png")
+
+    if console is not None:
+        _print_summary(console, models, rows, files)
+    return {
+        "out_dir": str(out_dir),
+        "files": sorted(str(p) for p in files.values()),
+        "fits": {label: res.to_dict() for label, res in models.items()},
+        "validation": [{"rate": r["rate"], "current_A": r["current_A"],
+                        **{label: r[label] for label in models}} for r in rows],
+    }
+
+
+def _frame(curve):
+    import pandas as pd
+
+    return pd.DataFrame({"time_s": curve.time_s, "voltage_V": curve.voltage_V,
+                         "current_A": curve.current_A})
+
+
+def _print_summary(console, models, rows, files):
+    from rich.table import Table
+
+    for label, res in models.items():
+        console.print(f"\n[bold]{label}[/]")
+        console.print(res.report(), markup=False)
+    t = Table(title=f"\nTime to {DEMO_CUTOFF_V} V: measured vs predicted", title_justify="left")
+    t.add_column("rate")
+    t.add_column("current [A]", justify="right")
+    t.add_column("measured [min]", justify="right")
+    for label in models:
+        t.add_column(f"{label} [min]", justify="right")
+        t.add_column("error", justify="right")
+    for r in rows:
+        cells = [r["rate"], f"{r['current_A']:.2f}", f"{r['measured_s'] / 60:.1f}"]
+        for label in models:
+            v = r[label]
+            cells += [f"{v['endurance_predicted_s'] / 60:.1f}",
+                      f"{v['endurance_error_pct']:+.1f} %"]
+        t.add_row(*cells)
+    console.print(t)
+    console.print("\nFiles written:")
+    for path in sorted(files.values()):
+        console.print(f"  {path}")
+
+
+class _no_status:
+    def __init__(self, *_a, **_k):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *_exc):
+        return False

@@ -1,0 +1,180 @@
+"""What the data do and do not determine: Jacobian SVD, correlations, bounds.
+
+Turns the Jacobian of a fit (columns = free parameters) into plain-language
+warnings. Three checks:
+
+1. **Degenerate directions**: singular values of the column-equilibrated
+   Jacobian below ``DEGENERATE_RATIO`` times the largest. The right singular
+   vector says which parameters move together; known patterns get a specific
+   explanation and cure (E0/R collinearity for one constant current; the
+   R, K, B, C, current scaling when the current is fitted).
+2. **Correlations** of the parameter estimates above ``CORRELATION_LIMIT``.
+3. **Parameters at a bound**: the optimum is then set by the bound, not the data.
+
+References
+----------
+.. [1] paper section 4.4 (trade-off between R and K; bounds set by trial and error).
+.. [2] DESIGN.md, "Facts any implementation must respect".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Relative singular value below which a direction counts as undetermined.
+DEGENERATE_RATIO = 1e-6
+#: Relative singular value below which a direction counts as poorly determined.
+WEAK_RATIO = 1e-3
+#: Absolute correlation above which a pair of parameters is reported.
+CORRELATION_LIMIT = 0.95
+#: Relative distance to a bound (of the bound span) that counts as "at the bound".
+AT_BOUND_TOLERANCE = 1e-6
+
+_CURRENT = "current_scale"
+
+
+@dataclass
+class Identifiability:
+    """Diagnostics of a fit's Jacobian (free parameters only)."""
+
+    names: list
+    singular_values: np.ndarray       # relative to the largest, descending
+    directions: list                  # [{name: component}] for weak/degenerate directions
+    correlation: np.ndarray           # among free parameters
+    strong_pairs: list                # [(name_a, name_b, rho)]
+    at_bounds: list                   # [(name, "lower"|"upper", bound)]
+    warnings: list = field(default_factory=list)
+
+    @property
+    def condition_number(self) -> float:
+        """Ratio of largest to smallest singular value (inf if degenerate)."""
+        smallest = self.singular_values[-1] if self.singular_values.size else 1.0
+        return float("inf") if smallest == 0 else float(1.0 / smallest)
+
+    def to_dict(self) -> dict:
+        return {
+            "parameters": list(self.names),
+            "relative_singular_values": [float(x) for x in self.singular_values],
+            "condition_number": self.condition_number,
+            "weak_directions": [{k: float(v) for k, v in d.items()} for d in self.directions],
+            "strong_correlations": [[a, b, float(r)] for a, b, r in self.strong_pairs],
+            "at_bounds": [[n, side, float(b)] for n, side, b in self.at_bounds],
+        }
+
+
+def equilibrated_svd(jacobian):
+    """SVD of the Jacobian with unit-norm columns, via a QR factor (no n x n work).
+
+    Returns (column norms, singular values descending, right singular vectors
+    as rows); ``J = U diag(sv) Vt diag(norms)``.
+    """
+    jac = np.asarray(jacobian, dtype=float)
+    norm = np.linalg.norm(jac, axis=0)
+    norm[norm == 0] = 1.0
+    r = np.linalg.qr(jac / norm, mode="r")
+    _, sv, vt = np.linalg.svd(r)
+    return norm, sv, vt
+
+
+def analyse(jacobian, names, values: dict, bounds: dict, *, stack=None,
+            paper_mode: bool = False, requested_fixed: dict | None = None) -> Identifiability:
+    """Diagnose a fit from its (weighted) Jacobian.
+
+    Parameters
+    ----------
+    jacobian : ndarray, shape (n_samples, n_free)
+        dV/dparameter at the optimum, columns in ``names`` order.
+    names : list of str
+        Free parameter names.
+    values : dict
+        Parameter values at the optimum.
+    bounds : dict
+        ``{name: (lower, upper)}``.
+    paper_mode : bool
+        The current was fitted (adds the scaling-degeneracy warning even when a
+        bound happens to pin it).
+    """
+    names = list(names)
+    jac = np.asarray(jacobian, dtype=float)
+    warnings: list[str] = []
+    if jac.shape[1] == 0:
+        return Identifiability(names, np.empty(0), [], np.empty((0, 0)), [], [], warnings)
+    norm, sv, vt = equilibrated_svd(jac)
+    zero_cols = [n for n, x in zip(names, np.linalg.norm(jac, axis=0)) if x == 0]
+    rel = sv / sv.max() if sv.max() > 0 else sv
+    directions = []
+    degenerate_found = set()
+    for k in np.flatnonzero(rel < WEAK_RATIO):
+        vec = vt[k] / np.abs(vt[k]).max()
+        involved = {n: float(c) for n, c in zip(names, vec) if abs(c) > 0.05}
+        directions.append(involved)
+        kind = _explain(involved, rel[k], warnings)
+        degenerate_found.add(kind)
+    for n in zero_cols:
+        warnings.append(f"{n} has no effect on the fitted curve at all: fix it to a known value.")
+
+    # correlations from the equilibrated normal matrix (pseudo-inverse)
+    keep = rel > DEGENERATE_RATIO
+    inv = np.where(keep, 1.0 / np.where(keep, sv, 1.0) ** 2, 0.0)
+    cov = (vt.T * inv) @ vt
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sd, sd)
+    corr[~np.isfinite(corr)] = 0.0
+    np.fill_diagonal(corr, 1.0)
+    pairs = []
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            if abs(corr[a, b]) > CORRELATION_LIMIT:
+                pairs.append((names[a], names[b], float(corr[a, b])))
+    if pairs and not degenerate_found - {None}:
+        text = ", ".join(f"{a}/{b} (rho = {r:+.3f})" for a, b, r in pairs)
+        warnings.append(
+            f"strongly correlated estimates: {text}. The data fix a combination of these, not "
+            f"each one; their individual values and predictions far from the fitted currents are "
+            f"uncertain. Add a curve at another current, or fix one of them.")
+
+    at_bounds = []
+    for n in names:
+        lo, hi = bounds[n]
+        span = hi - lo
+        v = values[n]
+        for side, bound in (("lower", lo), ("upper", hi)):
+            if abs(v - bound) <= AT_BOUND_TOLERANCE * span + 1e-12 * abs(bound):
+                at_bounds.append((n, side, bound))
+                warnings.append(
+                    f"{n} = {v:.6g} sits at its {side} bound {bound:g}: the bound, not the data, "
+                    f"sets it. Widen it with --bound {n}=LOW:HIGH or fix it to a known value.")
+    if paper_mode and "scaling" not in degenerate_found:
+        warnings.append(_SCALING_TEXT)
+    return Identifiability(names, rel, directions, corr, pairs, at_bounds, warnings)
+
+
+_SCALING_TEXT = (
+    "the current and C, K, R, B scale together (i -> l*i, C -> l*C, K -> K/l, R -> R/l, "
+    "B -> B/l leaves the voltage curve unchanged): one curve cannot tell the capacity C nor the "
+    "current, so the 'fitted current' is set by the start and the bounds and is NOT a "
+    "validation. Use the logged or commanded current (drop --paper-mode).")
+
+
+def _explain(involved: dict, ratio: float, warnings: list) -> str | None:
+    """Append a plain-language warning for one weak direction; return its kind."""
+    keys = set(involved)
+    strength = "not determined" if ratio < DEGENERATE_RATIO else "poorly determined"
+    if _CURRENT in keys:
+        warnings.append(_SCALING_TEXT)
+        return "scaling"
+    if keys <= {"E0_V", "R_ohm", "K_V_per_Ah", "A_V"} and {"E0_V", "R_ohm"} <= keys:
+        warnings.append(
+            f"E0 and R are {strength} separately: with one constant current only E0 - R*i is "
+            f"fixed by the curve. Give --e0 V (e.g. from a low-rate curve), keep the rest voltage "
+            f"before the load in the file, or add a curve at a second current.")
+        return "e0_r"
+    text = ", ".join(f"{n} ({c:+.2f})" for n, c in sorted(involved.items()))
+    warnings.append(
+        f"a combination of parameters is {strength} by the data (relative singular value "
+        f"{ratio:.1e}): {text} can change together with almost no change of the curve. "
+        f"Fix one of them or add a curve at another current.")
+    return "other"

@@ -1,0 +1,279 @@
+"""Plots of fits, simulations and curve families.
+
+matplotlib is imported inside each function (``import dischargelab`` stays
+light). Every function takes ``ax=None`` (a new figure is made) and returns the
+main Axes; nothing is shown: call ``ax.figure.savefig(path)`` or
+:func:`save` yourself.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .errors import require
+
+
+def _pyplot():
+    require("matplotlib", "plot")
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "pdf", "svg", "ps", "cairo") and \
+            not _has_display():
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _has_display() -> bool:
+    import os
+    import sys
+
+    return sys.platform in ("darwin", "win32") or bool(os.environ.get("DISPLAY") or
+                                                       os.environ.get("WAYLAND_DISPLAY"))
+
+
+def _axes(ax, figsize=(8, 5)):
+    if ax is not None:
+        return ax
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=figsize, layout="constrained")
+    return ax
+
+
+def save(ax, path, dpi: int = 130) -> Path:
+    """Save the figure holding ``ax`` to ``path`` (format from the suffix) and close it."""
+    plt = _pyplot()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig = ax.figure
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def plot_fit(result, ax=None, x: str = "charge"):
+    """Measured and fitted pack voltage per curve, with a residual panel below.
+
+    With ``ax`` given, the residual panel is an inset under it (leave room).
+
+    Parameters
+    ----------
+    result : FitResult
+    ax : matplotlib Axes, optional
+    x : {"charge", "time"}
+        Horizontal axis: discharged charge [Ah] or time [min].
+    """
+    plt = _pyplot()
+    if ax is None:
+        fig, (ax, res_ax) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True, layout="constrained",
+                                         gridspec_kw={"height_ratios": [3, 1]})
+    else:
+        res_ax = ax.inset_axes([0.0, -0.42, 1.0, 0.28], sharex=ax)
+    colors = _colors(len(result.curves))
+    for curve, color in zip(result.curves, colors):
+        xs = _xvalues(curve.charge_Ah, curve.time_s, x)
+        fitted = result.predicted_voltage(curve)
+        label = curve.name or f"{curve.mean_current_A:.3g} A"
+        ax.plot(xs, curve.voltage_V, ".", ms=2, color=color, alpha=0.5,
+                label=f"{label} measured")
+        ax.plot(xs, fitted, "-", lw=1.5, color=color, label=f"{label} model")
+        res_ax.plot(xs, (curve.voltage_V - fitted) * 1000, "-", lw=0.8, color=color)
+    res_ax.axhline(0, color="0.3", lw=0.8)
+    res_ax.set_ylabel("residual [mV]")
+    res_ax.set_xlabel(_xlabel(x))
+    ax.tick_params(labelbottom=False)
+    ax.set_ylabel(f"pack voltage [V] ({result.cells_series}S{result.strings_parallel}P)")
+    p = result.parameters
+    ax.set_title(f"fit: E0={p.E0_V:.3f} V  R={p.R_ohm * 1000:.1f} mohm  K={p.K_V_per_Ah:.4f} "
+                 f"V/Ah  A={p.A_V:.3f} V  B={p.B_per_Ah:.3g} /Ah  C={p.C_Ah:.3f} Ah   "
+                 f"RMSE {result.rmse_V * 1000:.1f} mV/cell", fontsize=9)
+    ax.grid(alpha=0.3)
+    res_ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, ncol=2 if len(result.curves) > 2 else 1)
+    return ax
+
+
+def plot_simulation(result, ax=None, x: str = "time", label: str | None = None, **kwargs):
+    """Pack voltage of a :class:`~dischargelab.simulate.SimulationResult`.
+
+    ``x`` is "time" [min] or "charge" [Ah].
+    """
+    ax = _axes(ax)
+    xs = _xvalues(result.charge_Ah, result.time_s, x)
+    ax.plot(xs, result.voltage_V, label=label, **kwargs)
+    ax.set_xlabel(_xlabel(x))
+    ax.set_ylabel("pack voltage [V]")
+    ax.grid(alpha=0.3)
+    return ax
+
+
+def plot_family(results, ax=None, x: str = "charge", labels=None):
+    """Curve family: one discharge per load, like the paper's Figs 5, 7 and 10."""
+    ax = _axes(ax)
+    colors = _colors(len(results))
+    for k, (res, color) in enumerate(zip(results, colors)):
+        if labels is not None:
+            label = labels[k]
+        else:
+            step = res.steps[0]
+            unit = "A" if step.kind == "current" else "W"
+            label = (f"{step.value:g} {unit}: {res.time_to_cutoff_s / 60:.1f} min, "
+                     f"{res.capacity_Ah:.3g} Ah, {res.energy_Wh_total:.3g} Wh")
+        plot_simulation(res, ax=ax, x=x, label=label, color=color)
+    if results:
+        ax.axhline(results[0].cutoff_pack_V, color="0.4", ls="--", lw=0.8, label="cutoff")
+        bat = results[0].battery
+        ax.set_title(f"{bat.name or 'battery'} ({bat.cells_series}S{bat.strings_parallel}P): "
+                     f"simulated discharges", fontsize=10)
+    ax.legend(fontsize=8)
+    return ax
+
+
+
+def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool = True):
+    """Pack voltage through a flight with the phases shaded (like the paper's Fig. 11).
+
+    Draws the cutoff voltage, the moment the reserve is reached (if it is), the
+    pack current on a second axis and a box with the endurance numbers.
+
+    Parameters
+    ----------
+    result : dischargelab.mission.MissionResult
+    ax : matplotlib Axes, optional
+    show_current : bool
+        Pack current [A] on a right-hand axis.
+    label_phases : bool
+        Write phase names in the shaded bands wide enough to hold them.
+    """
+    plt = _pyplot()
+    ax = _axes(ax, figsize=(10, 5.5))
+    sim = result.simulation
+    mission = result.mission
+    minutes = sim.time_s / 60.0
+    total = max(float(minutes[-1]), 1e-9)
+    names = []
+    for row in result.phases:
+        if row["phase"] not in names:
+            names.append(row["phase"])
+    palette = plt.get_cmap("tab20")
+    color_of = {n: palette((2 * k + 1) % 20) for k, n in enumerate(names)}
+    v_lo = min(float(np.min(sim.voltage_V)), mission.cutoff_pack_V)
+    v_hi = float(np.max(sim.voltage_V))
+    pad = 0.08 * max(v_hi - v_lo, 0.05 * v_hi)
+    for row in result.phases:
+        a, b = row["start_s"] / 60.0, row["end_s"] / 60.0
+        ax.axvspan(a, b, color=color_of[row["phase"]], alpha=0.45, lw=0)
+        if label_phases and (b - a) > 0.012 * total and row["repetition"] in (None, 1):
+            narrow = (b - a) < 0.09 * total
+            ax.text(0.5 * (a + b), 0.985, row["phase"], ha="center", va="top", fontsize=8,
+                    rotation=90 if narrow else 0, transform=ax.get_xaxis_transform(),
+                    clip_on=True)
+    ax.plot(minutes, sim.voltage_V, color="k", lw=1.6, label="pack voltage")
+    ax.axhline(mission.cutoff_pack_V, color="tab:red", ls="--", lw=1.0,
+               label=f"cutoff {mission.cutoff_pack_V:.2f} V ({mission.cutoff_cell_V:g} V/cell)")
+    if np.isfinite(result.reserve_time_s):
+        ax.axvline(result.reserve_time_s / 60.0, color="tab:orange", ls="-.", lw=1.2,
+                   label=f"reserve {mission.reserve_pct:g} % reached "
+                         f"({result.reserve_time_s / 60:.1f} min)")
+    if np.isfinite(result.cutoff_time_s):
+        ax.axvline(result.cutoff_time_s / 60.0, color="tab:red", ls=":", lw=1.2,
+                   label=f"cutoff reached ({result.cutoff_time_s / 60:.1f} min)")
+    ax.set_ylim(v_lo - pad, v_hi + 2.2 * pad)
+    ax.set_xlim(0, total)
+    ax.set_xlabel("time [min]")
+    ax.set_ylabel(f"pack voltage [V] ({mission.battery.cells_series}S"
+                  f"{mission.battery.strings_parallel}P)")
+    ax.grid(alpha=0.3)
+    handles, labels = ax.get_legend_handles_labels()
+    if show_current:
+        cur = ax.twinx()
+        cur.plot(minutes, sim.current_A, color="tab:blue", lw=0.9, alpha=0.8,
+                 label="pack current")
+        cur.set_ylabel("pack current [A]", color="tab:blue")
+        cur.tick_params(axis="y", colors="tab:blue")
+        cur.set_ylim(0, 1.6 * max(float(np.max(sim.current_A)), 1e-6))
+        h2, l2 = cur.get_legend_handles_labels()
+        handles, labels = handles + h2, labels + l2
+    ax.legend(handles, labels, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.11),
+              ncol=min(len(labels), 4), frameon=False)
+    lines = [f"flight {result.flight_time_s / 60:.1f} min, lands at {result.soc_end_pct:.0f} % "
+             f"(reserve {mission.reserve_pct:g} %)"]
+    if result.stretch is not None and result.stretch["binding"] != "infeasible":
+        st = result.stretch
+        lines.append(f"max {st['phase']} {st['max_s'] / 60:.1f} min -> endurance "
+                     f"{result.endurance_s / 60:.1f} min")
+        if st["margin_s"] is not None:
+            lines.append(f"margin {st['margin_s'] / 60:+.1f} min of {st['phase']}")
+    unc = result.uncertainty or {}
+    if unc.get("available"):
+        e = unc["endurance_s"]
+        lines.append(f"95 % interval {e['low'] / 60:.1f}-{e['high'] / 60:.1f} min")
+    if not result.completed:
+        lines.append(f"NOT COMPLETED: {result.ended_by} at {result.flight_time_s / 60:.1f} min")
+    ax.set_title(f"{mission.name}: {mission.battery.name or 'battery'}\n" + "; ".join(lines),
+                 fontsize=9)
+    return ax
+
+
+def plot_validation(cases, ax=None, x: str = "auto"):
+    """Measured (solid) and predicted (dashed) discharges per rate (paper Figs 12-14).
+
+    Parameters
+    ----------
+    cases : sequence of dischargelab.validate.ValidationCase
+    ax : matplotlib Axes, optional
+    x : {"auto", "time", "charge"}
+        Time [min] or discharged charge [Ah] on the horizontal axis; "auto" uses
+        time unless the durations differ by more than 4x (then charge).
+    """
+    from .model import charge_from_current
+
+    ax = _axes(ax, figsize=(9, 5.5))
+    cases = list(cases)
+    if x == "auto":
+        spans = [float(c.time_s[-1]) for c in cases if c.time_s.size]
+        x = "charge" if spans and max(spans) > 4 * max(min(spans), 1e-9) else "time"
+    colors = _colors(len(cases))
+    for case, color in zip(cases, colors):
+        s = case.summary
+        if x == "charge":
+            xs_meas = charge_from_current(case.time_s, case.current_A)
+            xs_pred = case.prediction.charge_Ah
+        else:
+            xs_meas = case.time_s / 60.0
+            xs_pred = case.prediction.time_s / 60.0
+        err = s["endurance_error_pct"]
+        err_text = "no cutoff" if err is None else f"{err:+.1f} %"
+        ax.plot(xs_meas, case.voltage_measured_V, "-", color=color, lw=1.4,
+                label=f"{s['current_A']:.3g} A measured")
+        ax.plot(xs_pred, case.prediction.voltage_V, "--", color=color, lw=1.4,
+                label=f"{s['current_A']:.3g} A model (endurance {err_text})")
+    if cases:
+        cutoff = cases[0].summary["cutoff_pack_V"]
+        ax.axhline(cutoff, color="0.4", ls=":", lw=0.9, label=f"cutoff {cutoff:.2f} V")
+    ax.set_xlabel(_xlabel(x))
+    ax.set_ylabel("pack voltage [V]")
+    ax.set_title("measured vs predicted discharges", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, ncol=2 if len(cases) > 3 else 1)
+    return ax
+
+def _xvalues(charge_Ah, time_s, x):
+    if x == "charge":
+        return np.asarray(charge_Ah)
+    if x == "time":
+        return np.asarray(time_s) / 60.0
+    raise ValueError(f"x must be 'charge' or 'time', got {x!r}")
+
+
+def _xlabel(x):
+    return "discharged charge [Ah]" if x == "charge" else "time [min]"
+
+
+def _colors(n):
+    plt = _pyplot()
+    cmap = plt.get_cmap("viridis")
+    return [cmap(v) for v in np.linspace(0.0, 0.85, max(n, 1))]

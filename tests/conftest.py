@@ -1,0 +1,40 @@
+"""Shared fixtures: where the real measured data sets live."""
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _find_shared_data() -> Path | None:
+    env = os.environ.get("DISCHARGELAB_SHARED_DATA")
+    if env:
+        return Path(env)
+    for parent in [REPO, *REPO.parents]:
+        candidate = parent / "shared" / "data"
+        if (candidate / "samsung30q_S001").is_dir():
+            return candidate
+    return None
+
+
+SHARED_DATA = _find_shared_data()
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """Folder of real measured discharges (../shared/data beside the checkout).
+
+    Missing data fails the test rather than skipping it, so CI can never pass
+    without exercising the real sets.
+    """
+    if SHARED_DATA is None:
+        pytest.fail("real data folder ../shared/data not found; set DISCHARGELAB_SHARED_DATA")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def bundled_data() -> Path:
+    """Samsung 30Q demo files bundled with the package."""
+    return REPO / "src" / "dischargelab" / "data" / "samsung30q"
