@@ -264,10 +264,10 @@ def fit_cmd(data, columns, current, sign, segment, cells, parallel, e0, fix, bou
     """
     from .fit import fit_battery
 
+    fixed, bounds = _parse_fixed(fix, e0), _parse_bounds(bound)  # option errors first
     curves, metas = load_curves(data, columns, current, sign, segment)
-    fixed = _parse_fixed(fix, e0)
     result = fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
-                         bounds=_parse_bounds(bound), paper_mode=paper_mode,
+                         bounds=bounds, paper_mode=paper_mode,
                          use_rest=not no_rest)
     battery = result.battery
     label = name or ", ".join(c.name for c in curves)

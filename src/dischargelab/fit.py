@@ -42,7 +42,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
+from scipy.special import stdtrit
 from scipy.optimize import least_squares
 
 from .errors import DataError, FitError
@@ -65,6 +65,9 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
     "C_Ah": (1e-3, 1e4),
     CURRENT_SCALE: (1.0, 1.0),
 }
+
+#: Default upper bound of C as a multiple of the largest discharged charge.
+C_UPPER_FACTOR = 20.0
 
 #: Bounds of the fitted/measured current ratio in paper mode (the paper's fits
 #: came within 2.5-5 % of the measured current). C is bounded below by the
@@ -153,8 +156,10 @@ class Curve:
 
     @property
     def charge_Ah(self) -> np.ndarray:
-        """Discharged charge from the first sample [Ah]."""
-        return charge_from_current(self.time_s, self.current_A)
+        """Discharged charge from the first sample [Ah] (computed once)."""
+        if getattr(self, "_charge", None) is None:
+            self._charge = charge_from_current(self.time_s, self.current_A)
+        return self._charge
 
 
 @dataclass
@@ -228,7 +233,8 @@ def _spec(fixed, bounds, stack: _Stack, paper_mode: bool):
     # (in paper mode the charge scales with the fitted current: use its upper bound)
     scale_hi = b[CURRENT_SCALE][1] if paper_mode else 1.0
     lo_c = stack.q_max * scale_hi * (1.0 + 1e-4)
-    b["C_Ah"] = (max(b["C_Ah"][0], lo_c), max(b["C_Ah"][1], lo_c * 10))
+    hi_c = b["C_Ah"][1] if "C_Ah" in bounds else stack.q_max * C_UPPER_FACTOR
+    b["C_Ah"] = (max(b["C_Ah"][0], lo_c), max(hi_c, lo_c * 1.01))
     if "C_Ah" in fixed and fixed["C_Ah"] <= stack.q_max:
         raise FitError(f"fixed C_Ah = {fixed['C_Ah']:g} Ah is not above the "
                        f"{stack.q_max:g} Ah already discharged in the data (q >= C)")
@@ -255,10 +261,12 @@ class _Model:
         self.linear = [n for n in _LINEAR if n not in fixed]
         self.nonlinear = [n for n in _NONLINEAR if n not in fixed]
         self.free = self.linear + self.nonlinear
-        self._ones = np.ones(stack.voltage.size)
         self._basis_key = None
         self._weighted = not np.all(stack.weight == 1.0)
         self._weighted_voltage = stack.voltage * stack.weight
+        self._lin_idx = [_LINEAR.index(n) for n in self.linear]
+        self._fixed_lin = [(_LINEAR.index(n), self.fixed[n]) for n in _LINEAR
+                           if n in self.fixed and self.fixed[n] != 0]
 
     def full(self, values: dict) -> dict:
         out = dict(self.fixed)
@@ -270,34 +278,36 @@ class _Model:
         return CellParameters(*(full[n] for n in PARAMETER_NAMES)), full[CURRENT_SCALE]
 
     def basis(self, full: dict):
-        """Columns and intermediates at the nonlinear point of ``full`` (cached)."""
+        """Basis columns (E0, R, K, A order) and intermediates at the nonlinear point (cached)."""
         key = (full["B_per_Ah"], full["C_Ah"], full[CURRENT_SCALE])
         if key != self._basis_key:
             b, c, scale = key
-            i = self.s.current * scale
             q = self.s.charge * scale
             denom = c - q
             gain = c / denom
-            pol = i + q
+            pol = self.s.current * scale + q
             expo = np.exp(-b * q)
-            cols = {"E0_V": self._ones, "R_ohm": -i, "K_V_per_Ah": -gain * pol, "A_V": expo}
+            phi = np.empty((q.size, 4))
+            phi[:, 0] = 1.0
+            np.multiply(self.s.current, -scale, out=phi[:, 1])
+            np.multiply(gain, -pol, out=phi[:, 2])
+            phi[:, 3] = expo
             self._basis_key = key
-            self._basis_val = (q, denom, gain, pol, expo, cols)
+            self._basis_val = (q, denom, gain, pol, expo, phi)
         return self._basis_val
 
     def voltage(self, values):
         full = self.full(values)
-        cols = self.basis(full)[5]
-        return sum(full[n] * cols[n] for n in _LINEAR)
+        return self.basis(full)[5] @ np.array([full[n] for n in _LINEAR])
 
     def jacobian(self, values, names):
         """Analytic dV/d(name) for the named parameters, shape (n, len(names))."""
         full = self.full(values)
-        q, denom, gain, pol, expo, cols = self.basis(full)
+        q, denom, gain, pol, expo, phi = self.basis(full)
         out = np.empty((q.size, len(names)))
         for k, n in enumerate(names):
-            if n in cols:
-                out[:, k] = cols[n]
+            if n in _LINEAR:
+                out[:, k] = phi[:, _LINEAR.index(n)]
             elif n == "B_per_Ah":
                 out[:, k] = -full["A_V"] * q * expo
             elif n == "C_Ah":
@@ -322,17 +332,15 @@ class _Model:
             return self._cache
         values = dict(zip(self.nonlinear, theta))
         values.update({n: 0.0 for n in self.linear})
-        full = self.full(values)
-        cols = self.basis(full)[5]
+        basis = self.basis(self.full(values))[5]
         rhs = self._weighted_voltage
-        fixed_linear = [n for n in _LINEAR if n in self.fixed and self.fixed[n] != 0]
-        if fixed_linear:
-            base = sum(self.fixed[n] * cols[n] for n in fixed_linear)
+        if self._fixed_lin:
+            base = sum(value * basis[:, k] for k, value in self._fixed_lin)
             rhs = rhs - (base * self.s.weight if self._weighted else base)
         if self.linear:
-            phi = np.column_stack([cols[n] for n in self.linear])
+            phi = basis if len(self._lin_idx) == 4 else basis[:, self._lin_idx]
             if self._weighted:
-                phi *= self.s.weight[:, None]
+                phi = phi * self.s.weight[:, None]
             coef, chol = _solve_normal(phi, rhs)
             values.update(zip(self.linear, coef))
             resid = phi @ coef - rhs
@@ -340,6 +348,35 @@ class _Model:
             phi, chol, resid = None, None, -rhs
         self._cache_key, self._cache = key, (values, resid, phi, chol)
         return self._cache
+
+    def grid_costs(self, starts) -> np.ndarray:
+        """Projected residual sum of squares at many nonlinear points in one batch."""
+        starts = np.atleast_2d(starts)
+        if CURRENT_SCALE in self.nonlinear or len(self._lin_idx) == 0:
+            return np.array([float(r @ r) for r in map(self.varpro_residual, starts)])
+        point = {n: starts[:, [k]] for k, n in enumerate(self.nonlinear)}
+        b = point.get("B_per_Ah", self.fixed.get("B_per_Ah"))
+        c = point.get("C_Ah", self.fixed.get("C_Ah"))
+        q, i = self.s.charge, self.s.current
+        gain = c / (c - q)
+        phi = np.empty((starts.shape[0], q.size, 4))
+        phi[:, :, 0] = 1.0
+        phi[:, :, 1] = -i
+        phi[:, :, 2] = -gain * (i + q)
+        phi[:, :, 3] = np.exp(-b * q)
+        rhs = np.broadcast_to(self._weighted_voltage, phi.shape[:2])
+        if self._fixed_lin:
+            base = sum(value * phi[:, :, k] for k, value in self._fixed_lin)
+            rhs = rhs - base * self.s.weight
+        phi = phi[:, :, self._lin_idx] * self.s.weight[None, :, None]
+        gram = np.einsum("mni,mnj->mij", phi, phi)
+        norm = np.sqrt(np.einsum("mii->mi", gram))
+        norm[norm == 0] = 1.0
+        gram = gram / (norm[:, :, None] * norm[:, None, :])
+        proj = np.einsum("mni,mn->mi", phi, rhs) / norm
+        coef = np.linalg.pinv(gram, hermitian=True) @ proj[:, :, None]
+        resid = np.einsum("mni,mi->mn", phi, coef[:, :, 0] / norm) - rhs
+        return np.einsum("mn,mn->m", resid, resid)
 
     def varpro_residual(self, theta):
         return self.project(theta)[1]
@@ -364,12 +401,11 @@ def _solve_normal(phi, rhs):
     norm = np.sqrt(np.diag(gram))
     norm[norm == 0] = 1.0
     gram = gram / np.outer(norm, norm)
-    try:
-        diag = np.diag(np.linalg.cholesky(gram))
-        if not diag.min() > 1e-6 * diag.max():
-            raise np.linalg.LinAlgError
+    # unit diagonal: det(gram) = prod(eigenvalues) < 1e-12 flags near-collinear columns
+    sign, logdet = np.linalg.slogdet(gram)
+    if sign > 0 and logdet > -27.6:
         inverse = np.linalg.inv(gram)
-    except np.linalg.LinAlgError:
+    else:
         inverse = np.linalg.pinv(gram)
     solver = (inverse, norm)
     return _cho_apply(solver, phi.T @ rhs), solver
@@ -537,7 +573,7 @@ def _starts(model: _Model, q_max: float, bounds: dict, guess: dict | None):
 def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 fixed: dict | None = None, bounds: dict | None = None,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
-                weighting: str = "equal", n_best: int = 2) -> FitResult:
+                weighting: str = "equal", n_best: int = 1) -> FitResult:
     """Fit the cell model to one or several discharges with shared parameters.
 
     Parameters
@@ -602,7 +638,7 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         # coarse to fine: search on a thinned copy of the data, refine on all of it
         coarse = _Model(_stack(curves, cells_series, strings_parallel, use_rest, weighting,
                                max_samples=SEARCH_SAMPLES_PER_CURVE), fixed)
-        cost = np.array([np.sum(coarse.varpro_residual(x) ** 2) for x in starts])
+        cost = coarse.grid_costs(starts)
         nfev += len(starts)
         best = None
         for k in np.argsort(cost)[:max(1, n_best)]:
@@ -624,7 +660,8 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                        "check the data and the bounds on C_Ah")
     w = stack.weight
     jac = model.jacobian(values, model.free) * w[:, None]
-    cov_free, dof_eff = _covariance(jac, residual * w, stack)
+    svd = equilibrated_svd(jac)
+    cov_free, dof_eff = _covariance(svd, residual * w, stack)
     names_all = list(PARAMETER_NAMES)
     cov = np.zeros((6, 6))
     idx = [names_all.index(n) for n in model.free if n in names_all]
@@ -635,7 +672,7 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         corr = cov / np.outer(sd, sd)
     corr[~np.isfinite(corr)] = 0.0
     np.fill_diagonal(corr, 1.0)
-    t_crit = float(stats.t.ppf(0.975, max(dof_eff, 1.0)))
+    t_crit = float(stdtrit(max(dof_eff, 1.0), 0.975))  # Student t quantile
     stderr, ci95 = {}, {}
     for k, n in enumerate(PARAMETER_NAMES):
         v = float(getattr(params, n))
@@ -645,8 +682,7 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             e = float(sd[k]) if np.isfinite(sd[k]) else float("nan")
             stderr[n], ci95[n] = e, (v - t_crit * e, v + t_crit * e)
 
-    ident = analyse(jac, model.free, values, bnds, stack=stack, paper_mode=paper_mode,
-                    requested_fixed=requested_fixed)
+    ident = analyse(jac, model.free, values, bnds, paper_mode=paper_mode, svd=svd)
     warnings += ident.warnings
     measured = ~stack.is_rest
     rmse = float(np.sqrt(np.mean(residual[measured] ** 2)))
@@ -777,12 +813,13 @@ def _polish(model: _Model, values: dict, bounds: dict) -> dict:
     return out
 
 
-def _covariance(jac: np.ndarray, resid: np.ndarray, stack: _Stack):
+def _covariance(svd, resid: np.ndarray, stack: _Stack):
     """Parameter covariance with an AR(1) effective-sample-size correction.
 
     Returns (covariance of the free parameters, effective degrees of freedom).
     """
-    n, p = jac.shape
+    norm, sv, vt = svd
+    n, p = resid.size, norm.size
     # lag-1 autocorrelation of residuals within each curve
     num = den = 0.0
     for k in range(stack.n_curves):
@@ -796,7 +833,6 @@ def _covariance(jac: np.ndarray, resid: np.ndarray, stack: _Stack):
     s2 = float(np.dot(resid, resid)) / max(n - p, 1) * (n / n_eff)
     # pseudo-inverse via SVD; parameters in a degenerate direction get NaN variance
     # (columns equilibrated first so the threshold is scale free)
-    norm, sv, vt = equilibrated_svd(jac)
     keep = sv > (sv.max() * 1e-8 if sv.size else 0.0)
     inv = np.where(keep, 1.0 / np.where(keep, sv, 1.0) ** 2, 0.0)
     cov = ((vt.T * inv) @ vt) / np.outer(norm, norm)

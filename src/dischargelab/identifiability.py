@@ -78,8 +78,8 @@ def equilibrated_svd(jacobian):
     return norm, sv, vt
 
 
-def analyse(jacobian, names, values: dict, bounds: dict, *, stack=None,
-            paper_mode: bool = False, requested_fixed: dict | None = None) -> Identifiability:
+def analyse(jacobian, names, values: dict, bounds: dict, *, paper_mode: bool = False,
+            svd=None) -> Identifiability:
     """Diagnose a fit from its (weighted) Jacobian.
 
     Parameters
@@ -95,13 +95,15 @@ def analyse(jacobian, names, values: dict, bounds: dict, *, stack=None,
     paper_mode : bool
         The current was fitted (adds the scaling-degeneracy warning even when a
         bound happens to pin it).
+    svd : tuple, optional
+        :func:`equilibrated_svd` of ``jacobian`` if already computed.
     """
     names = list(names)
     jac = np.asarray(jacobian, dtype=float)
     warnings: list[str] = []
     if jac.shape[1] == 0:
         return Identifiability(names, np.empty(0), [], np.empty((0, 0)), [], [], warnings)
-    norm, sv, vt = equilibrated_svd(jac)
+    norm, sv, vt = equilibrated_svd(jac) if svd is None else svd
     zero_cols = [n for n, x in zip(names, np.linalg.norm(jac, axis=0)) if x == 0]
     rel = sv / sv.max() if sv.max() > 0 else sv
     directions = []
@@ -144,6 +146,13 @@ def analyse(jacobian, names, values: dict, bounds: dict, *, stack=None,
         for side, bound in (("lower", lo), ("upper", hi)):
             if abs(v - bound) <= AT_BOUND_TOLERANCE * span + 1e-12 * abs(bound):
                 at_bounds.append((n, side, bound))
+                if n == "C_Ah" and side == "upper":
+                    warnings.append(
+                        f"C_Ah ran to its upper bound {bound:g} Ah: the data do not reach the "
+                        f"end-of-discharge knee, so the capacity is not determined. Fix it with "
+                        f"--fix C_Ah=<Ah> (e.g. the nominal capacity) or use a discharge that "
+                        f"reaches the cutoff.")
+                    continue
                 warnings.append(
                     f"{n} = {v:.6g} sits at its {side} bound {bound:g}: the bound, not the data, "
                     f"sets it. Widen it with --bound {n}=LOW:HIGH or fix it to a known value.")
