@@ -1,0 +1,182 @@
+"""Read real discharge files into canonical columns.
+
+One entry point, :func:`read_discharge`, for every supported source:
+
+* delimited text: CSV, TSV, semicolon or whitespace separated, with or
+  without header, byte-order mark, CRLF, comment lines (:mod:`.text`);
+* LabVIEW measurement files ``.lvm`` (:mod:`.lvm`);
+* DJI ground-station app logs with ``Battery updated`` records, and the CSV
+  derived from them (:mod:`.dji`);
+* dischargelab's own logger files (first line ``# dischargelab-log v1``,
+  :mod:`.logfile`).
+
+Every reader returns ``(DataFrame, meta)``; the frame has ``time_s`` (0 at load
+start), ``voltage_V``, ``current_A`` (discharge positive) and, when present,
+``temperature_C`` plus reader extras (``soc_pct``, ``flight_mode``...).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from .columns import (CANONICAL_COLUMNS, COLUMN_KEYS, CanonicalTable, map_columns, parse_columns,
+                      parse_units, validate_columns, validate_units)
+from .dji import BATTERY_MARK, is_dji_raw, read_dji_raw
+from .lvm import is_lvm, read_lvm
+from .prepare import check_current_option, check_segment_option, describe, prepare
+from .text import load_text, read_delimited
+
+#: First line of a dischargelab logger file.
+LOG_MAGIC = "# dischargelab-log v1"
+
+#: Accepted values of ``fmt``.
+FORMATS = ("auto", "text", "lvm", "dji-raw", "dischargelab-log")
+
+
+def detect_format(text: str) -> str:
+    """Name of the format of a file's text (one of :data:`FORMATS` except ``"auto"``)."""
+    stripped = text.lstrip("\ufeff \t\r\n")
+    first = stripped[:stripped.find("\n")] if "\n" in stripped else stripped
+    if first.strip().startswith(LOG_MAGIC):
+        return "dischargelab-log"
+    if is_lvm(first):
+        return "lvm"
+    if BATTERY_MARK in stripped or is_dji_raw(first):
+        return "dji-raw"
+    return "text"
+
+
+def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=None,
+                   segment="auto", delimiter=None, header="auto", fmt="auto",
+                   rest_sample="auto"):
+    """Read one discharge from a file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Data file.
+    columns : dict or str, optional
+        Which source column holds which quantity: ``{"time_s": 0, "current_A": 1,
+        "voltage_V": 2, "temperature_C": 4}`` (0-based numbers or header names),
+        or the ``--columns`` text ``"time_s=0,current_A=1,voltage_V=2"``. Columns
+        not given are found by header name; a headerless two-column file is read
+        as (time_s, voltage_V).
+    current_A : float, optional
+        Constant discharge current [A] (``--current``), for files without a
+        current column; if the file has one, it is used only to find the
+        discharge and the given value replaces it (noted in ``meta["notes"]``).
+    sign : {"auto", "positive", "negative"}
+        Sign of the discharge current in the file (``--sign``). ``"auto"``
+        detects it from the voltage trend under load.
+    units : dict or str, optional
+        Source units, e.g. ``{"voltage_V": "mV", "time_s": "h"}`` or
+        ``"voltage_V=mV,time_s=h"`` (``--units``); otherwise read from header
+        names such as ``"Voltage (mV)"`` or ``"current_mA"``, else V, A, s, degC.
+    segment : "auto", "none" or int
+        ``"auto"``: the longest discharge segment; ``"none"``: every valid row;
+        ``N``: the N-th segment counting from 1 (``--segment``).
+    delimiter : str, optional
+        ``","``, ``"\\t"``, ``";"``, ``"|"`` or ``"whitespace"``; detected when None.
+    header : {"auto", True, False}
+        Whether the first line is a header; detected by default.
+    fmt : {"auto", "text", "lvm", "dji-raw", "dischargelab-log"}
+        File format; detected from the content by default.
+    rest_sample : {"auto", "none"}
+        Keep the rest sample before the load step in ``meta["rest_sample"]``.
+
+    Returns
+    -------
+    frame : pandas.DataFrame
+        ``time_s`` [s] from 0 at load start, ``voltage_V`` [V], ``current_A`` [A]
+        (discharge positive), optional ``temperature_C`` [degC] and extras.
+    meta : dict
+        ``source``, ``format``, ``sign_convention`` ("discharge positive" or
+        "discharge negative (flipped)"), ``sign_source``, ``current_source``
+        ("column" or "given"), ``dropped`` (rows by reason), ``summary`` (one
+        sentence), ``rest_sample`` (``{"voltage_V", "time_s", "current_A",
+        "line", "rule"}`` or None; time relative to load start), ``segments``
+        (every discharge segment found), ``segment`` (number kept),
+        ``time_offset_s`` (file time of load start), ``column_map``, ``units``,
+        ``notes`` (everything inferred), plus reader keys (``events``...).
+
+    Raises
+    ------
+    DataError
+        One line saying what is wrong and which option fixes it.
+    """
+    path = Path(path)
+    name = path.name
+    if fmt not in FORMATS:
+        raise DataError(f"format must be one of {', '.join(FORMATS)}; got {fmt!r}")
+    if isinstance(columns, str):
+        columns = parse_columns(columns)
+    elif columns is not None:
+        columns = validate_columns(dict(columns))
+    if isinstance(units, str):
+        units = parse_units(units)
+    elif units is not None:
+        units = validate_units(dict(units))
+    check_segment_option(segment)
+    given = check_current_option(current_A)
+
+    text, encoding = load_text(path)
+    kind = detect_format(text) if fmt == "auto" else fmt
+    if kind == "dischargelab-log":
+        table, logged_current = _read_logfile(path)
+        if given is None and logged_current is not None:
+            given = logged_current
+            table.meta["notes"].append(f"constant current {given:g} A from the log header")
+    elif kind == "dji-raw":
+        table = read_dji_raw(text, name)
+        ignored = [opt for opt, val in (("--columns", columns), ("--units", units)) if val]
+        if ignored:
+            table.meta["notes"].append(f"{' and '.join(ignored)} ignored: DJI logs have fixed "
+                                       "fields")
+    else:
+        if kind == "lvm":
+            source = read_lvm(text, name, delimiter=delimiter)
+        else:
+            source = read_delimited(text, name, delimiter=delimiter, header=header,
+                                    meta={"format": "text"})
+            if source.names and "flight_mode_last_event" in source.names:
+                source.meta["format"] = "dji-derived-csv"
+        table = map_columns(source, name, columns=columns, units=units)
+    table.meta.setdefault("format", kind)
+    table.meta["source"] = str(path)
+    table.meta["encoding"] = encoding["encoding"] + (" with BOM" if encoding.get("bom") else "")
+    return prepare(table, name, current_A=given, sign=sign, segment=segment,
+                   rest_sample=rest_sample)
+
+
+def _read_logfile(path: Path) -> tuple[CanonicalTable, float | None]:
+    try:
+        from .logfile import read_log
+    except ImportError:
+        raise DataError(f"{path.name} is a dischargelab log file, but this installation has no "
+                        "reader for it (dischargelab.io.logfile)") from None
+    frame, meta = read_log(path)
+    meta = dict(meta)
+    meta["format"] = "dischargelab-log"
+    meta.setdefault("notes", [])
+    meta["reader_dropped"] = meta.pop("dropped", {})
+    logged_current = None
+    if meta.pop("current_source", None) == "given" and "current_A" in frame:
+        logged_current = float(frame.pop("current_A").iloc[0]) if len(frame) else None
+    meta.pop("sign_convention", None)
+    meta["column_map"] = {c: c for c in frame.columns if c in COLUMN_KEYS}
+    meta["units"] = {c: "canonical" for c in frame.columns if c in COLUMN_KEYS}
+    meta["explicit_units"] = [c for c in frame.columns if c in COLUMN_KEYS]
+    frame = frame.reset_index(drop=True)
+    if "line" in frame:
+        lines = frame.pop("line").to_numpy()
+    else:
+        lines = np.arange(1, len(frame) + 1)
+        meta["notes"].append("line numbers in messages count data rows of the log, not file lines")
+    return CanonicalTable(frame=frame, line_numbers=lines, meta=meta), logged_current
+
+
+__all__ = ["read_discharge", "describe", "parse_columns", "parse_units", "detect_format",
+           "FORMATS", "CANONICAL_COLUMNS", "COLUMN_KEYS", "LOG_MAGIC"]

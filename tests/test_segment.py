@@ -1,0 +1,161 @@
+"""Segment finding on canonical frames: sign, load runs, splits, rest sample."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from dischargelab.errors import DataError
+from dischargelab.io.segment import (choose_segment, detect_sign, find_segments, runs,
+                                     voltage_step_rest)
+
+
+def frame(t, v, i, **extra):
+    data = {"time_s": np.asarray(t, float), "voltage_V": np.asarray(v, float),
+            "current_A": np.asarray(i, float)}
+    data.update(extra)
+    return pd.DataFrame(data)
+
+
+def test_runs():
+    assert runs(np.array([0, 1, 1, 0, 1, 0, 0, 1], bool)) == [(1, 3), (4, 5), (7, 8)]
+    assert runs(np.zeros(3, bool)) == []
+
+
+def test_detect_sign_discharge_negative():
+    t = np.arange(100.0)
+    v = 4.1 - 0.005 * t
+    sign, evidence = detect_sign(t, np.full(100, -3.0), v)
+    assert sign == -1
+    assert "falls while the current is negative" in evidence
+
+
+def test_detect_sign_uses_voltage_not_magnitude():
+    # fast charge at 6 A (voltage rises), then slow discharge at 1 A (voltage falls):
+    # the larger current is the charge, and it is positive in this file
+    t = np.arange(200.0)
+    i = np.where(t < 60, 6.0, -1.0)
+    v = np.where(t < 60, 3.6 + 0.01 * t, 4.2 - 0.004 * (t - 60))
+    sign, _ = detect_sign(t, i, v)
+    assert sign == -1
+
+
+def test_detect_sign_without_trend_uses_majority():
+    t = np.arange(50.0)
+    sign, evidence = detect_sign(t, np.full(50, 2.0), np.full(50, 3.7))
+    assert sign == 1
+    assert "no clear voltage trend" in evidence
+
+
+def test_find_segments_constant_current_lab_cycle():
+    i = np.concatenate([np.zeros(5), np.full(20, 3.0), np.zeros(5), np.full(10, -1.0),
+                        np.zeros(2), np.full(30, 3.0), np.zeros(4)])
+    t = np.arange(i.size, dtype=float)
+    v = 4.0 - 0.001 * t
+    search = find_segments(frame(t, v, i))
+    assert [(s.start, s.stop) for s in search.segments] == [(5, 25), (42, 72)]
+    assert [s.ended_by for s in search.segments] == ["current falls to idle",
+                                                     "current falls to idle"]
+    assert search.threshold_A == pytest.approx(0.6)  # 20 % of the 3 A load
+    assert not search.variable
+    assert (search.state[30:40] == -1).all()
+    assert choose_segment(search, frame(t, v, i), "auto").number == 2
+    assert choose_segment(search, frame(t, v, i), 1).number == 1
+
+
+def test_gaps_split_only_variable_current():
+    t = np.concatenate([np.arange(20.0), 100 + np.arange(20.0)])
+    v = 4.0 - 0.001 * t
+    constant = find_segments(frame(t, v, np.full(40, 3.0)))
+    assert len(constant.segments) == 1
+    rng = np.random.default_rng(1)
+    variable = find_segments(frame(t, v, rng.uniform(10, 25, 40)))
+    assert [s.rows for s in variable.segments] == [20, 20]
+    assert variable.segments[0].ended_by == "gap in the samples"
+    assert variable.gap_limit_s == pytest.approx(4.0)
+
+
+def test_landed_rows_are_idle_and_breaks_split():
+    t = np.arange(30.0)
+    i = np.full(30, 15.0)
+    mode = np.array(["GPS_WAYPOINT"] * 30, dtype=object)
+    mode[10:12] = "LANDED"
+    search = find_segments(frame(t, 25 - 0.01 * t, i, flight_mode=mode), breaks_s=[20.5])
+    assert [(s.start, s.stop) for s in search.segments] == [(0, 10), (12, 21), (21, 30)]
+    assert search.segments[0].ended_by == "landed"
+    assert search.segments[1].ended_by == "take-off or landing event"
+
+
+def test_voltage_jump_without_current_drop_is_a_swap():
+    t = np.arange(40.0)
+    v = 21.0 - 0.01 * t
+    v[25:] += 4.0
+    search = find_segments(frame(t, v, np.full(40, 15.0)))
+    assert [s.rows for s in search.segments] == [25, 15]
+    assert search.segments[0].ended_by == "voltage jumps up (pack swap?)"
+
+
+def test_voltage_rise_when_current_drops_is_not_a_swap():
+    t = np.arange(40.0)
+    i = np.where((t > 15) & (t < 20), 6.0, 20.0)
+    v = 24.0 - 0.01 * t - 0.05 * i  # 0.7 V recovery = 3 % when the load drops
+    v[16] += 0.5  # plus a 2 % overshoot
+    search = find_segments(frame(t, v, i))
+    assert len(search.segments) == 1
+
+
+def test_short_runs_are_not_segments():
+    i = np.array([0, 5, 5, 0, 0, 5, 5, 5, 5, 0], float)
+    t = np.arange(i.size, dtype=float)
+    search = find_segments(frame(t, 4 - 0.01 * t, i))
+    assert [(s.start, s.stop) for s in search.segments] == [(5, 9)]
+    assert search.short_rows[[1, 2]].all()
+
+
+def test_no_discharge_is_an_error():
+    t = np.arange(10.0)
+    with pytest.raises(DataError, match="never positive"):
+        find_segments(frame(t, np.full(10, 4.0), np.full(10, -2.0)))
+    search = find_segments(frame(t, np.full(10, 4.0), np.array([0, 5, 0, 0, 0, 0, 0, 0, 0, 0.])))
+    with pytest.raises(DataError, match="no discharge found"):
+        choose_segment(search, frame(t, np.full(10, 4.0), np.zeros(10)), "auto")
+
+
+def test_voltage_step_rest():
+    v = np.concatenate([[4.18], 4.126 - 0.002 * np.arange(20)])
+    is_rest, why = voltage_step_rest(v)
+    assert is_rest and "load switched on" in why
+    # K2-like start: the first step is not larger than the next ones
+    v = np.array([3.6645, 3.6394, 3.5378, 3.4546, 3.385, 3.3373, 3.309, 3.2927, 3.2818, 3.2724,
+                  3.2665, 3.2622, 3.2567])
+    assert voltage_step_rest(v)[0] is False
+    assert voltage_step_rest([4.1, 4.0])[0] is False
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["idle", "load", "charge"]),
+                          st.integers(min_value=3, max_value=15)), min_size=1, max_size=8))
+def test_segments_are_the_load_blocks(blocks):
+    """Constant-current blocks: every load block (not touching another) is one segment."""
+    level = {"idle": 0.0005, "load": 4.0, "charge": -2.0}  # idle: logger noise < 1 mA
+    merged = []
+    for kind, n in blocks:  # adjacent blocks of the same kind are one block
+        if merged and merged[-1][0] == kind:
+            merged[-1] = (kind, merged[-1][1] + n)
+        else:
+            merged.append((kind, n))
+    i = np.concatenate([np.full(n, level[kind]) for kind, n in merged])
+    t = np.arange(i.size, dtype=float)
+    v = 4.0 - 0.001 * t
+    expected, k = [], 0
+    for kind, n in merged:
+        if kind == "load":
+            expected.append((k, k + n))
+        k += n
+    if not expected:
+        with pytest.raises(DataError):
+            find_segments(frame(t, v, i))
+        return
+    search = find_segments(frame(t, v, i))
+    assert [(s.start, s.stop) for s in search.segments] == expected
