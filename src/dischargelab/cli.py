@@ -112,6 +112,9 @@ def data_options(func):
         click.option("--sign", type=click.Choice(["auto", "positive", "negative"]),
                      default="auto", show_default=True,
                      help="Sign of the DISCHARGE current in the file; auto detects and reports it."),
+        click.option("--units", metavar="SPEC",
+                     help="Units of the source columns when the header does not say, e.g. "
+                          "voltage_V=mV,current_A=mA,time_s=ms (also h, min)."),
         click.option("--segment", default="auto", show_default=True, metavar="auto|none|N",
                      help="Which discharge to keep: auto (the main one), none (all rows) or the "
                           "N-th segment (counting from 1) of a file holding several."),
@@ -121,15 +124,32 @@ def data_options(func):
     return func
 
 
-def load_curves(paths, columns=None, current=None, sign="auto", segment="auto"):
-    """Read files with :func:`dischargelab.io.read_discharge` into fit curves.
+def expand_paths(items) -> list[str]:
+    """Paths, with quoted shell patterns such as 'runs/*.csv' expanded."""
+    import glob
 
-    Returns (curves, metas). Raises DischargelabError with one line on bad input.
+    paths = []
+    for item in items:
+        item = str(item)
+        if any(c in item for c in "*?["):
+            matches = sorted(glob.glob(item))
+            if not matches:
+                raise DischargelabError(f"no file matches {item!r}")
+            paths.extend(matches)
+        else:
+            paths.append(item)
+    return paths
+
+
+def read_data_files(paths, columns=None, current=None, sign="auto", segment="auto", units=None,
+                    status=None, verb="reading"):
+    """Read measured files with the shared data options; returns [(data, meta), ...].
+
+    Raises DischargelabError with one line on bad options or input.
     """
-    from .fit import Curve
-    from .io import parse_columns, read_discharge
+    from .io import parse_columns, parse_units, read_discharge
 
-    paths = list(paths)
+    paths = expand_paths(paths)
     currents = [None] * len(paths)
     if current:
         values = parse_number_list(current, "--current")
@@ -147,12 +167,23 @@ def load_curves(paths, columns=None, current=None, sign="auto", segment="auto"):
             raise DischargelabError(f"--segment must be auto, none or an integer, "
                                     f"got {segment!r}") from None
     column_map = parse_columns(columns) if columns else None
+    unit_map = parse_units(units) if units else None
+    loaded = []
+    for k, (path, amps) in enumerate(zip(paths, currents)):
+        if status is not None:
+            status.update(f"{verb} {Path(path).name} ({k + 1}/{len(paths)})")
+        loaded.append(read_discharge(path, columns=column_map, current_A=amps, sign=sign,
+                                     segment=segment, units=unit_map))
+    return loaded
+
+
+def load_curves(paths, columns=None, current=None, sign="auto", segment="auto", units=None):
+    """Read files into fit curves; returns (curves, metas)."""
+    from .fit import Curve
+
     curves, metas = [], []
-    for path, amps in zip(paths, currents):
-        data, meta = read_discharge(path, columns=column_map, current_A=amps, sign=sign,
-                                    segment=segment)
-        name = Path(path).stem
-        curves.append(Curve.from_frame(data, meta, name=name))
+    for data, meta in read_data_files(paths, columns, current, sign, segment, units):
+        curves.append(Curve.from_frame(data, meta, name=Path(meta.get("source", "")).stem))
         metas.append(meta)
     return curves, metas
 
@@ -234,6 +265,9 @@ def _print_fit(result, battery_path=None):
 @click.option("--paper-mode", is_flag=True,
               help="Reproduce the paper: E0 given (--e0), current fitted with R, K, A, B, C. "
                    "Degenerate by construction; prints why.")
+@click.option("--bootstrap", default=100, show_default=True, type=click.IntRange(0),
+              help="Bootstrap refits stored in the battery file; they give missions and "
+                   "predictions their 95 % interval (0 = covariance only).")
 @click.option("--no-rest", is_flag=True,
               help="Ignore the rest voltage logged before the load step.")
 @click.option("--nominal-capacity", type=float, metavar="AH",
@@ -247,7 +281,8 @@ def _print_fit(result, battery_path=None):
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="Save the data-vs-model plot (PNG, SVG or PDF).")
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def fit_cmd(data, columns, current, sign, segment, cells, parallel, e0, fix, bound, paper_mode,
+def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, e0, fix, bound,
+            paper_mode, bootstrap,
             no_rest, nominal_capacity, name, chemistry, output, plot_path, as_json):
     """Fit the battery model to one or more discharge files.
 
@@ -265,10 +300,10 @@ def fit_cmd(data, columns, current, sign, segment, cells, parallel, e0, fix, bou
     from .fit import fit_battery
 
     fixed, bounds = _parse_fixed(fix, e0), _parse_bounds(bound)  # option errors first
-    curves, metas = load_curves(data, columns, current, sign, segment)
+    curves, metas = load_curves(data, columns, current, sign, segment, units)
     result = fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
                          bounds=bounds, paper_mode=paper_mode,
-                         use_rest=not no_rest)
+                         use_rest=not no_rest, bootstrap=bootstrap)
     battery = result.battery
     label = name or ", ".join(c.name for c in curves)
     from dataclasses import replace as _replace
@@ -477,7 +512,9 @@ def demo_cmd(out_dir, as_json):
     """Run the whole method on the bundled Samsung 30Q data (C/10, 1C, 4C).
 
     Fits the cell on 1C alone and on all three rates together, predicts each
-    measured rate, and writes battery files and plots to --out.
+    measured rate, flies the paper's Table 5 mission and a survey mission on a
+    4S2P pack of the fitted cells, and writes battery files, plots and an HTML
+    report to --out.
 
     \b
     Example:
@@ -486,8 +523,16 @@ def demo_cmd(out_dir, as_json):
     from .demo import run_demo
 
     summary = run_demo(Path(out_dir), console=None if as_json else out)
+    missions = summary.pop("missions")
     if as_json:
+        summary["missions"] = {name: {k: v for k, v in m.to_dict().items() if k != "phases"}
+                               for name, m in missions.items()}
         print_json(summary)
+        return
+    for result in missions.values():
+        out.print()
+        _print_mission(result)
+    out.print(f"\nOpen {Path(out_dir) / 'report.html'} in a browser for the full report.")
 
 
 def main(argv: Optional[list[str]] = None) -> None:
@@ -568,9 +613,11 @@ def _read_pairs_interactively() -> list[tuple[float, float]]:
               min_open=True, max_open=True), help="Significance level of the offset tests.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="Write the calibration file (JSON) for 'acquire --calibration'.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="Save a plot of Ke per point, the fit and the linear range (PNG, PDF).")
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
 def calibrate_cmd(pairs, csv_path, divider, meter_percent, meter_digits, meter_resolution,
-                  adc_bits, adc_reference, offset, alpha, output, as_json):
+                  adc_bits, adc_reference, offset, alpha, output, plot_path, as_json):
     """Find the logger's scale factor Ke = V_real / V_measured (paper eq. 7).
 
     Give pairs of (multimeter reading, logger reading) taken with packs at
@@ -583,7 +630,7 @@ def calibrate_cmd(pairs, csv_path, divider, meter_percent, meter_digits, meter_r
     Examples:
       dischargelab calibrate --pair 15.33,3.51 --pair 13.16,3.01 --pair 11.88,2.71 \\
           --pair 11.26,2.57 --pair 7.67,1.74 --divider 3.3k -o cal.json
-      dischargelab calibrate --csv points.csv --divider 2.7k --json
+      dischargelab calibrate --csv points.csv --divider 2.7k --plot ke.png --json
       dischargelab calibrate -o cal.json          (type the points at the prompt)
       dischargelab acquire --calibration cal.json ...
     """
@@ -608,9 +655,20 @@ def calibrate_cmd(pairs, csv_path, divider, meter_percent, meter_digits, meter_r
                              adc_reference_V=adc_reference, alpha=alpha, offset=offset)
     if output:
         result.calibration.save(output)
+    if plot_path:
+        from .errors import require
+
+        require("matplotlib", "plot").use("Agg")
+        import matplotlib.pyplot as plt
+
+        ax = result.plot()
+        ax.figure.tight_layout()
+        ax.figure.savefig(plot_path, dpi=120)
+        plt.close(ax.figure)
     if as_json:
         data = result.to_dict()
         data["output"] = output
+        data["plot"] = plot_path
         print_json(data)
         return
     rows = [[f"{p.real_V:g}", f"{p.measured_V:g}", f"{p.ke:.4f}", f"{p.predicted_V:.3f}",
@@ -648,16 +706,18 @@ def _acquire_summary_rows(result) -> list[list]:
 
     rows = [["ended by", result.ended_by], ["message", result.message or "-"],
             ["samples", s.get("samples", 0)], ["rows in file", s.get("rows_written", 0)],
-            ["test time [s]", num("duration_s", ".1f")],
-            ["first voltage [V]", num("first_voltage_V", ".3f")],
-            ["last voltage [V]", num("last_voltage_V", ".3f")],
-            ["min voltage [V]", num("min_voltage_V", ".3f")],
-            ["charge [Ah]", num("charge_Ah", ".4f")], ["energy [Wh]", num("energy_Wh", ".3f")]]
+            ["test time (s)", num("duration_s", ".1f")],
+            ["first voltage (V)", num("first_voltage_V", ".3f")],
+            ["last voltage (V)", num("last_voltage_V", ".3f")],
+            ["min voltage (V)", num("min_voltage_V", ".3f")],
+            ["charge (Ah)", num("charge_Ah", ".4f")], ["energy (Wh)", num("energy_Wh", ".3f")]]
     for key in ("frames_ok", "frames_lost", "frames_corrupt", "reconnects"):
         if key in result.stats:
             rows.append([key.replace("_", " "), result.stats[key]])
     rows.append(["data file", str(result.out)])
-    return rows
+    from rich.markup import escape
+
+    return [[escape(str(key)), escape(str(value))] for key, value in rows]
 
 
 def _report_acquisition(result, as_json: bool) -> None:
@@ -744,11 +804,18 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
       dischargelab acquire --source ebc-a20 --port /dev/ttyUSB0 --out run.csv --cells 2 \\
           --current 1.7
     """
-    from .acquire.session import AcquireSettings, prepare_acquisition
+    from .acquire.acquisition import AcquireSettings, prepare_acquisition
     from .acquire.sensors import Thermistor, current_sensor as make_current_sensor
 
     if calibration_path and ke is not None:
         raise DischargelabError("give either --calibration or --ke, not both")
+    if plot:
+        from .acquire.live import check_display
+
+        check_display()                    # before the port is opened or a file created
+    if Path(out_path).exists() and not force:
+        raise DischargelabError(f"{out_path} already exists; choose another --out or pass "
+                                "--force to overwrite it")
     calibration = None
     if calibration_path:
         from .acquire.calibration import load_calibration
@@ -772,8 +839,8 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
         switch_load=switch_load, duration_s=duration_s, force=force, logview=logview_path,
         give_up_after_s=give_up_s)
     acquisition = prepare_acquisition(settings)
-    view = "live" if live and not quiet and not as_json and err.is_terminal else "lines"
     console = err if as_json else out
+    view = "live" if live and not quiet and console.is_terminal else "lines"
     result = acquisition.run(view=view, console=console, every_s=every_s, plot=plot)
     _report_acquisition(result, as_json)
     sys.exit(result.exit_status)
@@ -875,7 +942,7 @@ def virtual_device_cmd(battery, cells, current_A, rate_Hz, speed, divider_gain, 
 @app.command("demo-acquire")
 @click.option("--out", "out_dir", default="demo-out", show_default=True,
               type=click.Path(file_okay=False), help="Folder for the log, record and plot.")
-@click.option("--battery", default="nanotech-1700-2s", show_default=True, metavar="PRESET|FILE",
+@click.option("--battery", default="zippy-1100-2s", show_default=True, metavar="PRESET|FILE",
               help="Battery driving the virtual logger.")
 @click.option("--seconds", "wall_seconds", type=click.FloatRange(min=5), default=45.0,
               show_default=True, metavar="S", help="Wall-clock length of the discharge.")
@@ -897,9 +964,10 @@ def demo_acquire_cmd(out_dir, battery, wall_seconds, seed, live, as_json):
     """
     from .acquire.demo import run_acquire_demo
 
-    view = "live" if live and not as_json and err.is_terminal else "lines"
+    console = err if as_json else out
+    view = "live" if live and console.is_terminal else "lines"
     summary = run_acquire_demo(out_dir, battery=battery, wall_seconds=wall_seconds, seed=seed,
-                               view=view, console=err if as_json else out)
+                               view=view, console=console)
     if as_json:
         print_json(summary)
         return
@@ -937,49 +1005,13 @@ def _progress_callback(status, what: str):
     return update
 
 
-def _expand_paths(items) -> list[str]:
-    """Paths, with shell-style patterns expanded (quoted '*.csv' also works on Windows)."""
-    import glob
-
-    paths = []
-    for item in items:
-        matches = sorted(glob.glob(item)) if any(c in item for c in "*?[") else []
-        if any(c in item for c in "*?[") and not matches:
-            raise DischargelabError(f"no file matches {item!r}")
-        paths.extend(matches or [item])
-    return paths
-
-
-def _validation_cases(battery, paths, cutoff, columns, current, sign, segment, status=None):
-    from .io import parse_columns, read_discharge
+def _validation_cases(battery, paths, cutoff, columns, current, sign, segment, units,
+                      status=None):
     from .validate import compare_discharge
 
-    paths = _expand_paths(paths)
-    currents = [None] * len(paths)
-    if current:
-        values = parse_number_list(current, "--current")
-        if len(values) == 1:
-            currents = values * len(paths)
-        elif len(values) == len(paths):
-            currents = values
-        else:
-            raise DischargelabError(f"--current has {len(values)} values for {len(paths)} files; "
-                                    f"give one value or one per file")
-    if segment not in ("auto", "none"):
-        try:
-            segment = int(segment)
-        except ValueError:
-            raise DischargelabError(f"--segment must be auto, none or an integer, "
-                                    f"got {segment!r}") from None
-    column_map = parse_columns(columns) if columns else None
-    cases = []
-    for k, (path, amps) in enumerate(zip(paths, currents)):
-        if status is not None:
-            status.update(f"validating {Path(path).name} ({k + 1}/{len(paths)})")
-        data, meta = read_discharge(path, columns=column_map, current_A=amps, sign=sign,
-                                    segment=segment)
-        cases.append(compare_discharge(battery, data, meta, cutoff))
-    return cases
+    return [compare_discharge(battery, data, meta, cutoff)
+            for data, meta in read_data_files(paths, columns, current, sign, segment, units,
+                                              status=status, verb="validating")]
 
 
 def _print_mission(result) -> None:
@@ -1034,6 +1066,10 @@ def _print_mission(result) -> None:
               help="Cutoff voltage per cell [V] (overrides the mission file).")
 @click.option("--reserve", type=click.FloatRange(0, 100, max_open=True), metavar="PCT",
               help="State of charge to land with [%] (overrides the mission file).")
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series (overrides the mission and battery files).")
+@click.option("--parallel", type=click.IntRange(1), default=None,
+              help="Strings in parallel (overrides the mission and battery files).")
 @click.option("--draws", default=300, show_default=True, type=click.IntRange(0),
               help="Parameter draws for the 95 % interval (0 = none; needs a fitted battery).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the draws.")
@@ -1042,22 +1078,25 @@ def _print_mission(result) -> None:
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
               help="Save voltage, current, power and state of charge through the flight (CSV).")
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def endurance_cmd(battery, mission, cutoff, reserve, draws, seed, plot_path, csv_path, as_json):
+def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, draws, seed, plot_path,
+                  csv_path, as_json):
     """Fly a mission (TOML) on a battery: flight time, max cruise, margin and its interval.
 
     BATTERY is a battery file from `fit` or a preset name; MISSION a TOML file of
     phases (current, power or flight condition; duration, until cutoff/reserve,
-    repeat blocks; one phase may be `stretch = true`). See examples/missions/.
+    repeat blocks; one phase may be `stretch = true`). Bundled examples by name: paper-table5, fixed-wing-survey, multirotor-hover.
 
     \b
     Examples:
-      dischargelab endurance hacker-4100-4s-lifepo4 examples/missions/paper_table5.toml
+      dischargelab endurance hacker-4100-4s-lifepo4 paper-table5
       dischargelab endurance battery.json mission.toml --reserve 25 --plot flight.png
+      dischargelab endurance cell.json mission.toml --cells 4 --parallel 2 --cutoff 3.0
       dischargelab endurance battery.json mission.toml --draws 500 --json
     """
     from .mission import load_mission, run_mission
 
     plan = load_mission(mission, battery=battery, cutoff_cell_V=cutoff, reserve_pct=reserve)
+    plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
     with err.status("flying the mission", spinner="dots") as status:
         result = run_mission(plan, draws=draws, seed=seed,
                              progress=_progress_callback(status, "parameter draws"))
@@ -1088,7 +1127,7 @@ def endurance_cmd(battery, mission, cutoff, reserve, draws, seed, plot_path, csv
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="Save measured vs predicted curves (PNG, SVG or PDF).")
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def validate_cmd(battery, data, cutoff, columns, current, sign, segment, cells, parallel,
+def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, cells, parallel,
                  plot_path, as_json):
     """Compare the model with measured discharges: endurance and voltage errors.
 
@@ -1107,7 +1146,8 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, cells, 
 
     bat = load_battery(battery).with_pack(cells, parallel)
     with err.status("validating", spinner="dots") as status:
-        cases = _validation_cases(bat, data, cutoff, columns, current, sign, segment, status)
+        cases = _validation_cases(bat, data, cutoff, columns, current, sign, segment, units,
+                                  status)
     if plot_path:
         from .plot import plot_validation, save
 
@@ -1122,14 +1162,15 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, cells, 
     def f(value, spec):
         return "-" if value is None or not math.isfinite(value) else format(value, spec)
 
-    body = [[Path(r["file"]).name, f(r["current_A"], ".3g"), r["profile"],
+    body = [[Path(r["file"]).name, f(r["current_A"], ".3g") + ("" if r["profile"] == "constant"
+                                                               else " (profile)"),
              f(r["endurance_measured_s"], ".0f"), f(r["endurance_predicted_s"], ".0f"),
              f(r["endurance_error_s"], "+.0f"), f(r["endurance_error_pct"], "+.2f"),
              f(r["voltage_rmse_pct"], ".2f"), f(r["voltage_max_error_pct"], ".2f"),
              f(r["voltage_max_error_operational_pct"], ".2f"),
              {True: "yes", False: "no", None: "?"}[r["in_fit"]]] for r in rows]
     out.print(table(f"Validation to {cutoff:g} V/cell ({bat.cells_series}S{bat.strings_parallel}P)",
-                    ["file", "current [A]", "profile", "measured [s]", "predicted [s]",
+                    ["file", "current [A]", "measured [s]", "predicted [s]",
                      "error [s]", "error [%]", "V RMS [%]", "V max [%]", "V max >20% SOC [%]",
                      "in fit"], body))
     out.print(f"mean |endurance error| {f(summary['mean_abs_endurance_error_pct'], '.2f')} %, "
@@ -1152,6 +1193,10 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, cells, 
               help="Cutoff per cell [V] for validation and curves (default: the mission's, "
                    "else the chemistry's).")
 @data_options
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series of the mission pack (overrides the mission file).")
+@click.option("--parallel", type=click.IntRange(1), default=None,
+              help="Strings in parallel of the mission pack (overrides the mission file).")
 @click.option("--draws", default=300, show_default=True, type=click.IntRange(0),
               help="Parameter draws for the mission's 95 % interval (0 = none).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the draws.")
@@ -1159,8 +1204,8 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, cells, 
 @click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
               help="HTML file to write (one self-contained page).")
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment,
-               draws, seed, title, output, as_json):
+def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment, units,
+               cells, parallel, draws, seed, title, output, as_json):
     """Write one self-contained HTML report for the pilot: model, fit, mission, validation.
 
     \b
@@ -1169,7 +1214,7 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
       dischargelab report battery.json --mission mission.toml --validate 'runs/*.csv' \\
           --cutoff 3.0 --columns time_s=0,current_A=1,voltage_V=2 -o report.html
       dischargelab report hacker-4100-4s-lifepo4 \\
-          --mission examples/missions/paper_table5.toml -o table5.html
+          --mission paper-table5 -o table5.html
     """
     from .mission import load_mission, run_mission
     from .model import CUTOFF_CELL_VOLTAGE_V, load_battery
@@ -1185,6 +1230,7 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
         if mission_path:
             status.update("flying the mission")
             plan = load_mission(mission_path, battery=bat, cutoff_cell_V=cutoff)
+            plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
             result = run_mission(plan, draws=draws, seed=seed,
                                  progress=_progress_callback(status, "parameter draws"))
         if validate_paths:
@@ -1197,7 +1243,7 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
                 raise DischargelabError("give --cutoff V (per cell) for the validation: the "
                                         "battery's chemistry is unknown")
             cases = _validation_cases(bat, validate_paths, cut, columns, current, sign, segment,
-                                      status)
+                                      units, status)
         status.update("drawing plots")
         label = battery if isinstance(battery, str) else None
         path = write_report(output, bat if bat.name else label, mission_result=result,

@@ -15,6 +15,12 @@ DEMO_FILES = {"C/10": "Q30_S001_C10.csv", "1C": "Q30_S001_1C.csv", "4C": "Q30_S0
 #: Column layout of the bundled files (no header).
 DEMO_COLUMNS = {"time_s": 0, "current_A": 1, "voltage_V": 2, "temperature_C": 4}
 DEMO_CUTOFF_V = 2.5
+#: The survey mission flies a 4S2P pack of the fitted cells down to 3.0 V per cell.
+PACK = (4, 2)
+SURVEY_CUTOFF_V = 3.0
+#: Bootstrap refits per fit; they are the draws of the mission's 95 % interval.
+BOOTSTRAP = 100
+DRAWS = BOOTSTRAP
 
 
 def demo_data_dir() -> Path:
@@ -37,13 +43,19 @@ def load_demo_curves():
 
 
 def run_demo(out_dir: Path, console=None) -> dict:
-    """Fit, predict and plot; write everything into ``out_dir``; return a summary dict."""
+    """Fit, predict, fly two missions, plot and report into ``out_dir``.
+
+    Returns a summary dict; ``summary["missions"]`` holds the MissionResult objects
+    (paper Table 5 on its preset, and a survey flight on a pack of the fitted cells).
+    """
     from dataclasses import replace
 
     from .fit import fit_battery
     from .plot import plot_family, save
     from .simulate import curve_family
-    from .validate import validate_discharge
+    from .mission import load_mission, run_mission
+    from .report import write_report
+    from .validate import compare_discharge, validate_discharge
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -56,8 +68,8 @@ def run_demo(out_dir: Path, console=None) -> dict:
         say(f"[bold]{curve.name}[/]: {meta.get('summary', '')}")
 
     with status("fitting"):
-        one = fit_battery(curves[1])
-        all_rates = fit_battery(curves)
+        one = fit_battery(curves[1], bootstrap=BOOTSTRAP)
+        all_rates = fit_battery(curves, bootstrap=BOOTSTRAP)
     models = {"fit on 1C": one, "fit on C/10 + 1C + 4C": all_rates}
     files = {}
     for label, res, stem in (("1C", one, "battery-1C"), ("C/10+1C+4C", all_rates, "battery")):
@@ -80,9 +92,29 @@ def run_demo(out_dir: Path, console=None) -> dict:
                           cutoff_cell_V=DEMO_CUTOFF_V)
     files["curves.png"] = save(plot_family(family), out_dir / "curves.png")
 
+    with status("flying the paper's Table 5 mission"):
+        table5 = run_mission(load_mission("paper-table5"))
+        files["paper-table5.png"] = save(table5.plot(), out_dir / "paper-table5.png")
+    with status(f"flying a survey mission on a {PACK[0]}S{PACK[1]}P pack of the fitted cells "
+                f"({DRAWS} bootstrap parameter sets)"):
+        pack_file = files["battery.json"]
+        survey = load_mission("fixed-wing-survey", battery=pack_file,
+                              cutoff_cell_V=SURVEY_CUTOFF_V)
+        survey = survey.with_battery(survey.battery.with_pack(*PACK))
+        survey_result = run_mission(survey, draws=DRAWS, seed=0)
+        files["survey.png"] = save(survey_result.plot(), out_dir / "survey.png")
+    with status("writing the report"):
+        cases = [compare_discharge(pack_file, data, meta, DEMO_CUTOFF_V)
+                 for data, meta in zip(frames, metas)]
+        files["report.html"] = write_report(
+            out_dir / "report.html", pack_file, mission_result=survey_result,
+            validation=cases, title=f"Samsung 30Q: model, validation and a {PACK[0]}S{PACK[1]}P "
+                                    f"survey mission")
+
     if console is not None:
         _print_summary(console, models, rows, files)
     return {
+        "missions": {"paper-table5": table5, "fixed-wing-survey": survey_result},
         "out_dir": str(out_dir),
         "files": sorted(str(p) for p in files.values()),
         "fits": {label: res.to_dict() for label, res in models.items()},

@@ -444,6 +444,7 @@ class FitResult:
     elapsed_s: float
     nfev: int
     n_starts: int
+    bootstrap: np.ndarray | None = None
 
     # ---- derived ---------------------------------------------------------------
     @property
@@ -468,6 +469,9 @@ class FitResult:
         capacities = [float(c.charge_Ah[-1]) / self.strings_parallel for c in self.curves]
         lowest = int(np.argmin([abs(x) for x in self.fit_currents_A]))
         extra["measured_capacity_Ah"] = capacities[lowest]
+        if self.bootstrap is not None:
+            extra["bootstrap"] = {"names": list(PARAMETER_NAMES),
+                                  "samples": np.round(self.bootstrap, 12).tolist()}
         return Battery(self.parameters, self.cells_series, self.strings_parallel,
                        covariance=self.covariance, fit_currents_A=self.fit_currents_A,
                        extra=extra)
@@ -573,7 +577,8 @@ def _starts(model: _Model, q_max: float, bounds: dict, guess: dict | None):
 def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 fixed: dict | None = None, bounds: dict | None = None,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
-                weighting: str = "equal", n_best: int = 1) -> FitResult:
+                weighting: str = "equal", n_best: int = 1, bootstrap: int = 0,
+                seed: int = 0) -> FitResult:
     """Fit the cell model to one or several discharges with shared parameters.
 
     Parameters
@@ -598,6 +603,12 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         "equal" gives each curve the same total weight whatever its length.
     n_best : int
         Number of best grid starts refined by the variable-projection solver.
+    bootstrap : int
+        Number of moving-block bootstrap refits stored with the result (0 = none);
+        they carry the parameter uncertainty into simulations without assuming
+        the linearised covariance holds far from the optimum.
+    seed : int
+        Seed of the bootstrap.
 
     Returns
     -------
@@ -686,6 +697,9 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     warnings += ident.warnings
     measured = ~stack.is_rest
     rmse = float(np.sqrt(np.mean(residual[measured] ** 2)))
+    samples = None
+    if bootstrap:
+        samples = _bootstrap(model, values, residual, bnds, int(bootstrap), seed)
     return FitResult(
         parameters=params, stderr=stderr, ci95=ci95, covariance=cov, correlation=corr,
         free=list(model.free), fixed={n: v for n, v in fixed.items()}, bounds=bnds,
@@ -693,8 +707,55 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         identifiability=ident, curves=curves, cells_series=int(cells_series),
         strings_parallel=int(strings_parallel), current_scale=float(scale),
         paper_mode=paper_mode, elapsed_s=time.perf_counter() - t_start, nfev=nfev,
-        n_starts=len(starts),
+        n_starts=len(starts), bootstrap=samples,
     )
+
+
+def _block_length(residual, stack: _Stack) -> int:
+    """Block length of the moving-block bootstrap: the residuals' correlation length."""
+    num = den = 0.0
+    for k in range(stack.n_curves):
+        r = residual[(stack.curve == k) & ~stack.is_rest]
+        if r.size > 2:
+            num += float(np.dot(r[1:], r[:-1]))
+            den += float(np.dot(r, r))
+    rho = min(max(num / den if den > 0 else 0.0, 0.0), 0.999)
+    return max(1, int(np.ceil((1 + rho) / (1 - rho))))
+
+
+def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed: int):
+    """Parameter sets refitted to the fit plus block-resampled residuals.
+
+    Circular moving-block bootstrap of the residuals within each curve (blocks as
+    long as the residuals' correlation length, so the smooth model-misfit pattern
+    is resampled, not only the noise); each replica is refitted from the optimum.
+    Returns an array (n, 6) in PARAMETER_NAMES order; fixed parameters constant.
+    """
+    from dataclasses import replace as _replace
+
+    rng = np.random.default_rng(seed)
+    stack = model.s
+    fitted = stack.voltage + residual
+    block = _block_length(residual, stack)
+    theta0 = np.array([values[k] for k in model.nonlinear])
+    lo = np.array([bounds[k][0] for k in model.nonlinear])
+    hi = np.array([bounds[k][1] for k in model.nonlinear])
+    out = np.empty((n, 6))
+    for b in range(n):
+        voltage = fitted.copy()
+        for k in range(stack.n_curves):
+            idx = np.flatnonzero((stack.curve == k) & ~stack.is_rest)
+            m = idx.size
+            length = min(block, max(1, m // 4))
+            starts = rng.integers(0, m, int(np.ceil(m / length)))
+            pick = ((starts[:, None] + np.arange(length)[None, :]) % m).ravel()[:m]
+            voltage[idx] = fitted[idx] - residual[idx][pick]
+        replica = _Model(_replace(stack, voltage=voltage), model.fixed)
+        theta = _varpro_solve(replica, theta0, lo, hi).x if model.nonlinear else theta0
+        vals = _polish(replica, dict(replica.project(theta)[0]), bounds)
+        params, _ = replica.params(vals)
+        out[b] = params.as_array()
+    return out
 
 
 @dataclass

@@ -15,7 +15,8 @@ import numpy as np
 from .errors import require
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib.pyplot, with the Agg backend when there is no display."""
     require("matplotlib", "plot")
     import matplotlib
 
@@ -38,14 +39,14 @@ def _has_display() -> bool:
 def _axes(ax, figsize=(8, 5)):
     if ax is not None:
         return ax
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=figsize, layout="constrained")
     return ax
 
 
 def save(ax, path, dpi: int = 130) -> Path:
     """Save the figure holding ``ax`` to ``path`` (format from the suffix) and close it."""
-    plt = _pyplot()
+    plt = pyplot()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig = ax.figure
@@ -66,7 +67,7 @@ def plot_fit(result, ax=None, x: str = "charge"):
     x : {"charge", "time"}
         Horizontal axis: discharged charge [Ah] or time [min].
     """
-    plt = _pyplot()
+    plt = pyplot()
     if ax is None:
         fig, (ax, res_ax) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True, layout="constrained",
                                          gridspec_kw={"height_ratios": [3, 1]})
@@ -148,7 +149,7 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
     label_phases : bool
         Write phase names in the shaded bands wide enough to hold them.
     """
-    plt = _pyplot()
+    plt = pyplot()
     ax = _axes(ax, figsize=(10, 5.5))
     sim = result.simulation
     mission = result.mission
@@ -181,8 +182,17 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
     if np.isfinite(result.cutoff_time_s):
         ax.axvline(result.cutoff_time_s / 60.0, color="tab:red", ls=":", lw=1.2,
                    label=f"cutoff reached ({result.cutoff_time_s / 60:.1f} min)")
+    x_max = total
+    st = result.stretch
+    if st is not None and st["binding"] != "infeasible" and \
+            abs(result.endurance_s - result.flight_time_s) > 1.0:
+        latest = result.endurance_s / 60.0
+        x_max = max(total, latest * 1.02)
+        ax.axvline(latest, color="tab:orange", ls="--", lw=1.2,
+                   label=f"latest landing with the longest {st['phase']} "
+                         f"({latest:.1f} min, {st['binding']})")
     ax.set_ylim(v_lo - pad, v_hi + 2.2 * pad)
-    ax.set_xlim(0, total)
+    ax.set_xlim(0, x_max)
     ax.set_xlabel("time [min]")
     ax.set_ylabel(f"pack voltage [V] ({mission.battery.cells_series}S"
                   f"{mission.battery.strings_parallel}P)")
@@ -198,7 +208,7 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
         h2, l2 = cur.get_legend_handles_labels()
         handles, labels = handles + h2, labels + l2
     ax.legend(handles, labels, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.11),
-              ncol=min(len(labels), 4), frameon=False)
+              ncol=min(len(labels), 3), frameon=False)
     lines = [f"flight {result.flight_time_s / 60:.1f} min, lands at {result.soc_end_pct:.0f} % "
              f"(reserve {mission.reserve_pct:g} %)"]
     if result.stretch is not None and result.stretch["binding"] != "infeasible":
@@ -274,6 +284,6 @@ def _xlabel(x):
 
 
 def _colors(n):
-    plt = _pyplot()
+    plt = pyplot()
     cmap = plt.get_cmap("viridis")
     return [cmap(v) for v in np.linspace(0.0, 0.85, max(n, 1))]

@@ -175,8 +175,13 @@ def _cutoff_pack(battery: Battery, cutoff_cell_V, cutoff_pack_V) -> float:
     return float(value)
 
 
-def _cell_split(battery: Battery):
-    """Return (V(i_pack, q_pack), a(q_pack), b(q_pack)) with V = a - b * i at pack level."""
+def linear_in_current(battery: Battery):
+    """Pack voltage as a line in the current: returns ``a_b(q_pack) -> (a, b)``.
+
+    Eq. (6) with ``i_f = i`` is linear in the current, so at pack charge ``Q`` [Ah]
+    the pack voltage is ``V = a(Q) - b(Q) * I`` with ``a`` [V] and ``b`` [ohm]
+    vectorised over ``Q`` (and over parameter samples).
+    """
     p = battery.strings_parallel
     s = battery.cells_series
     prm = battery.parameters
@@ -194,7 +199,7 @@ def _cell_split(battery: Battery):
     return a_b
 
 
-def _power_current(a, b, power_W):
+def power_current(a, b, power_W):
     """Low-current root of (a - b*i)*i = P; NaN where the power cannot be delivered."""
     disc = a * a - 4.0 * b * power_W
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -241,7 +246,7 @@ def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
     if not 0 <= initial_charge_Ah < q_max:
         raise SimulationError(f"initial charge removed {initial_charge_Ah:g} Ah must be in "
                               f"[0, {q_max:g}) Ah (the model capacity C x parallel strings)")
-    a_b = _cell_split(battery)
+    a_b = linear_in_current(battery)
     first_load = next((st for st in steps if st.kind != "rest"), None)
     if first_load is not None:
         v0 = _start_voltage(a_b, first_load, initial_charge_Ah)
@@ -276,7 +281,7 @@ def _start_voltage(a_b, step: Step, q0: float) -> float:
     a, b = a_b(q0)
     if step.kind == "current":
         return float(a - b * step.value)
-    i = _power_current(a, b, step.value)
+    i = power_current(a, b, step.value)
     if not np.isfinite(i):
         raise SimulationError(f"the battery cannot deliver {step.value:g} W: its maximum power "
                               f"at the start is {a * a / (4 * b):.1f} W; lower the power")
@@ -334,7 +339,7 @@ def _run_power(st, a_b, cutoff, t0, q0, q_max, n):
 
     def current_at(q):
         a, b = a_b(q)
-        return _power_current(a, b, power)
+        return power_current(a, b, power)
 
     def rhs(_t, y):
         i = current_at(y[0])

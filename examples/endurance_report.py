@@ -1,0 +1,57 @@
+"""Pilot's report: fit a battery, validate it on other rates, fly a mission, write one HTML page.
+
+Uses the Samsung 30Q discharges bundled with the package (1C and 4C to fit, C/10 to
+validate) and, when the shared data folder is beside the checkout, the 2C and 3C runs
+too. The mission is the bundled fixed-wing survey mission on a 4S2P pack.
+
+Usage: python examples/endurance_report.py [--out DIR]
+"""
+
+import argparse
+from pathlib import Path
+
+from dischargelab.fit import Curve, fit_battery
+from dischargelab.io import read_discharge
+from dischargelab.mission import load_mission, run_mission
+from dischargelab.report import write_report
+from dischargelab.validate import compare_files
+
+HERE = Path(__file__).resolve().parent
+BUNDLED = HERE.parent / "src" / "dischargelab" / "data" / "samsung30q"
+SHARED = HERE.parent.parent / "shared" / "data" / "samsung30q_S001"
+COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
+CUTOFF_CELL_V = 3.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="report-out", help="folder for the battery and report")
+    out = Path(parser.parse_args().out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    curves = [Curve.from_frame(*read_discharge(BUNDLED / f"Q30_S001_{rate}.csv",
+                                               columns=COLUMNS)) for rate in ("1C", "4C")]
+    fit = fit_battery(curves)
+    battery_file = fit.battery.save(out / "samsung30q.json")
+    print(fit.report())
+
+    unseen = [BUNDLED / "Q30_S001_C10.csv"]
+    unseen += [SHARED / f"Q30_S001_{rate}.csv" for rate in ("2C", "3C")
+               if (SHARED / f"Q30_S001_{rate}.csv").exists()]
+    cases = compare_files(battery_file, unseen, cutoff_cell_V=CUTOFF_CELL_V, columns=COLUMNS)
+    for case in cases:
+        s = case.summary
+        print(f"validation {Path(s['file']).name}: endurance error {s['endurance_error_pct']:+.2f} %"
+              f", voltage RMS {s['voltage_rmse_pct']:.2f} %")
+
+    mission = load_mission("fixed-wing-survey", battery=battery_file,
+                           cutoff_cell_V=CUTOFF_CELL_V)
+    mission = mission.with_battery(mission.battery.with_pack(4, 2))
+    result = run_mission(mission, draws=300, seed=0)
+    report = write_report(out / "report.html", battery_file, mission_result=result,
+                          validation=cases, title="Samsung 30Q 4S2P survey pack")
+    print(f"endurance {result.endurance_s / 60:.1f} min; report: {report}")
+
+
+if __name__ == "__main__":
+    main()

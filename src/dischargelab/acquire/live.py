@@ -1,0 +1,345 @@
+"""Live view of a running test: terminal panel (rich), periodic lines, matplotlib window.
+
+:class:`LiveDisplay` is a pipeline Consumer that keeps the numbers (voltage,
+per-cell voltage, charge and energy, trend, rates, link state); rendering is
+done from the main thread, so a slow terminal never slows the data file.
+The terminal view needs no graphics and works over SSH; :class:`LivePlot` is
+the optional window (``--plot``), the paper's "meter and graph" consumer.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections import deque
+
+from ..errors import DischargelabError
+
+SPARK_CHARS = "▁▂▃▄▅▆▇█"
+
+
+def sparkline(values, width: int = 48) -> str:
+    """Unicode bar sparkline of ``values`` resampled to ``width`` characters."""
+    vals = [v for v in values if v is not None and math.isfinite(v)]
+    if not vals:
+        return ""
+    if len(vals) > width:
+        step = len(vals) / width
+        vals = [vals[min(len(vals) - 1, int((i + 0.5) * step))] for i in range(width)]
+    lo, hi = min(vals), max(vals)
+    span = hi - lo
+    if span <= 0:
+        return SPARK_CHARS[len(SPARK_CHARS) // 2] * len(vals)
+    top = len(SPARK_CHARS) - 1
+    return "".join(SPARK_CHARS[round((v - lo) / span * top)] for v in vals)
+
+
+class Trend:
+    """Whole-test history decimated to at most ``2 * points`` values (constant memory)."""
+
+    def __init__(self, points: int = 240):
+        self.points = points
+        self.step_s = 0.0
+        self.times: list[float] = []
+        self.values: list[float] = []
+        self._next_t = -math.inf
+
+    def add(self, t: float, value: float) -> None:
+        if t < self._next_t:
+            return
+        self.times.append(t)
+        self.values.append(value)
+        if len(self.times) >= 2 * self.points:
+            self.times = self.times[::2]
+            self.values = self.values[::2]
+            self.step_s = max(self.step_s * 2, (self.times[-1] - self.times[0]) / self.points)
+        self._next_t = t + self.step_s
+
+
+def _clock_text(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "--:--:--"
+    seconds = int(seconds)
+    return f"{seconds // 3600:02d}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+
+
+class LiveDisplay:
+    """Numbers of a running test (pipeline Consumer) and their terminal rendering.
+
+    Parameters
+    ----------
+    cells_series : int
+    cutoff_pack_V : float, optional
+    current_given_A : float, optional
+        Constant current [A] known from the test set-up (``--current``), used for
+        charge and energy when no current is measured.
+    stats : callable, optional
+        Returns the source statistics (frames_ok, frames_lost, ...).
+    safety : SafetyMonitor, optional
+        Shown as debounce / trip state.
+    title : str
+    """
+
+    def __init__(self, *, cells_series: int = 1, cutoff_pack_V: float | None = None,
+                 current_given_A: float | None = None, stats=None, safety=None, title: str = "",
+                 clock=time.monotonic):
+        self.cells_series = max(1, int(cells_series))
+        self.cutoff_pack_V = cutoff_pack_V
+        self.current_given_A = current_given_A
+        self._stats = stats or (lambda: {})
+        self.safety = safety
+        self.title = title
+        self._clock = clock
+        self.samples = 0
+        self.last = None
+        self.first_voltage_V = math.nan
+        self.min_voltage_V = math.inf
+        self.charge_Ah = 0.0
+        self.energy_Wh = 0.0
+        self.trend = Trend()
+        self._arrivals: deque = deque(maxlen=21)          # about 5 s at 4 points per second
+        self._prev = None
+        self.link = "connecting"
+        self.events: deque = deque(maxlen=4)
+        self.ended = ""
+        self.started_wall = clock()
+
+    # ------------------------------------------------------------------ Consumer
+    def current_of(self, sample) -> float | None:
+        """Measured current if any, else the given one [A]."""
+        if sample.current_A is not None:
+            return sample.current_A
+        return self.current_given_A
+
+    def handle(self, sample) -> None:
+        prev = self._prev
+        if prev is None:
+            self.first_voltage_V = sample.voltage_V
+        else:
+            dt = sample.time_s - prev.time_s
+            i0, i1 = self.current_of(prev), self.current_of(sample)
+            if dt > 0 and i0 is not None and i1 is not None:
+                self.charge_Ah += 0.5 * (i0 + i1) * dt / 3600.0
+                self.energy_Wh += 0.5 * (i0 * prev.voltage_V + i1 * sample.voltage_V) * dt / 3600.0
+        self._prev = sample
+        self.last = sample
+        self.samples += 1
+        if math.isfinite(sample.voltage_V):
+            self.min_voltage_V = min(self.min_voltage_V, sample.voltage_V)
+        self.trend.add(sample.time_s, sample.voltage_V)
+        now = self._clock()
+        if not self._arrivals or now - self._arrivals[-1][0] >= 0.25:
+            self._arrivals.append((now, self.samples))
+        self.link = "streaming"
+
+    def event(self, kind: str, **fields) -> None:
+        if kind == "disconnect":
+            self.link = "LINK DOWN - reconnecting"
+        elif kind == "reconnect":
+            self.link = "reconnected"
+        elif kind == "stop":
+            self.ended = fields.get("ended_by", "")
+            return
+        text = fields.get("message") or fields.get("reason") or ""
+        if kind == "gap":
+            text = f"{fields.get('duration_s', 0):.1f} s without data"
+        self.events.append(f"{kind}: {text}" if text else kind)
+
+    def close(self) -> None:
+        pass
+
+    # ------------------------------------------------------------------ numbers
+    @property
+    def rate_Hz(self) -> float:
+        """Samples per wall-clock second over the last few seconds (0 when data stopped)."""
+        if len(self._arrivals) < 2:
+            return math.nan
+        (t0, n0), (t1, n1) = self._arrivals[0], self._arrivals[-1]
+        if self._clock() - t1 > max(3.0, 3 * (t1 - t0) / max(n1 - n0, 1)):
+            return 0.0
+        return (n1 - n0) / (t1 - t0) if t1 > t0 else math.nan
+
+    def summary(self) -> dict:
+        """Numbers for the end-of-test summary."""
+        last = self.last
+        stats = self._stats()
+        out = {
+            "samples": self.samples,
+            "duration_s": None if last is None else last.time_s,
+            "first_voltage_V": None if last is None else self.first_voltage_V,
+            "last_voltage_V": None if last is None else last.voltage_V,
+            "min_voltage_V": None if last is None else self.min_voltage_V,
+            "charge_Ah": self.charge_Ah if self._has_current() else None,
+            "energy_Wh": self.energy_Wh if self._has_current() else None,
+        }
+        for key in ("frames_ok", "frames_lost", "frames_corrupt", "reconnects"):
+            if key in stats:
+                out[key] = stats[key]
+        return out
+
+    def _has_current(self) -> bool:
+        return self.last is not None and self.current_of(self.last) is not None
+
+    def status_line(self) -> str:
+        """One plain line (for --quiet and logs)."""
+        last = self.last
+        if last is None:
+            return f"waiting for data ({self.link})"
+        stats = self._stats()
+        cell = last.voltage_V / self.cells_series
+        parts = [f"t={last.time_s:9.1f} s", f"V={last.voltage_V:7.3f} V ({cell:.3f} V/cell)"]
+        current = self.current_of(last)
+        if current is not None:
+            parts.append(f"I={current:6.2f} A")
+            parts.append(f"{self.charge_Ah:7.4f} Ah {self.energy_Wh:7.3f} Wh")
+        if last.temperature_C is not None:
+            parts.append(f"T={last.temperature_C:5.1f} C")
+        parts.append(f"rate {self.rate_Hz:6.1f}/s")
+        parts.append(f"lost {stats.get('frames_lost', 0)} corrupt {stats.get('frames_corrupt', 0)}")
+        state = self.safety.pending if self.safety is not None else ""
+        if self.link != "streaming":
+            state = f"{self.link} {state}".strip()
+        if state:
+            parts.append(state)
+        return "  ".join(parts)
+
+    def render(self):
+        """A rich renderable of the current state."""
+        from rich.panel import Panel
+        from rich.table import Table
+        from rich.text import Text
+
+        grid = Table.grid(padding=(0, 2))
+        grid.add_column(style="bold", justify="right")
+        grid.add_column()
+        last = self.last
+        stats = self._stats()
+        if last is None:
+            grid.add_row("status", Text(f"waiting for data ({self.link})", style="yellow"))
+        else:
+            cell = last.voltage_V / self.cells_series
+            cut = ""
+            if self.cutoff_pack_V:
+                cut = f"   cutoff {self.cutoff_pack_V:.2f} V"
+            low = self.cutoff_pack_V is not None and last.voltage_V <= self.cutoff_pack_V * 1.03
+            grid.add_row("pack", Text(
+                f"{last.voltage_V:8.3f} V   {self.cells_series} x {cell:.3f} V/cell   "
+                f"min {self.min_voltage_V:.3f} V{cut}", style="bold red" if low else "bold green"))
+            grid.add_row("elapsed", f"{_clock_text(last.time_s)}   ({last.time_s:.1f} s test time)")
+            current = self.current_of(last)
+            if current is not None:
+                how = "measured" if last.current_A is not None else "given"
+                grid.add_row("current", f"{current:.3f} A ({how})   {self.charge_Ah:.4f} Ah   "
+                                        f"{self.energy_Wh:.3f} Wh")
+            else:
+                grid.add_row("current", Text("unknown (give --current A for Ah and Wh)",
+                                             style="dim"))
+            if last.temperature_C is not None:
+                grid.add_row("temperature", f"{last.temperature_C:.1f} °C")
+            if len(self.trend.values) > 1:
+                grid.add_row("trend", f"{sparkline(self.trend.values)}  "
+                                      f"{self.trend.values[0]:.2f} -> {last.voltage_V:.2f} V")
+        grid.add_row("link", f"{self.rate_Hz:.1f} samples/s   ok {stats.get('frames_ok', 0)}   "
+                             f"lost {stats.get('frames_lost', 0)}   corrupt "
+                             f"{stats.get('frames_corrupt', 0)}   reconnects "
+                             f"{stats.get('reconnects', 0)}")
+        state = self.safety.pending if self.safety is not None else ""
+        style = "bold red" if state or self.link.startswith("LINK") else "green"
+        grid.add_row("state", Text(" | ".join(x for x in (self.link, state) if x), style=style))
+        for text in list(self.events)[-2:]:
+            grid.add_row("event", Text(text, style="yellow"))
+        return Panel(grid, title=self.title or "dischargelab acquire", title_align="left",
+                     subtitle="Ctrl-C stops", subtitle_align="right")
+
+
+# ---------------------------------------------------------------------- plot window
+
+def check_display() -> None:
+    """Raise a one-line error when no window can be opened (no display, no GUI backend)."""
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                  or os.environ.get("WAYLAND_DISPLAY")):
+        raise DischargelabError("--plot needs a graphical display (DISPLAY is not set); run "
+                                "without --plot (the terminal view works over SSH) or use ssh -X")
+
+
+class LivePlot:
+    """Voltage-vs-time window updated from the main thread (``--plot``).
+
+    Parameters
+    ----------
+    display : LiveDisplay
+        Source of the data (its decimated trend).
+    interactive : bool
+        Open a window (needs a display and a GUI backend); False draws on an
+        off-screen figure (for saving a picture).
+    """
+
+    def __init__(self, display: LiveDisplay, *, interactive: bool = True):
+        if interactive:
+            check_display()
+        import matplotlib
+
+        if interactive:
+            backend = matplotlib.get_backend().lower()
+            if backend in ("agg", "pdf", "svg", "ps", "cairo", "template"):
+                for candidate in ("TkAgg", "QtAgg", "GTK3Agg"):
+                    try:
+                        matplotlib.use(candidate, force=True)
+                        break
+                    except Exception:  # noqa: BLE001 - try the next GUI toolkit
+                        continue
+                else:
+                    raise DischargelabError("--plot needs an interactive matplotlib backend "
+                                            "(Tk, Qt or GTK); none is installed")
+        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure
+
+        self.display = display
+        self.interactive = interactive
+        self._plt = plt
+        if interactive:
+            plt.ion()
+            self.figure = plt.figure("dischargelab acquire", figsize=(8, 4.5),
+                                     layout="constrained")
+        else:
+            from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+            self.figure = Figure(figsize=(8, 4.5), layout="constrained")
+            FigureCanvasAgg(self.figure)
+        self.ax = self.figure.add_subplot(1, 1, 1)
+        (self.line,) = self.ax.plot([], [], lw=1.4, color="tab:blue", label="pack voltage")
+        if display.cutoff_pack_V:
+            self.ax.axhline(display.cutoff_pack_V, color="tab:red", ls="--", lw=1,
+                            label=f"cutoff {display.cutoff_pack_V:.2f} V")
+        self.ax.set_xlabel("time [s]")
+        self.ax.set_ylabel("pack voltage [V]")
+        self.ax.grid(True, alpha=0.3)
+        self.ax.legend(loc="upper right")
+
+    def update(self) -> None:
+        """Redraw with the latest data (call a few times a second)."""
+        t, v = list(self.display.trend.times), list(self.display.trend.values)
+        if self.display.last is not None and (not t or self.display.last.time_s > t[-1]):
+            t.append(self.display.last.time_s)
+            v.append(self.display.last.voltage_V)
+        n = min(len(t), len(v))
+        self.line.set_data(t[:n], v[:n])
+        if n:
+            self.ax.relim()
+            self.ax.autoscale_view()
+            last = self.display.last
+            self.ax.set_title(f"{last.voltage_V:.3f} V at {last.time_s:.0f} s", loc="left")
+        if self.interactive:
+            self.figure.canvas.draw_idle()
+            self._plt.pause(0.001)
+        else:
+            self.figure.canvas.draw()
+
+    def save(self, path) -> None:
+        self.figure.savefig(path, dpi=100)
+
+    def close(self) -> None:
+        if self.interactive:
+            self._plt.close(self.figure)

@@ -1,0 +1,335 @@
+"""Validate a battery model against measured discharges it was not fitted to.
+
+For each measured discharge the model is driven with the measured current
+(its mean when the current is constant, otherwise the measured profile as a
+sequence of load steps) through :func:`dischargelab.simulate.simulate`, and we
+report, as in the paper's section 4.4 (Figs 12-14):
+
+* the measured and the predicted time to the cutoff voltage, and the endurance
+  error in seconds and in percent of the measured time;
+* the voltage error in percent of the measured voltage, RMS and maximum, over
+  the whole curve and over its operational part (state of charge above 20 %,
+  counted on the charge the measurement delivered to the cutoff).
+
+The measured time to cutoff is interpolated linearly at the first crossing of
+the cutoff voltage. A measurement that never reaches the cutoff has no
+endurance error (``None``) and a warning.
+
+References
+----------
+.. [1] paper section 4.4 and Figs 12-14 (see ``../shared/paper``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DataError
+from .model import charge_from_current, load_battery
+from .simulate import SimulationResult, Step, simulate, simulate_current
+
+#: Relative spread of the current (std / mean) below which a discharge is treated as constant.
+CONSTANT_CURRENT_CV = 0.03
+
+#: Operational part of a curve: state of charge above this fraction (paper 4.4).
+OPERATIONAL_SOC = 0.20
+
+#: Consecutive profile samples whose currents differ less than this fraction of the
+#: mean current are merged into one load step.
+PROFILE_MERGE_FRACTION = 0.01
+
+
+def measured_time_to_cutoff(time_s, voltage_V, cutoff_V: float) -> float:
+    """Time [s] of the first crossing of ``cutoff_V``, linearly interpolated (NaN if never)."""
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(voltage_V, dtype=float)
+    below = np.flatnonzero(v <= cutoff_V)
+    if below.size == 0:
+        return float("nan")
+    k = int(below[0])
+    if k == 0:
+        return float(t[0])
+    v0, v1 = v[k - 1], v[k]
+    frac = (v0 - cutoff_V) / (v0 - v1) if v0 != v1 else 1.0
+    return float(t[k - 1] + frac * (t[k] - t[k - 1]))
+
+
+def _is_constant(current: np.ndarray) -> bool:
+    mean = float(np.mean(current))
+    return mean > 0 and float(np.std(current)) <= CONSTANT_CURRENT_CV * mean
+
+
+def profile_steps(time_s, current_A, *, merge_fraction: float = PROFILE_MERGE_FRACTION):
+    """Load steps reproducing a measured current profile.
+
+    Each interval between samples carries the trapezoidal mean of its end
+    currents (so the charge equals :func:`~dischargelab.model.charge_from_current`);
+    neighbouring intervals closer than ``merge_fraction`` of the mean current are
+    merged with their charge-weighted mean. Charging intervals (negative current)
+    become rests.
+
+    Returns
+    -------
+    steps : list of Step
+    ends_s : numpy.ndarray
+        End time of each step [s] from the first sample.
+    """
+    t = np.asarray(time_s, dtype=float)
+    i = np.asarray(current_A, dtype=float)
+    dt = np.diff(t)
+    mid = np.clip(0.5 * (i[1:] + i[:-1]), 0.0, None)
+    tol = merge_fraction * max(float(np.mean(np.abs(i))), 1e-9)
+    steps, ends = [], []
+    charge, duration = 0.0, 0.0
+    for k in range(dt.size):
+        if duration > 0 and abs(mid[k] - charge / duration) > tol:
+            steps.append(_step(charge / duration, duration))
+            ends.append(t[k] - t[0])
+            charge, duration = 0.0, 0.0
+        charge += mid[k] * dt[k]
+        duration += dt[k]
+    if duration > 0:
+        steps.append(_step(charge / duration, duration))
+        ends.append(t[-1] - t[0])
+    return steps, np.asarray(ends)
+
+
+def _step(current, duration):
+    if current <= 0:
+        return Step("rest", 0.0, float(duration))
+    return Step("current", float(current), float(duration))
+
+
+@dataclass
+class ValidationCase:
+    """One measured discharge against its prediction.
+
+    Attributes
+    ----------
+    summary : dict
+        The JSON row (see :func:`validate_discharge`).
+    time_s, voltage_measured_V, current_A : numpy.ndarray
+        The measurement (time from load start).
+    voltage_predicted_V : numpy.ndarray
+        Prediction at the measured times (NaN after the predicted cutoff).
+    prediction : SimulationResult
+        The simulated discharge (to the predicted cutoff).
+    """
+
+    summary: dict
+    time_s: np.ndarray
+    voltage_measured_V: np.ndarray
+    voltage_predicted_V: np.ndarray
+    prediction: SimulationResult = field(repr=False)
+    current_A: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def label(self) -> str:
+        """Short label: file name and current."""
+        s = self.summary
+        return f"{Path(s['file']).name} ({s['current_A']:.3g} A)"
+
+    def plot(self, ax=None, **kwargs):
+        """Measured and predicted voltage; returns the Axes."""
+        from .plot import plot_validation
+
+        return plot_validation([self], ax=ax, **kwargs)
+
+
+def _same_file(a, b) -> bool:
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except (OSError, TypeError, ValueError):
+        return False
+
+
+def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) -> ValidationCase:
+    """Predict one measured discharge; see :func:`validate_discharge` for the numbers."""
+    battery = load_battery(battery)
+    meta = dict(meta or {})
+    for col in ("time_s", "voltage_V", "current_A"):
+        if col not in data:
+            raise DataError(f"measured data has no {col} column (files without a current "
+                            f"column need --current A)")
+    t = np.asarray(data["time_s"], dtype=float)
+    v = np.asarray(data["voltage_V"], dtype=float)
+    i = np.asarray(data["current_A"], dtype=float)
+    name = str(meta.get("source") or meta.get("name") or "data")
+    if t.size < 3:
+        raise DataError(f"{name}: only {t.size} samples; nothing to validate")
+    if not (np.isfinite(cutoff_cell_V) and cutoff_cell_V > 0):
+        raise DataError(f"cutoff voltage must be > 0 V per cell, got {cutoff_cell_V}")
+    t = t - t[0]
+    cutoff_pack = cutoff_cell_V * battery.cells_series
+    warnings = []
+    if v[0] <= cutoff_pack:
+        raise DataError(f"{Path(name).name}: the measurement starts at {v[0]:.3f} V, at or "
+                        f"below the cutoff {cutoff_pack:.3f} V; check --cutoff and the pack's "
+                        f"cells in series ({battery.cells_series})")
+    t_meas = measured_time_to_cutoff(t, v, cutoff_pack)
+    reached = np.isfinite(t_meas)
+    t_end = t_meas if reached else float(t[-1])
+    if not reached:
+        warnings.append(f"the measurement ends at {v[-1]:.3f} V without reaching the cutoff "
+                        f"{cutoff_pack:.3f} V; no endurance error")
+    inside = t <= t_end
+    q_meas = charge_from_current(t, i)
+    q_total = float(np.interp(t_end, t, q_meas))
+    constant = _is_constant(i[inside])
+    mean_current = float(np.trapezoid(i[inside], t[inside]) / max(t[inside][-1], 1e-12)) \
+        if inside.sum() > 1 else float(i[0])
+    if constant:
+        prediction = simulate_current(battery, mean_current, cutoff_pack_V=cutoff_pack)
+        q_pred_at_t = mean_current * t / 3600.0
+        v_pred = battery.voltage(mean_current, q_pred_at_t)
+        profile = "constant"
+    else:
+        steps, _ = profile_steps(t, i)
+        tail = t >= t[-1] - min(60.0, 0.1 * t[-1])
+        tail_current = float(np.mean(np.clip(i[tail], 0, None)))
+        if tail_current > 0:
+            steps.append(Step("current", tail_current, None, "extension"))
+        prediction = simulate(battery, steps, cutoff_pack_V=cutoff_pack, points_per_step=2)
+        if prediction.ended_by == "cutoff" and tail_current > 0 and \
+                prediction.step[-1] == len(steps) - 1:
+            warnings.append(f"the prediction reaches the cutoff after the measured profile "
+                            f"ends; it was extended at the last measured {tail_current:.3g} A")
+        # voltage at each sample: simulated charge, the sample's own measured current
+        q_at = np.interp(t, prediction.time_s, prediction.charge_Ah)
+        v_pred = battery.voltage(np.clip(i, 0.0, None), q_at)
+        profile = "measured"
+    t_pred = prediction.time_to_cutoff_s
+    v_pred = np.where(t <= (t_pred if np.isfinite(t_pred) else np.inf), v_pred, np.nan)
+    compare = inside & np.isfinite(v_pred) & (v > 0)
+    rel = (v_pred[compare] - v[compare]) / v[compare] * 100.0
+    soc = 1.0 - q_meas / q_total if q_total > 0 else np.ones_like(q_meas)
+    operational = compare & (soc > OPERATIONAL_SOC)
+    rel_op = (v_pred[operational] - v[operational]) / v[operational] * 100.0
+
+    def rms(x):
+        return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+    def peak(x):
+        return float(np.max(np.abs(x))) if x.size else float("nan")
+
+    error_s = t_pred - t_meas if reached else float("nan")
+    summary = {
+        "file": name,
+        "current_A": mean_current,
+        "cell_current_A": mean_current / battery.strings_parallel,
+        "profile": profile,
+        "cutoff_cell_V": float(cutoff_cell_V),
+        "cutoff_pack_V": float(cutoff_pack),
+        "endurance_measured_s": t_meas if reached else None,
+        "endurance_predicted_s": t_pred if np.isfinite(t_pred) else None,
+        "endurance_error_s": error_s if np.isfinite(error_s) else None,
+        "endurance_error_pct": 100.0 * error_s / t_meas if reached and t_meas > 0 and
+        np.isfinite(error_s) else None,
+        "capacity_measured_Ah": q_total if reached else None,
+        "capacity_predicted_Ah": prediction.capacity_Ah,
+        "voltage_rmse_pct": rms(rel),
+        "voltage_max_error_pct": peak(rel),
+        "voltage_mean_error_pct": float(np.mean(rel)) if rel.size else float("nan"),
+        "voltage_rmse_operational_pct": rms(rel_op),
+        "voltage_max_error_operational_pct": peak(rel_op),
+        "voltage_rmse_V": rms(v_pred[compare] - v[compare]),
+        "compared_until_s": float(t[compare][-1]) if compare.any() else None,
+        "n_compared": int(compare.sum()),
+        "in_fit": None,
+        "extrapolation": None,
+        "warnings": warnings,
+    }
+    sources = battery.extra.get("source")
+    if isinstance(sources, list) and meta.get("source"):
+        summary["in_fit"] = any(isinstance(s, dict) and _same_file(s.get("source"),
+                                                                     meta["source"])
+                                for s in sources)
+        if summary["in_fit"]:
+            warnings.append("this file was used in the fit: not an independent validation")
+    fitted = [abs(x) for x in battery.fit_currents_A if x]
+    if fitted:
+        cell = summary["cell_current_A"]
+        summary["extrapolation"] = bool(cell > 2 * max(fitted) or cell < 0.5 * min(fitted))
+        if summary["extrapolation"]:
+            warnings.append(f"extrapolation: cell current {cell:.3g} A is far outside the "
+                            f"fitted currents {', '.join(f'{x:.3g}' for x in fitted)} A")
+    return ValidationCase(summary=summary, time_s=t, voltage_measured_V=v,
+                          voltage_predicted_V=v_pred, prediction=prediction, current_A=i)
+
+
+def validate_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) -> dict:
+    """Endurance and voltage errors of the model on one measured discharge.
+
+    Parameters
+    ----------
+    battery : Battery, preset name or battery-file path
+        The pack the measurement was made on (cells in series / parallel).
+    data : pandas.DataFrame or mapping
+        Canonical columns ``time_s`` (from load start), ``voltage_V`` (pack),
+        ``current_A`` (pack, discharge positive), e.g. from
+        :func:`dischargelab.io.read_discharge`.
+    meta : dict
+        Reader metadata (``source`` names the file).
+    cutoff_cell_V : float
+        Cutoff voltage per cell [V].
+
+    Returns
+    -------
+    dict
+        ``file``, ``current_A`` (mean), ``endurance_measured_s``,
+        ``endurance_predicted_s``, ``endurance_error_pct`` (100 (pred - meas) / meas),
+        ``voltage_rmse_pct``, ``voltage_max_error_pct`` (over the compared curve),
+        plus ``endurance_error_s``, ``voltage_*_operational_pct`` (SOC > 20 %),
+        ``capacity_measured_Ah``, ``capacity_predicted_Ah``, ``profile``
+        ("constant" | "measured"), ``in_fit``, ``extrapolation``, ``warnings``.
+        Endurance keys are None when the measurement never reaches the cutoff.
+    """
+    return compare_discharge(battery, data, meta, cutoff_cell_V).summary
+
+
+def compare_files(battery, paths, *, cutoff_cell_V: float, columns=None, current_A=None,
+                  progress=None, **read_options) -> list[ValidationCase]:
+    """Read each file with :func:`dischargelab.io.read_discharge` and compare it."""
+    from .io import read_discharge
+
+    battery = load_battery(battery)
+    paths = list(paths)
+    if not paths:
+        raise DataError("no measured files to validate against")
+    cases = []
+    for k, path in enumerate(paths):
+        data, meta = read_discharge(path, columns=columns, current_A=current_A, **read_options)
+        cases.append(compare_discharge(battery, data, meta, cutoff_cell_V))
+        if progress is not None:
+            progress(k + 1, len(paths))
+    return cases
+
+
+def validate_files(battery, paths, *, cutoff_cell_V: float, columns=None, current_A=None,
+                   **read_options) -> list[dict]:
+    """:func:`validate_discharge` for each file (read with ``read_discharge``)."""
+    return [c.summary for c in compare_files(battery, paths, cutoff_cell_V=cutoff_cell_V,
+                                             columns=columns, current_A=current_A,
+                                             **read_options)]
+
+
+def summarise(rows: list[dict]) -> dict:
+    """Mean absolute endurance error [%] and worst voltage errors over validation rows."""
+    errors = [abs(r["endurance_error_pct"]) for r in rows if r["endurance_error_pct"] is not None]
+    rmse = [r["voltage_rmse_pct"] for r in rows if np.isfinite(r["voltage_rmse_pct"])]
+    peak_op = [r["voltage_max_error_operational_pct"] for r in rows
+               if np.isfinite(r["voltage_max_error_operational_pct"])]
+    return {
+        "files": len(rows),
+        "mean_abs_endurance_error_pct": float(np.mean(errors)) if errors else None,
+        "max_abs_endurance_error_pct": float(np.max(errors)) if errors else None,
+        "max_voltage_rmse_pct": float(np.max(rmse)) if rmse else None,
+        "max_voltage_error_operational_pct": float(np.max(peak_op)) if peak_op else None,
+    }
+
+
+__all__ = ["validate_discharge", "validate_files", "compare_discharge", "compare_files",
+           "ValidationCase", "measured_time_to_cutoff", "profile_steps", "summarise"]
