@@ -31,7 +31,6 @@ from _machine import machine_line  # noqa: E402
 
 from dischargelab.mission import load_mission, mission_summary, run_mission  # noqa: E402
 
-MISSIONS = Path(__file__).resolve().parents[1] / "examples" / "missions"
 TARGET_S = 0.050
 
 
@@ -50,13 +49,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     repeats = parser.parse_args().repeats
 
-    table5 = load_mission(MISSIONS / "paper_table5.toml")
+    table5 = load_mission("paper-table5")
     sd = 0.02 * table5.battery.parameters.as_array()
     table5_cov = table5.with_battery(replace(table5.battery, covariance=np.diag(sd**2)))
-    fixed_wing = load_mission(MISSIONS / "fixed_wing_survey.toml")
+    fixed_wing = load_mission("fixed-wing-survey")
     fixed_wing_cov = fixed_wing.with_battery(replace(fixed_wing.battery,
                                                      covariance=np.diag(sd**2)))
-    hover = load_mission(MISSIONS / "multirotor_hover.toml")
+    hover = load_mission("multirotor-hover")
 
     cases = [
         ("Table 5: run_mission (max-cruise root finding)", lambda: run_mission(table5),

@@ -6,7 +6,7 @@ import pytest
 from dischargelab.errors import DataError, FitError
 from dischargelab.fit import Curve, fit_battery, guess_parameters
 from dischargelab.identifiability import analyse
-from dischargelab.model import PARAMETER_NAMES, cell_voltage
+from dischargelab.model import PARAMETER_NAMES
 from synthetic import TRUE, measurement_noise, synthetic_curve
 
 

@@ -3,8 +3,6 @@ uncertainty propagation and the example missions."""
 
 import json
 import math
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -480,16 +478,3 @@ def test_unphysical_draws_are_rejected():
     assert np.all(params.R_ohm >= 0)
     assert 0.1 < info["rejected_fraction"] < 0.3                  # P(R < 0) = 17 %
     assert any("unphysical" in w for w in info["warnings"])
-
-
-# ---------------------------------------------------------------------------------------------
-# Example scripts run
-# ---------------------------------------------------------------------------------------------
-
-def test_mission_example_script_runs(tmp_path):
-    script = REPO / "examples" / "mission_endurance.py"
-    done = subprocess.run([sys.executable, str(script), "--out", str(tmp_path)],
-                          capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert "endurance" in done.stdout
-    assert (tmp_path / "paper-table5.png").stat().st_size > 10_000

@@ -389,6 +389,7 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
       dischargelab predict hacker-4100-4s-lifepo4 --current 50 --cutoff-pack 10
     """
     from .simulate import simulate_current, simulate_power
+    from .uncertainty import simulation_interval
 
     chosen = [x is not None for x in (current, c_rate, power)]
     if sum(chosen) != 1:
@@ -396,10 +397,23 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
     bat, cut = _battery_and_cutoff(battery, cells, parallel, cutoff, cutoff_pack)
     q0 = (1.0 - soc / 100.0) * bat.capacity_Ah
     if power is not None:
-        result = simulate_power(bat, power, initial_charge_Ah=q0, **cut)
+        def run(b):
+            return simulate_power(b, power, initial_charge_Ah=q0, **cut)
     else:
         amps = current if current is not None else c_rate * bat.rated_capacity_Ah
-        result = simulate_current(bat, amps, initial_charge_Ah=q0, **cut)
+
+        def run(b):
+            return simulate_current(b, amps, initial_charge_Ah=q0, **cut)
+    result = run(bat)
+    spread = simulation_interval(bat, run)
+    warnings = []
+    cell_current = float(result.current_A[0]) / bat.strings_parallel
+    side = bat.extrapolation(cell_current)
+    if side:
+        fitted = ", ".join(f"{x:.3g}" for x in bat.fit_currents_A)
+        warnings.append(f"extrapolation: {cell_current:.3g} A per cell is far {side} the fitted "
+                        f"currents ({fitted} A); the interval covers the parameter uncertainty "
+                        f"only, not the model's error away from the fitted rates (see validate)")
     if plot_path:
         from .plot import save
 
@@ -411,20 +425,35 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
     if csv_path:
         result.to_pandas().to_csv(csv_path, index=False)
     summary = result.to_dict()
+    if spread is not None:
+        summary["interval95"] = {key: list(spread[key]) for key in
+                                 ("time_to_cutoff_s", "capacity_Ah", "energy_Wh")}
+        summary["interval95"]["bootstrap_draws"] = spread["draws"] - spread["failed"]
+    summary["warnings"] = warnings
     if as_json:
         print_json(summary)
         return
+
+    def with_interval(text, key, scale=1.0, spec=".4g"):
+        if spread is None:
+            return text
+        lo, hi = spread[key]
+        return f"{text}  [95 %: {lo * scale:{spec}} to {hi * scale:{spec}}]"
+
     load = (f"{summary['current_A']:.4g} A" if "current_A" in summary
             else f"{summary['power_W']:.4g} W")
     rows = [["load", load],
             ["cutoff", f"{summary['cutoff_V']:.3f} V/cell ({summary['cutoff_pack_V']:.2f} V pack)"],
-            ["time to cutoff", f"{summary['time_to_cutoff_s']:.0f} s "
-                               f"({summary['time_to_cutoff_s'] / 60:.2f} min)"],
-            ["charge delivered", f"{summary['capacity_Ah']:.4g} Ah"],
-            ["energy delivered", f"{summary['energy_Wh']:.4g} Wh"],
+            ["time to cutoff", with_interval(f"{summary['time_to_cutoff_s'] / 60:.2f} min",
+                                             "time_to_cutoff_s", 1 / 60, ".2f")],
+            ["charge delivered", with_interval(f"{summary['capacity_Ah']:.4g} Ah",
+                                               "capacity_Ah")],
+            ["energy delivered", with_interval(f"{summary['energy_Wh']:.4g} Wh", "energy_Wh")],
             ["ended by", summary["ended_by"]]]
     out.print(table(f"Prediction ({bat.cells_series}S{bat.strings_parallel}P)",
                     ["quantity", "value"], rows))
+    for warning in warnings:
+        out.print(f"warning: {warning}", markup=False)
 
 
 @app.command("curves")

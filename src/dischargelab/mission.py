@@ -1113,9 +1113,8 @@ def _crossing_time(sim: SimulationResult, q_target: float) -> float:
 def extrapolation_warnings(battery: Battery, phase_rows: list[dict]) -> list[str]:
     """Warn when phase cell currents lie far outside the currents the battery was fitted at.
 
-    More than 2x above the highest or below half the lowest fitted cell current
-    (``Battery.fit_currents_A``) is an extrapolation of the model (paper 4.4:
-    accuracy falls away from the fitted rate).
+    See :meth:`dischargelab.model.Battery.extrapolation` (more than 2x above the
+    highest or below half the lowest fitted cell current).
     """
     fitted = [abs(x) for x in battery.fit_currents_A if x]
     if not fitted:
@@ -1123,13 +1122,13 @@ def extrapolation_warnings(battery: Battery, phase_rows: list[dict]) -> list[str
                 "currents lie inside the fitted range"]
     lo, hi = min(fitted), max(fitted)
     p = battery.strings_parallel
-    above, below = {}, {}
+    found = {"above": {}, "below": {}}
     for row in phase_rows:
         cell = row["mean_current_A"] / p
-        if cell > 2.0 * hi:
-            above.setdefault(row["phase"], cell)
-        elif 0 < cell < 0.5 * lo:
-            below.setdefault(row["phase"], cell)
+        side = battery.extrapolation(cell)
+        if side:
+            found[side].setdefault(row["phase"], cell)
+    above, below = found["above"], found["below"]
     out = []
     if above:
         names = ", ".join(f"{n} ({c:.3g} A)" for n, c in above.items())

@@ -39,6 +39,9 @@ LINEAR_PARAMETERS: tuple[str, ...] = ("E0_V", "R_ohm", "K_V_per_Ah", "A_V")
 #: Name of the model in battery files and JSON output.
 MODEL_NAME = "tremblay"
 
+#: Cell currents beyond this factor of the fitted range are extrapolations.
+EXTRAPOLATION_FACTOR = 2.0
+
 
 @dataclass(frozen=True)
 class CellParameters:
@@ -234,6 +237,23 @@ class Battery:
             if value:
                 return float(value) * self.strings_parallel
         return self.capacity_Ah
+
+    def extrapolation(self, cell_current_A: float) -> str | None:
+        """"above" / "below" when a cell current [A] lies far outside the fitted currents.
+
+        Far means more than :data:`EXTRAPOLATION_FACTOR` times the highest or less
+        than the lowest divided by it (paper 4.4: accuracy falls away from the
+        fitted rate). None inside the range or when no fit currents are known.
+        """
+        fitted = [abs(x) for x in self.fit_currents_A if x]
+        cell = abs(float(cell_current_A))
+        if not fitted or cell == 0:
+            return None
+        if cell > EXTRAPOLATION_FACTOR * max(fitted):
+            return "above"
+        if cell < min(fitted) / EXTRAPOLATION_FACTOR:
+            return "below"
+        return None
 
     def voltage(self, current_A, charge_Ah, filtered_current_A=None):
         """Pack voltage [V] for pack current [A] and pack charge [Ah]."""

@@ -223,8 +223,11 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
         lines.append(f"95 % interval {e['low'] / 60:.1f}-{e['high'] / 60:.1f} min")
     if not result.completed:
         lines.append(f"NOT COMPLETED: {result.ended_by} at {result.flight_time_s / 60:.1f} min")
-    ax.set_title(f"{mission.name}: {mission.battery.name or 'battery'}\n" + "; ".join(lines),
-                 fontsize=9)
+    # two short lines rather than one long one, so narrow figures do not clip the title
+    half = (len(lines) + 1) // 2
+    ax.set_title(f"{mission.name}: {mission.battery.name or 'battery'}\n"
+                 + "; ".join(lines[:half]) + ("\n" + "; ".join(lines[half:]) if lines[half:]
+                                              else ""), fontsize=9)
     return ax
 
 

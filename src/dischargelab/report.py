@@ -359,12 +359,11 @@ def _mission_section(result) -> str:
     if unc is not None and not unc.get("available"):
         rows.append(["uncertainty", unc.get("reason", "unavailable")])
     elif unc:
-        rows.append(["uncertainty method", f"{unc['accepted']} parameter draws from the fit "
-                                           f"covariance (seed {unc['seed']}); "
-                                           f"{100 * unc['rejected_fraction']:.0f} % of the "
-                                           f"draws tried were unphysical and rejected; the "
-                                           f"mission completes in "
-                                           f"{100 * unc['completed_fraction']:.0f} % of draws"])
+        rejected = (f"; {100 * unc['rejected_fraction']:.0f} % of the draws tried were "
+                    f"unphysical and rejected" if unc.get("rejected") else "")
+        rows.append(["uncertainty method", f"{unc['method']}: {unc['accepted']} parameter sets"
+                                           f"{rejected}; the mission completes with "
+                                           f"{100 * unc['completed_fraction']:.0f} % of them"])
     parts.append(_table(["quantity", "value"], rows, text_columns=(1,)))
     parts.append(_figure(result.plot(), "Pack voltage through the flight, phases shaded, "
                                         "cutoff and reserve marked (paper Fig. 11 style).",

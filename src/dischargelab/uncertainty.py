@@ -507,5 +507,41 @@ def mission_uncertainty(mission, *, draws: int = DEFAULT_DRAWS, seed: int = 0, l
     return out
 
 
-__all__ = ["sample_parameters", "bootstrap_parameters", "interval", "DrawFlight", "mission_uncertainty",
+def simulation_interval(battery: Battery, simulate_one, *, level: float = 0.95) -> dict | None:
+    """Interval of a simulation's summary numbers over the stored bootstrap refits.
+
+    Parameters
+    ----------
+    battery : Battery
+        With ``extra["bootstrap"]`` (``fit --bootstrap N``); otherwise None is returned.
+    simulate_one : callable
+        ``simulate_one(battery) -> SimulationResult`` for one parameter set.
+
+    Returns
+    -------
+    dict or None
+        ``{"level", "draws", "failed", "time_to_cutoff_s": (low, high),
+        "capacity_Ah": (low, high), "energy_Wh": (low, high)}``; draws whose
+        simulation is impossible (e.g. the cutoff above their start voltage) are
+        counted in ``failed``.
+    """
+    samples = bootstrap_parameters(battery)
+    if samples is None:
+        return None
+    times, charges, energies, failed = [], [], [], 0
+    for row in samples:
+        try:
+            run = simulate_one(replace(battery, parameters=CellParameters.from_array(row)))
+        except DataError:
+            failed += 1
+            continue
+        times.append(run.time_to_cutoff_s)
+        charges.append(run.capacity_Ah)
+        energies.append(run.energy_Wh_total)
+    return {"level": level, "draws": int(len(samples)), "failed": failed,
+            "time_to_cutoff_s": interval(times, level), "capacity_Ah": interval(charges, level),
+            "energy_Wh": interval(energies, level)}
+
+
+__all__ = ["sample_parameters", "bootstrap_parameters", "simulation_interval", "interval", "DrawFlight", "mission_uncertainty",
            "DEFAULT_DRAWS"]

@@ -252,7 +252,7 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) ->
     fitted = [abs(x) for x in battery.fit_currents_A if x]
     if fitted:
         cell = summary["cell_current_A"]
-        summary["extrapolation"] = bool(cell > 2 * max(fitted) or cell < 0.5 * min(fitted))
+        summary["extrapolation"] = battery.extrapolation(cell) is not None
         if summary["extrapolation"]:
             warnings.append(f"extrapolation: cell current {cell:.3g} A is far outside the "
                             f"fitted currents {', '.join(f'{x:.3g}' for x in fitted)} A")

@@ -1,0 +1,46 @@
+"""Every example script and every benchmark runs (quick settings) and prints its result."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = sorted((REPO / "examples").glob("*.py"))
+
+#: benchmark -> (quick arguments, text the output must contain)
+BENCHMARKS = {
+    "fit_speed.py": (["--repeats", "3"], "speed-up"),
+    "accuracy.py": (["--sets", "enertech"], "endurance error"),
+    "mission_speed.py": (["--repeats", "1"], "Table 5"),
+    "io_read_speed.py": (["--repeats", "1", "--rows", "20000"], "ms"),
+    "acquire_throughput.py": (["--seconds", "5"], "corrupt"),
+}
+
+
+def run(args, timeout=300):
+    return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout, cwd=REPO)
+
+
+@pytest.mark.parametrize("script", EXAMPLES, ids=[p.name for p in EXAMPLES])
+def test_example_runs(script, tmp_path):
+    done = run([script, "--out", tmp_path])
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip()
+    produced = [p for p in tmp_path.iterdir() if p.suffix in (".png", ".html")]
+    assert produced and all(p.stat().st_size > 10_000 for p in produced)
+
+
+def test_every_benchmark_is_listed():
+    assert {p.name for p in (REPO / "benchmarks").glob("[!_]*.py")} == set(BENCHMARKS)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(BENCHMARKS))
+def test_benchmark_runs(name, shared_data):
+    args, expected = BENCHMARKS[name]
+    done = run([REPO / "benchmarks" / name, *args])
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert expected in done.stdout
