@@ -711,15 +711,20 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     )
 
 
-def _block_length(residual, stack: _Stack) -> int:
-    """Block length of the moving-block bootstrap: the residuals' correlation length."""
+def _lag1_correlation(residual, stack: _Stack) -> float:
+    """Lag-1 autocorrelation of the residuals within each curve, pooled, in [0, 0.999]."""
     num = den = 0.0
     for k in range(stack.n_curves):
         r = residual[(stack.curve == k) & ~stack.is_rest]
         if r.size > 2:
             num += float(np.dot(r[1:], r[:-1]))
             den += float(np.dot(r, r))
-    rho = min(max(num / den if den > 0 else 0.0, 0.0), 0.999)
+    return min(max(num / den if den > 0 else 0.0, 0.0), 0.999)
+
+
+def _block_length(residual, stack: _Stack) -> int:
+    """Block length of the moving-block bootstrap: the residuals' correlation length."""
+    rho = _lag1_correlation(residual, stack)
     return max(1, int(np.ceil((1 + rho) / (1 - rho))))
 
 
@@ -881,14 +886,7 @@ def _covariance(svd, resid: np.ndarray, stack: _Stack):
     """
     norm, sv, vt = svd
     n, p = resid.size, norm.size
-    # lag-1 autocorrelation of residuals within each curve
-    num = den = 0.0
-    for k in range(stack.n_curves):
-        r = resid[(stack.curve == k) & ~stack.is_rest]
-        if r.size > 2:
-            num += float(np.dot(r[1:], r[:-1]))
-            den += float(np.dot(r, r))
-    rho = min(max(num / den if den > 0 else 0.0, 0.0), 0.999)
+    rho = _lag1_correlation(resid, stack)
     n_eff = max(n * (1 - rho) / (1 + rho), p + 1.0)
     dof_eff = n_eff - p
     s2 = float(np.dot(resid, resid)) / max(n - p, 1) * (n / n_eff)

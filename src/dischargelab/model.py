@@ -22,13 +22,13 @@ References
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from .errors import DataError
+from .jsonfile import read_json, write_json
 
 #: Canonical parameter names, in the order used by every array and matrix.
 PARAMETER_NAMES: tuple[str, ...] = ("E0_V", "R_ohm", "K_V_per_Ah", "A_V", "B_per_Ah", "C_Ah")
@@ -317,13 +317,8 @@ class Battery:
         )
 
     def save(self, path) -> Path:
-        """Write the battery file (JSON); returns the path."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
-        tmp.replace(path)
-        return path
+        """Write the battery file (JSON, atomically); returns the path."""
+        return write_json(path, self.to_dict())
 
 
 def load_battery(source) -> Battery:
@@ -333,15 +328,8 @@ def load_battery(source) -> Battery:
     text = str(source)
     if text in PRESETS:
         return PRESETS[text]
-    path = Path(text)
-    if not path.exists():
-        raise DataError(
-            f"battery file {text!r} not found (and not a preset: {', '.join(sorted(PRESETS))})"
-        )
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"{text}: not valid JSON ({exc})") from None
+    data = read_json(text, f"battery file {text!r} not found (and not a preset: "
+                           f"{', '.join(sorted(PRESETS))})")
     return Battery.from_dict(data)
 
 

@@ -253,9 +253,12 @@ class DrawFlight:
             total = half * np.sum(_WEIGHTS[:, None] * inv, axis=0)
         return np.where(dq > 0, total, 0.0)
 
-    def advance(self, phase, q0, duration_s: float) -> np.ndarray:
-        """Charge [Ah] after ``duration_s`` at the phase's load (NaN if the power failed)."""
-        if phase.value == 0 or duration_s == 0:
+    def advance(self, phase, q0, duration_s) -> np.ndarray:
+        """Charge [Ah] after ``duration_s`` (scalar or per draw) at the phase's load.
+
+        NaN where the power failed.
+        """
+        if phase.value == 0 or np.all(np.asarray(duration_s) == 0):
             return np.array(q0, dtype=float)
         if phase.kind == "current":
             return q0 + phase.value * duration_s / 3600.0
@@ -289,10 +292,15 @@ class DrawFlight:
             q[alive] = target[alive]
             alive[:] = False
             return
-        q_new = self.advance(phase, q, duration_s)
-        crossed = alive & ~(q_new < stop)
+        self._step(phase, state, stop, np.broadcast_to(float(duration_s), q.shape))
+
+    def _step(self, phase, state, stop, durations):
+        """Advance the alive draws by ``durations``; those crossing ``stop`` end there."""
+        q, t, alive = state["q"], state["t"], state["alive"]
+        q_new = self.advance(phase, q, durations)
+        crossed = alive & ~(q_new < stop) & (durations > 0)
         ok = alive & ~crossed
-        t[ok] += duration_s
+        t[ok] += durations[ok]
         q[ok] = q_new[ok]
         if crossed.any():
             target = np.maximum(stop, q)
@@ -414,31 +422,7 @@ class DrawFlight:
 
     def _fly_stretch(self, phase, durations, state):
         """The stretch phase with a per-draw duration."""
-        q, t, alive = state["q"], state["t"], state["alive"]
-        stop = self.stop_charge(phase)
-        if phase.kind == "current":
-            q_new = q + phase.value * durations / 3600.0
-        else:
-            h = durations / RK4_STEPS
-            q_new = q.copy()
-            f = lambda x: self.current(phase, x) / 3600.0  # noqa: E731
-            for _ in range(RK4_STEPS):
-                k1 = f(q_new)
-                k2 = f(q_new + 0.5 * h * k1)
-                k3 = f(q_new + 0.5 * h * k2)
-                k4 = f(q_new + h * k3)
-                q_new = q_new + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        crossed = alive & ~(q_new < stop) & (durations > 0)
-        ok = alive & ~crossed
-        t[ok] += durations[ok]
-        q[ok] = q_new[ok]
-        if crossed.any():
-            tgt = np.maximum(stop, q)
-            dt = self.time_between(phase, q, tgt)
-            t[crossed] += dt[crossed]
-            q[crossed] = tgt[crossed]
-            alive[crossed] = False
-            state["reason"][crossed] = 1
+        self._step(phase, state, self.stop_charge(phase), durations)
 
 
 def mission_uncertainty(mission, *, draws: int = DEFAULT_DRAWS, seed: int = 0, level=0.95,

@@ -40,7 +40,6 @@ References
 from __future__ import annotations
 
 import csv
-import json
 import math
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -48,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..jsonfile import read_json, write_json
 from ..errors import DataError
 
 #: Arduino Uno ADC: 10 bits over a 5 V reference (paper 3.3).
@@ -192,24 +192,13 @@ class Calibration:
 
     def save(self, path) -> Path:
         """Write the calibration file (JSON, atomically); returns the path."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
-        tmp.replace(path)
-        return path
+        return write_json(path, self.to_dict())
 
 
 def load_calibration(path) -> Calibration:
     """Read a calibration file written by :meth:`Calibration.save`."""
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"calibration file {str(path)!r} not found; create one with "
-                        "'dischargelab calibrate --pair REAL,MEASURED ... -o cal.json'")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: not valid JSON ({exc})") from None
+    data = read_json(path, f"calibration file {str(path)!r} not found; create one with "
+                           "'dischargelab calibrate --pair REAL,MEASURED ... -o cal.json'")
     return Calibration.from_dict(data, source=str(path))
 
 

@@ -38,7 +38,6 @@ import shutil
 import tempfile
 import threading
 import time
-import tty
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,8 +46,17 @@ import numpy as np
 from ..errors import DataError
 from ..model import Battery, charge_from_current, load_battery
 from . import protocol as proto
-from .sensors import (ADC_REFERENCE_V, CURRENT_CHANNEL, CURRENT_SENSORS, TEMPERATURE_CHANNEL,
-                      VOLTAGE_CHANNEL, CurrentSensor, Thermistor, volts_to_adc)
+from .pseudo_terminal import close_fds, open_raw_pty
+from .sensors import (
+    ADC_REFERENCE_V,
+    CURRENT_CHANNEL,
+    CURRENT_SENSORS,
+    TEMPERATURE_CHANNEL,
+    VOLTAGE_CHANNEL,
+    CurrentSensor,
+    Thermistor,
+    volts_to_adc,
+)
 
 FIRMWARE_NAME = "dischargelab-logger"
 FIRMWARE_VERSION = "1.0.0"
@@ -248,11 +256,7 @@ class VirtualDevice:
 
     # ------------------------------------------------------------------ pty
     def _open_pty(self) -> None:
-        master, slave = os.openpty()
-        tty.setraw(slave)                 # no echo, no line discipline before the host opens it
-        os.set_blocking(master, False)
-        self._master, self._slave = master, slave
-        target = os.ttyname(slave)
+        self._master, self._slave, target = open_raw_pty()
         tmp = f"{self.port}.{os.getpid()}.tmp"
         try:
             os.unlink(tmp)
@@ -268,12 +272,7 @@ class VirtualDevice:
             os.unlink(self.port)
         except OSError:
             pass
-        for fd in (self._master, self._slave):
-            if fd is not None:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
+        close_fds(self._master, self._slave)
         self._master = self._slave = None
 
     # ------------------------------------------------------------------ firmware state

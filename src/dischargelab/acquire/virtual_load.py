@@ -24,13 +24,22 @@ import os
 import select
 import threading
 import time
-import tty
 
 import numpy as np
 
 from ..model import charge_from_current, load_battery
-from .ebc import (BASE, HOST_FRAME_BYTES, Command, EbcFrameError, FrameSplitter, Status,
-                  decode_command, encode_status, xor_checksum)
+from .ebc import (
+    BASE,
+    HOST_FRAME_BYTES,
+    Command,
+    EbcFrameError,
+    FrameSplitter,
+    Status,
+    decode_command,
+    encode_status,
+    xor_checksum,
+)
+from .pseudo_terminal import close_fds, open_raw_pty
 
 
 class VirtualEbcLoad:
@@ -101,11 +110,7 @@ class VirtualEbcLoad:
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> "VirtualEbcLoad":
-        master, slave = os.openpty()
-        tty.setraw(slave)
-        os.set_blocking(master, False)   # a full pty buffer drops frames instead of blocking
-        self._master, self._slave = master, slave
-        self.port = os.ttyname(slave)
+        self._master, self._slave, self.port = open_raw_pty()
         self._thread = threading.Thread(target=self._run, name="virtual-ebc", daemon=True)
         self._thread.start()
         return self
@@ -114,12 +119,7 @@ class VirtualEbcLoad:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(5)
-        for fd in (self._master, self._slave):
-            if fd is not None:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
+        close_fds(self._master, self._slave)
         self._master = self._slave = None
 
     def __enter__(self) -> "VirtualEbcLoad":
