@@ -38,7 +38,9 @@ def app() -> None:
     """
 
 
-out = Console(highlight=False, soft_wrap=True)
+# Piped or redirected output gets wide tables instead of rich's 80-column default.
+out = Console(highlight=False, soft_wrap=True,
+              width=None if sys.stdout.isatty() or os.environ.get("COLUMNS") else 160)
 err = Console(stderr=True, highlight=False, soft_wrap=True)
 
 JSON_HELP = "Print the result as JSON alone on stdout (for scripts)."
@@ -809,6 +811,9 @@ def _report_acquisition(result, as_json: bool) -> None:
               help="Also write LogView OpenFormat lines to FILE (or a serial port).")
 @click.option("--baud", type=click.IntRange(1200), metavar="BAUD",
               help="Serial baud rate (default: the source's own, 115200 for the Arduino).")
+@click.option("--parity", type=click.Choice(["N", "E", "O"]), default=None,
+              help="Serial parity (default: the source's own; the EBC-A loads are documented "
+                   "with E by most sources, O by some: try O if no status frame arrives).")
 @click.option("--give-up-after", "give_up_s", type=click.FloatRange(min=0, min_open=True),
               metavar="S", help="End the test if the link stays down this long [s] "
                                 "(default: keep reconnecting until stopped).")
@@ -816,7 +821,7 @@ def _report_acquisition(result, as_json: bool) -> None:
 def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_temp, debounce,
                 rate_Hz, calibration_path, ke, current_A, current_sensor, thermistor,
                 switch_load, duration_s, plot, live, quiet, every_s, force, logview_path, baud,
-                give_up_s, as_json):
+                parity, give_up_s, as_json):
     """Log a discharge test from a serial instrument, with live view and safety cutoff.
 
     The producer/consumer program of the paper (section 3.2): samples are
@@ -854,17 +859,12 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
         from .acquire.calibration import Calibration
 
         calibration = Calibration(gain=ke)
-    if logview_path:
-        from importlib.util import find_spec
-
-        if find_spec("dischargelab.acquire.logview") is None:
-            raise DischargelabError("--logview is not available in this installation")
     settings = AcquireSettings(
         port=port, out=Path(out_path), source=source_kind, cells=cells, chemistry=chemistry,
         cutoff_cell_V=cutoff_cell, max_temperature_C=max_temp, debounce_samples=debounce,
         rate_Hz=rate_Hz, calibration=calibration, current_A=current_A,
         current_sensor=make_current_sensor(current_sensor) if current_sensor else None,
-        thermistor=Thermistor() if thermistor else None, baudrate=baud,
+        thermistor=Thermistor() if thermistor else None, baudrate=baud, parity=parity,
         switch_load=switch_load, duration_s=duration_s, force=force, logview=logview_path,
         give_up_after_s=give_up_s)
     acquisition = prepare_acquisition(settings)

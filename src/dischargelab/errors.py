@@ -25,10 +25,6 @@ class MissingExtraError(DischargelabError, ImportError):
     """An optional dependency is missing; the message names the extra to install."""
 
 
-class DischargelabWarning(UserWarning):
-    """Something worth knowing about a result (identifiability, extrapolation)."""
-
-
 def require(module: str, extra: str):
     """Import an optional dependency or raise :class:`MissingExtraError` naming the extra."""
     import importlib

@@ -40,6 +40,7 @@ class AcquireSettings:
     current_sensor: object | None = None
     thermistor: object | None = None
     baudrate: int | None = None
+    parity: str | None = None
     switch_load: bool = False
     duration_s: float | None = None
     force: bool = False
@@ -237,7 +238,7 @@ def prepare_acquisition(settings: AcquireSettings) -> Acquisition:
     source = open_source(
         settings.source, settings.port, rate_Hz=settings.rate_Hz,
         calibration=settings.calibration, current_sensor=settings.current_sensor,
-        thermistor=settings.thermistor, baudrate=settings.baudrate,
+        thermistor=settings.thermistor, baudrate=settings.baudrate, parity=settings.parity,
         switch_load=settings.switch_load, current_A=settings.current_A,
         cutoff_pack_V=None if provisional is None else provisional.cutoff_pack_V)
     try:

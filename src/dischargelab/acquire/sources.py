@@ -71,7 +71,8 @@ def open_arduino(port: str, *, rate_Hz: float = 1.0, calibration=None, current_s
 
 
 def open_ebc(port: str, *, current_A: float | None = None, cutoff_pack_V: float | None = None,
-             calibration=None, baudrate: int | None = None, **_ignored):
+             calibration=None, baudrate: int | None = None, parity: str | None = None,
+             **_ignored):
     """A ZKETECH EBC-A load running a CC discharge (:class:`~dischargelab.acquire.ebc.EbcSource`)."""
     from .ebc import BAUDRATE, EbcSource
 
@@ -79,5 +80,6 @@ def open_ebc(port: str, *, current_A: float | None = None, cutoff_pack_V: float 
         raise DataError("the EBC load needs the discharge current: give --current A")
     if cutoff_pack_V is None:
         raise DataError("the EBC load needs a cutoff voltage: give --cells or --cutoff-cell")
+    options = {} if parity is None else {"parity": parity}
     return EbcSource(port, current_A=current_A, cutoff_V=cutoff_pack_V, calibration=calibration,
-                     baudrate=baudrate or BAUDRATE)
+                     baudrate=baudrate or BAUDRATE, **options)
