@@ -35,7 +35,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/accuracy.py
 	$(BIN)/python benchmarks/mission_speed.py
 	$(BIN)/python benchmarks/io_read_speed.py
-	$(BIN)/python benchmarks/acquire_throughput.py --seconds 60
+	$(BIN)/python benchmarks/calibration_table1.py
+	$(BIN)/python benchmarks/acquire_throughput.py
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache

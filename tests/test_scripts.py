@@ -16,6 +16,7 @@ BENCHMARKS = {
     "mission_speed.py": (["--repeats", "1"], "Table 5"),
     "io_read_speed.py": (["--repeats", "1", "--rows", "20000"], "ms"),
     "acquire_throughput.py": (["--seconds", "5"], "corrupt"),
+    "calibration_table1.py": ([], "Target: 3.3 kOhm Ke = 4.38 +/- 0.01 -> 4.380"),
 }
 
 
