@@ -636,7 +636,12 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             raise FitError("paper mode fits one curve (the paper's setup); give one file")
     fixed, bnds = _spec(requested_fixed, bounds, stack, paper_mode)
     notes, warnings = [], []
-    _resolve_e0_r(stack, fixed, notes, warnings, paper_mode)
+    _resolve_e0_r(stack, fixed, notes, warnings)
+    for c in curves:
+        used = _thin(c.time_s.size, MAX_SAMPLES_PER_CURVE).size
+        if used < c.time_s.size:
+            notes.append(f"curve {c.name or '?'}: {used} of {c.time_s.size} samples used "
+                         f"(evenly thinned in time)")
     model = _Model(stack, fixed)
     if not model.free:
         raise FitError("every parameter is fixed; nothing to fit")
@@ -827,7 +832,7 @@ def _varpro_solve(model: _Model, theta0, lo, hi, max_iter: int = 200) -> _Soluti
     return _Solution(x=x, cost=cost, nfev=nfev)
 
 
-def _resolve_e0_r(stack: _Stack, fixed: dict, notes: list, warnings: list, paper_mode: bool):
+def _resolve_e0_r(stack: _Stack, fixed: dict, notes: list, warnings: list):
     """Apply the documented resolution of the E0/R collinearity (see module docstring)."""
     if "E0_V" in fixed or "R_ohm" in fixed:
         return

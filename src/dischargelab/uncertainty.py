@@ -294,8 +294,11 @@ class DrawFlight:
             return
         self._step(phase, state, stop, np.broadcast_to(float(duration_s), q.shape))
 
-    def _step(self, phase, state, stop, durations):
-        """Advance the alive draws by ``durations``; those crossing ``stop`` end there."""
+    def _step(self, phase, state, stop, durations, reason=1):
+        """Advance the alive draws by ``durations``; those crossing ``stop`` end there.
+
+        ``reason`` (scalar or per draw) is recorded for the draws that end.
+        """
         q, t, alive = state["q"], state["t"], state["alive"]
         q_new = self.advance(phase, q, durations)
         crossed = alive & ~(q_new < stop) & (durations > 0)
@@ -308,7 +311,7 @@ class DrawFlight:
             t[crossed] += dt[crossed]
             q[crossed] = target[crossed]
             alive[crossed] = False
-            state["reason"][crossed] = 1
+            state["reason"][crossed] = np.broadcast_to(reason, q.shape)[crossed]
 
     def _new_state(self, q=None, t=None):
         q = self.q_start.copy() if q is None else np.array(q, dtype=float)
@@ -352,19 +355,9 @@ class DrawFlight:
             t[alive] += phase.duration_s
             return
         stop = self.stop_charge(phase)
-        target = np.minimum(stop, self.q_reserve)
-        q_new = self.advance(phase, q, phase.duration_s)
-        crossed = alive & ~(q_new < target)
-        ok = alive & ~crossed
-        t[ok] += phase.duration_s
-        q[ok] = q_new[ok]
-        if crossed.any():
-            tgt = np.maximum(target, q)
-            dt = self.time_between(phase, q, tgt)
-            t[crossed] += dt[crossed]
-            q[crossed] = tgt[crossed]
-            alive[crossed] = False
-            state["reason"][crossed] = np.where(self.q_reserve < stop, 3, 1)[crossed]
+        self._step(phase, state, np.minimum(stop, self.q_reserve),
+                   np.broadcast_to(float(phase.duration_s), q.shape),
+                   reason=np.where(self.q_reserve < stop, 3, 1))
 
     # -- whole mission -----------------------------------------------------------------------
     def _suffix_feasible(self, items, q_end_stretch):
