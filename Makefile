@@ -1,12 +1,14 @@
 # Two entry points on a fresh machine (only Python >= 3.11 needed):
 #   make demo   -> builds .venv, installs dischargelab, runs the demo into ./demo-out/
 #   make test   -> same .venv, runs the whole test suite
+# Checks CI runs too: make lint (ruff), make typecheck (mypy on the public API),
+# make min-versions (the suite with every dependency at its declared lower bound).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench browser clean
+.PHONY: demo test lint typecheck docs min-versions bench browser clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,10 +17,25 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/dischargelab demo --out demo-out
+	$(BIN)/dischargelab demo --out demo-out --force
 
 test: $(STAMP) browser
 	$(BIN)/python -m pytest
+
+lint: $(STAMP)
+	$(BIN)/ruff check src tests benchmarks examples
+
+# The public API; api.py is included once it exists.
+typecheck: $(STAMP)
+	$(BIN)/mypy src/dischargelab/__init__.py $(wildcard src/dischargelab/api.py)
+
+# API reference from the docstrings (numpydoc) into docs/api/.
+docs: $(STAMP)
+	$(BIN)/pdoc --docformat numpy -o docs/api dischargelab dischargelab.models dischargelab.engine
+
+# A separate venv (.venv/min-versions) with the lower bounds from pyproject.toml.
+min-versions:
+	PYTHON=$(PYTHON) bash .ci/min-versions.sh
 
 # The HTML report is checked in headless Chromium. Installed from Debian's packages
 # when missing and we may (root with apt-get); otherwise that one test is skipped
@@ -39,4 +56,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/acquire_throughput.py
 
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache
+	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache

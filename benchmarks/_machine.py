@@ -2,7 +2,7 @@
 
 import os
 import platform
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 
 def machine_line() -> str:
@@ -19,6 +19,6 @@ def machine_line() -> str:
                     break
     except OSError:
         pass
-    now = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     return (f"{now}; {cpu}; {os.cpu_count()} cores; Python {platform.python_version()}; "
             f"numpy {numpy.__version__}; scipy {scipy.__version__}")

@@ -130,8 +130,10 @@ def main() -> None:
         ("frames lost (host seq gaps)", str(stats.get("frames_lost", "?"))),
         ("frames rejected as corrupt", str(stats.get("frames_corrupt", "?"))),
         ("corrupt frames accepted", f"{wrong}  (must be 0)"),
-        ("received frame rate", f"{received / max(duration, 1e-9):.1f} frames/s "
-                                f"({received * frame_bytes / max(duration, 1e-9) / (args.baud / 10) * 100:.1f} % of the link)"),
+        ("received frame rate",
+         f"{received / max(duration, 1e-9):.1f} frames/s "
+         f"({received * frame_bytes / max(duration, 1e-9) / (args.baud / 10) * 100:.1f} %"
+         " of the link)"),
         ("logger CPU", f"{cpu_s:.1f} s over {wall:.1f} s = {cpu_s / wall * 100:.1f} % of one core"
                        f" (target < 15 %)"),
         ("logger exit status", str(os.waitstatus_to_exitcode(status))),

@@ -12,9 +12,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _machine import machine_line  # noqa: E402
-
-from dischargelab.acquire.calibration import fit_calibration, read_points_csv  # noqa: E402
+from _machine import machine_line
+from dischargelab.acquire.calibration import fit_calibration, read_points_csv
 
 TABLE1 = Path(__file__).resolve().parents[1] / "tests" / "data" / "paper_table1.csv"
 

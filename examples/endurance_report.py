@@ -41,7 +41,8 @@ def main() -> None:
     cases = compare_files(battery_file, unseen, cutoff_cell_V=CUTOFF_CELL_V, columns=COLUMNS)
     for case in cases:
         s = case.summary
-        print(f"validation {Path(s['file']).name}: endurance error {s['endurance_error_pct']:+.2f} %"
+        print(f"validation {Path(s['file']).name}: "
+              f"endurance error {s['endurance_error_pct']:+.2f} %"
               f", voltage RMS {s['voltage_rmse_pct']:.2f} %")
 
     mission = load_mission("fixed-wing-survey", battery=battery_file,

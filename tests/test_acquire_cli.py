@@ -61,10 +61,24 @@ def test_acquire_cutoff_exit_status_and_loud_message(tmp_path, capsys):
                                         "--ke", "4.38", "--cells", "2", "--rate", "2",
                                         "--no-live", "--every", "100"], capsys)
     assert code == 3
-    assert "CUTOFF" in stderr and "load switched off" in stderr
-    assert "cutoff" in stdout
+    # no relay: dischargelab never drove the load, so it must not claim to have switched it off
+    assert "CUTOFF" in stderr and "load switched off" not in stderr
+    assert "does not drive this load" in stderr and "switch it off by hand" in stderr
+    assert "cutoff" in stdout and "not driven by dischargelab" in stdout
     _, meta = read_log(out)
     assert "cutoff" in [e["kind"] for e in meta["events"]]
+
+
+def test_acquire_cutoff_switches_a_driven_load_off_and_says_so(tmp_path, capsys):
+    out = tmp_path / "run.csv"
+    with VirtualDevice("zippy-1100-2s", current_A=4.0, speed=300, seed=13, relay=True) as dev:
+        code, stdout, stderr = run_cli(["acquire", "--port", dev.port, "--out", str(out),
+                                        "--ke", "4.38", "--cells", "2", "--rate", "2",
+                                        "--switch-load", "--json"], capsys)
+        assert dev.load_switched_off.wait(5)
+    assert code == 3
+    assert "load switched off" in stderr
+    assert json.loads(stdout)["load"] == "switched off"
 
 
 def test_acquire_refuses_to_overwrite(tmp_path, capsys):

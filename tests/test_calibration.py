@@ -8,9 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dischargelab.acquire.calibration import (Calibration, MeterAccuracy, adc_step_V,
-                                              fit_calibration, load_calibration, parse_pair,
-                                              read_points_csv)
+from dischargelab.acquire.calibration import (
+    Calibration,
+    MeterAccuracy,
+    adc_step_V,
+    fit_calibration,
+    load_calibration,
+    parse_pair,
+    read_points_csv,
+)
 from dischargelab.cli import main
 from dischargelab.errors import DataError
 

@@ -8,6 +8,7 @@ import pytest
 
 from dischargelab.cli import main
 from dischargelab.model import PARAMETER_NAMES
+from dischargelab.models import FAMILIES
 
 SAMSUNG_COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
@@ -36,8 +37,11 @@ def test_fit_json_contract(capsys, bundled_data, tmp_path):
                          "--plot", tmp_path / "fit.png")
     assert code == 0, err
     doc = json.loads(out)  # JSON alone on stdout
-    assert doc["model"] == "tremblay" and doc["cells_series"] == 1
-    assert set(doc["parameters"]) == set(PARAMETER_NAMES) == set(doc["stderr"])
+    # one rate with a logged temperature: the thermal family is chosen (and says why)
+    assert doc["model"] == "shepherd-thermal" and doc["cells_series"] == 1
+    assert any("chosen automatically" in n for n in doc["notes"])
+    names = set(FAMILIES[doc["model"]].names)
+    assert set(doc["parameters"]) == names == set(doc["stderr"]) and set(PARAMETER_NAMES) < names
     assert doc["n_samples"] > 3000 and 0 < doc["rmse_V"] < 0.05
     assert isinstance(doc["warnings"], list)
     saved = json.loads((tmp_path / "b.json").read_text())
@@ -79,11 +83,26 @@ def test_curves_plot_and_json(capsys, battery_file, tmp_path):
 def test_multi_file_fit_separates_e0_and_r(capsys, bundled_data):
     files = [bundled_data / f for f in ("Q30_S001_C10.csv", "Q30_S001_1C.csv",
                                         "Q30_S001_4C.csv")]
-    code, out, _ = run(capsys, "fit", *files, "--columns", SAMSUNG_COLUMNS, "--json")
+    code, out, _ = run(capsys, "fit", *files, "--columns", SAMSUNG_COLUMNS, "--json",
+                       "--model", "shepherd", "--bootstrap", "0")
     assert code == 0
     doc = json.loads(out)
-    assert doc["n_curves"] == 3
+    assert doc["n_curves"] == 3 and doc["model"] == "shepherd"
     assert 0.015 < doc["parameters"]["R_ohm"] < 0.045
+
+
+def test_multi_rate_auto_fit_is_physical_and_says_why(capsys, bundled_data):
+    files = [bundled_data / f for f in ("Q30_S001_C10.csv", "Q30_S001_1C.csv",
+                                        "Q30_S001_4C.csv")]
+    code, out, _ = run(capsys, "fit", *files, "--columns", SAMSUNG_COLUMNS, "--json",
+                       "--bootstrap", "0")
+    assert code == 0
+    doc = json.loads(out)
+    assert "chosen automatically" in doc["notes"][0] and "held-out" in doc["notes"][0]
+    # the bundled 3-rate fit: no parameter at a bound, RMSE <= 15 mV, held-out error <= 2 %
+    assert not doc["identifiability"]["at_bounds"]
+    assert doc["rmse_V"] <= 0.015
+    assert max(abs(e) for e in doc["model_error"]["errors_pct"]) <= 2.0
 
 
 def test_paper_mode_prints_degeneracy(capsys, shared_data):

@@ -10,11 +10,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dischargelab.acquire import ebc
-from dischargelab.acquire.ebc import (Command, EbcFrameError, EbcSource, FrameSplitter,
-                                      LoadControlError, Status, cc_discharge_frame,
-                                      checksum_matches, choose_current_unit, decode_command,
-                                      decode_field, decode_status, encode_command, encode_field,
-                                      encode_status, xor_checksum)
+from dischargelab.acquire.ebc import (
+    Command,
+    EbcFrameError,
+    EbcSource,
+    FrameSplitter,
+    LoadControlError,
+    Status,
+    cc_discharge_frame,
+    checksum_matches,
+    choose_current_unit,
+    decode_command,
+    decode_field,
+    decode_status,
+    encode_command,
+    encode_field,
+    encode_status,
+    xor_checksum,
+)
 from dischargelab.acquire.pipeline import Sample, SourceDisconnected
 from dischargelab.acquire.virtual_load import VirtualEbcLoad
 from dischargelab.errors import DataError

@@ -56,12 +56,13 @@ def test_given_e0_determines_r():
 
 def test_jacobian_detects_e0_r_collinearity():
     c = synthetic_curve(3.0, rest=False)
-    i, q = c.current_A, c.charge_Ah
-    from dischargelab.model import voltage_jacobian
+    from dischargelab.fit import _stack
+    from dischargelab.models import get_family
 
-    jac = voltage_jacobian(TRUE, i, q)[:, :4]  # E0, R, K, A free
+    data = _stack([c], 1, 1, use_rest=False, weighting="samples", max_samples=c.time_s.size)
+    jac = get_family("shepherd").jacobian(TRUE, data, PARAMETER_NAMES[:4])  # E0, R, K, A free
     ident = analyse(jac, list(PARAMETER_NAMES[:4]), TRUE.as_dict(),
-                    {n: (-10, 10) for n in PARAMETER_NAMES})
+                    dict.fromkeys(PARAMETER_NAMES, (-10, 10)))
     assert ident.singular_values[-1] < 1e-6
     assert any("E0 and R" in w and "--e0" in w for w in ident.warnings)
     assert {"E0_V", "R_ohm"} <= set(ident.directions[0])
@@ -79,7 +80,7 @@ def test_paper_mode_reports_scaling_degeneracy():
 
 
 def test_paper_mode_needs_e0():
-    with pytest.raises(FitError, match="--e0"):
+    with pytest.raises(FitError, match="E0_V"):
         fit_battery(synthetic_curve(3.0), paper_mode=True)
 
 

@@ -535,7 +535,8 @@ def test_clock_times_with_midnight_rollover(tmp_path):
     clock = 23 * 3600 + 50 * 60 + t  # 23:50 .. 00:19
     stamps = [f"{int(c % 86400 // 3600):02d}:{int(c % 3600 // 60):02d}:{c % 60:06.3f}"
               for c in clock]
-    lines = ["Time,Voltage(V),Current(A)"] + [f"{s},{a:.4f},{b:.3f}" for s, a, b in zip(stamps, v, i)]
+    lines = ["Time,Voltage(V),Current(A)"] + [f"{s},{a:.4f},{b:.3f}"
+                                              for s, a, b in zip(stamps, v, i)]
     frame, meta = read_discharge(write(tmp_path / "clock.csv", "\n".join(lines) + "\n"))
     np.testing.assert_allclose(frame["time_s"], t, atol=1e-6)
     assert meta["units"]["time_s"] == "s (clock)"

@@ -157,9 +157,11 @@ def test_k2_lvm_description_inferred_and_recorded(shared_data):
     assert "inferred" in meta["column_map"]["voltage_V"]
 
 
+# One segment per flight: waddle1 holds 7 flights (3 on the first pack, 4 on the second);
+# the others one each (counted from the flight-mode events in tests/test_dji_flights.py).
 DJI_SEGMENTS = {
-    "19-11-28_waddle1_2019_11_28_18_28": 8,
-    "19-12-17_tablet1_2019_12_17_18_49": 2,
+    "19-11-28_waddle1_2019_11_28_18_28": 7,
+    "19-12-17_tablet1_2019_12_17_18_49": 1,
     "20-01-12_tablet1_2020_01_12_12_08": 1,
     "20-01-12_tablet3_2020_01_12_13_24": 1,
     "20-01-21_tab3_2020_01_21_20_55": 1,
@@ -219,5 +221,5 @@ def test_dji_waddle_segments_selectable(shared_data):
     assert first["soc_pct"].iloc[0] == 64
     assert fourth["soc_pct"].iloc[0] == 96
     assert meta4["segment"] == 4
-    with pytest.raises(DataError, match=r"--segment 9: the file has 8"):
+    with pytest.raises(DataError, match=r"--segment 9: the file has 7"):
         read_discharge(path, segment=9)

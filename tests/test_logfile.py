@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from dischargelab.acquire.pipeline import Sample
+from dischargelab.atomic import OutputExistsError
 from dischargelab.errors import DataError
 from dischargelab.io.logfile import LOG_MAGIC, LogWriter, is_log_file, read_log
 
@@ -82,7 +83,7 @@ def test_malformed_rows_are_dropped_and_counted(tmp_path):
 def test_never_overwrites_unless_asked(tmp_path):
     path = tmp_path / "run.csv"
     path.write_text("precious")
-    with pytest.raises(DataError, match="already exists"):
+    with pytest.raises(OutputExistsError, match="already exists"):
         LogWriter(path, {})
     assert path.read_text() == "precious"
     LogWriter(path, {}, overwrite=True).close()

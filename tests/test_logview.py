@@ -11,8 +11,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dischargelab.acquire.logview import (DEFAULT_COLUMNS, LogViewWriter, device_ini, format_line,
-                                          parse_line, read_openformat, xor_checksum)
+from dischargelab.acquire.logview import (
+    DEFAULT_COLUMNS,
+    LogViewWriter,
+    device_ini,
+    format_line,
+    parse_line,
+    read_openformat,
+    xor_checksum,
+)
 from dischargelab.acquire.pipeline import Pipeline, Sample
 from dischargelab.errors import DataError
 

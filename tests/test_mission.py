@@ -13,12 +13,20 @@ from scipy.optimize import brentq
 from dischargelab.cli import main as cli_main
 from dischargelab.errors import DataError
 from dischargelab.mission import (
-    Mission, Phase, RepeatBlock, fixed_wing_power_W, hover_power_W, isa_air_density_kg_m3,
-    load_mission, mission_summary, run_mission,
+    Mission,
+    Phase,
+    RepeatBlock,
+    fixed_wing_power_W,
+    hover_power_W,
+    isa_air_density_kg_m3,
+    load_mission,
+    mission_outcomes,
+    mission_summary,
+    run_mission,
 )
 from dischargelab.model import PRESETS, Battery, CellParameters
 from dischargelab.simulate import Step, simulate, simulate_current, simulate_power
-from dischargelab.uncertainty import DrawFlight, mission_uncertainty, sample_parameters
+from dischargelab.uncertainty import mission_uncertainty, sample_parameters
 
 REPO = Path(__file__).resolve().parents[1]
 MISSIONS = REPO / "src" / "dischargelab" / "data" / "missions"
@@ -29,6 +37,11 @@ CELL = CellParameters(E0_V=3.75, R_ohm=0.03, K_V_per_Ah=0.008, A_V=0.35, B_per_A
                       C_Ah=3.1)
 PACK = Battery(CELL, cells_series=4, strings_parallel=2, name="test 4S2P",
                chemistry="li-ion", fit_currents_A=(3.0, 9.0))
+
+
+#: Engine steps per phase for comparisons with simulate that must agree to rounding
+#: (missions and simulate fly the same engine; simulate uses at least 50).
+SAME_STEPS = 50
 
 
 def current_mission(phases, reserve=20.0, cutoff=3.0, battery=PACK, soc=100.0):
@@ -61,7 +74,7 @@ def test_constant_current_mission_matches_hand_calculation_and_simulate():
 def test_fixed_mission_charge_energy_and_soc():
     phases = [Phase("a", "current", 30.0, 60.0), Phase("b", "current", 8.0, 900.0),
               Phase("c", "current", 4.0, 120.0)]
-    result = run_mission(current_mission(phases))
+    result = run_mission(current_mission(phases), points_per_step=SAME_STEPS)
     charge = (30 * 60 + 8 * 900 + 4 * 120) / 3600.0
     assert result.completed and result.ended_by == "end"
     assert result.flight_time_s == pytest.approx(1080.0)
@@ -70,18 +83,19 @@ def test_fixed_mission_charge_energy_and_soc():
     rows = result.phases
     assert [r["phase"] for r in rows] == ["a", "b", "c"]
     assert sum(r["charge_Ah"] for r in rows) == pytest.approx(charge, rel=1e-12)
-    # the same steps through simulate give the same energy
+    # the same steps through simulate (the same engine, same resolution): the same energy
     sim = simulate(PACK, [Step("current", 30, 60), Step("current", 8, 900),
-                          Step("current", 4, 120)], cutoff_cell_V=3.0)
+                          Step("current", 4, 120)], cutoff_cell_V=3.0,
+                   points_per_step=SAME_STEPS)
     assert result.simulation.energy_Wh_total == pytest.approx(sim.energy_Wh_total, rel=1e-12)
 
 
 def test_initial_state_of_charge_starts_partly_discharged():
     mission = current_mission([Phase("hover", "current", 15.0, until="cutoff")], reserve=0.0,
                               soc=80.0)
-    result = run_mission(mission)
+    result = run_mission(mission, points_per_step=SAME_STEPS)
     ref = simulate_current(PACK, 15.0, cutoff_cell_V=3.0,
-                           initial_charge_Ah=0.2 * PACK.capacity_Ah)
+                           initial_charge_Ah=0.2 * PACK.capacity_Ah, points=SAME_STEPS)
     assert result.flight_time_s == pytest.approx(ref.time_to_cutoff_s, rel=1e-12)
     assert result.soc_pct[0] == pytest.approx(80.0)
 
@@ -160,8 +174,8 @@ def test_infeasible_mission_is_reported():
 
 def test_power_phase_until_cutoff_matches_simulate_power():
     mission = current_mission([Phase("hover", "power", 400.0, until="cutoff")], reserve=0.0)
-    result = run_mission(mission)
-    ref = simulate_power(PACK, 400.0, cutoff_cell_V=3.0)
+    result = run_mission(mission, points_per_step=SAME_STEPS)
+    ref = simulate_power(PACK, 400.0, cutoff_cell_V=3.0, points=SAME_STEPS)
     assert result.flight_time_s == pytest.approx(ref.time_to_cutoff_s, rel=1e-9)
     assert result.simulation.energy_Wh_total == pytest.approx(ref.energy_Wh_total, rel=1e-6)
     assert np.allclose(result.simulation.power_W, 400.0, rtol=1e-9)
@@ -170,9 +184,10 @@ def test_power_phase_until_cutoff_matches_simulate_power():
 def test_mixed_power_and_current_phases_match_simulate_steps():
     phases = [Phase("takeoff", "current", 40.0, 20.0), Phase("cruise", "power", 250.0, 900.0),
               Phase("land", "power", 120.0, 60.0)]
-    result = run_mission(current_mission(phases))
+    result = run_mission(current_mission(phases), points_per_step=SAME_STEPS)
     sim = simulate(PACK, [Step("current", 40, 20), Step("power", 250, 900),
-                          Step("power", 120, 60)], cutoff_cell_V=3.0)
+                          Step("power", 120, 60)], cutoff_cell_V=3.0,
+                   points_per_step=SAME_STEPS)
     assert result.simulation.charge_Ah[-1] == pytest.approx(sim.charge_Ah[-1], rel=1e-12)
     assert result.phases[1]["mean_power_W"] == pytest.approx(250.0, rel=1e-6)
 
@@ -368,7 +383,8 @@ def test_cli_endurance_json_and_outputs(tmp_path, capsys):
     assert info.value.code == 0
     data = json.loads(capsys.readouterr().out)
     assert data["completed"] and data["stretch"]["binding"] == "reserve"
-    assert data["uncertainty"]["available"] is False
+    assert data["uncertainty"]["accepted"] == 0                 # a preset: model error only
+    assert data["uncertainty"]["interval_includes"][0].startswith("model error (prior")
     assert plot.stat().st_size > 10_000
     import pandas as pd
 
@@ -401,26 +417,32 @@ def with_covariance(battery, relative_sd):
 
 @pytest.mark.parametrize("name", ["paper-table5.toml", "fixed-wing-survey.toml",
                                   "multirotor-hover.toml"])
-def test_vectorised_draws_reproduce_the_simulate_path(name):
+def test_draw_evaluation_reproduces_the_flown_mission(name):
+    # the draws and the flown mission go through the same engine and the same search
     mission = load_mission(MISSIONS / name)
-    nominal = mission_summary(mission)
-    draws = DrawFlight(mission, mission.battery.parameters).evaluate()
-    for key in ("endurance_s", "flight_time_s", "soc_end_pct"):
-        assert draws[key][0] == pytest.approx(nominal[key], rel=2e-6, abs=2e-3)
-    if "max_stretch_s" in nominal:
-        assert draws["max_stretch_s"][0] == pytest.approx(nominal["max_stretch_s"], abs=3e-3)
+    flown = run_mission(mission)
+    same = {k: np.repeat(v, 3) for k, v in mission.battery.parameters.items()}
+    draws = mission_outcomes(mission, same)
+    assert np.ptp(draws["endurance_s"]) == 0.0
+    assert draws["endurance_s"][0] == pytest.approx(flown.endurance_s, rel=1e-9)
+    assert draws["flight_time_s"][0] == pytest.approx(flown.flight_time_s, rel=1e-9)
+    assert draws["soc_end_pct"][0] == pytest.approx(flown.soc_end_pct, rel=1e-9)
+    if flown.stretch is not None:
+        assert draws["max_stretch_s"][0] == pytest.approx(flown.stretch["max_s"], rel=1e-9)
+        assert draws["binding"][0] == flown.stretch["binding"]
 
 
-def test_vectorised_draws_agree_with_simulate_per_draw():
-    mission = load_mission(MISSIONS / "paper-table5.toml")
+@pytest.mark.parametrize("name", ["paper-table5.toml", "fixed-wing-survey.toml"])
+def test_batched_draws_agree_with_each_draw_alone(name):
+    mission = load_mission(MISSIONS / name)
     battery = with_covariance(mission.battery, 0.02)
-    params, _ = sample_parameters(battery, 5, seed=3)
-    draws = DrawFlight(mission, params).evaluate()
-    for k in range(5):
-        one = CellParameters(*[float(getattr(params, n)[k]) for n in
-                               ("E0_V", "R_ohm", "K_V_per_Ah", "A_V", "B_per_Ah", "C_Ah")])
+    params, _ = sample_parameters(battery, 4, seed=3)
+    draws = mission_outcomes(mission, params)
+    for k in range(4):
+        one = CellParameters({n: float(v[k]) for n, v in params.items()})
         ref = mission_summary(mission.with_battery(replace(battery, parameters=one)))
-        assert draws["endurance_s"][k] == pytest.approx(ref["endurance_s"], abs=3e-3)
+        for key in ("endurance_s", "max_stretch_s", "soc_end_pct"):
+            assert draws[key][k] == pytest.approx(ref[key], rel=1e-9)
 
 
 def test_interval_contains_nominal_and_shrinks_with_covariance():
@@ -432,7 +454,15 @@ def test_interval_contains_nominal_and_shrinks_with_covariance():
     for unc in (wide, narrow):
         e = unc["endurance_s"]
         assert unc["available"] and e["low"] < e["nominal"] < e["high"]
-    width = lambda u: u["endurance_s"]["high"] - u["endurance_s"]["low"]  # noqa: E731
+        assert unc["interval_includes"][0] == "parameters"
+        assert unc["interval_includes"][1].startswith("model error (prior, extrapolation x")
+        alone = unc["parameters_only"]["endurance_s"]
+        assert e["low"] < alone["low"] < alone["high"] < e["high"]   # model error widens it
+
+    def width(u):
+        return u["parameters_only"]["endurance_s"]["high"] - \
+            u["parameters_only"]["endurance_s"]["low"]
+
     # the endurance is smooth in the parameters: 4x smaller sigma -> about 4x narrower
     assert width(narrow) < 0.4 * width(wide)
     again = mission_uncertainty(mission.with_battery(with_covariance(mission.battery, 0.02)),
@@ -458,16 +488,28 @@ def test_interval_from_a_real_fit_covariance(shared_data):
     assert unc["available"] and unc["accepted"] == 300
     e = unc["endurance_s"]
     assert e["low"] <= result.endurance_s <= e["high"]
-    # the capacity is known to about 1 %: the interval is a few percent wide, not zero
-    assert 0.002 < (e["high"] - e["low"]) / result.endurance_s < 0.2
+    # the parameters alone: a few percent wide, not zero
+    alone = unc["parameters_only"]["endurance_s"]
+    assert 0.002 < (alone["high"] - alone["low"]) / result.endurance_s < 0.2
+    assert e["low"] < alone["low"] and alone["high"] < e["high"]
+    assert unc["interval_includes"][0] == "parameters" and len(unc["interval_includes"]) == 2
     assert not any("extrapolation" in w for w in result.warnings)
 
 
-def test_no_covariance_means_no_interval():
+def test_no_covariance_gives_the_model_error_alone():
     mission = load_mission(MISSIONS / "paper-table5.toml")
     result = run_mission(mission, draws=200)
-    assert result.uncertainty["available"] is False
-    assert "covariance" in result.uncertainty["reason"]
+    unc = result.uncertainty
+    assert unc["available"] and unc["accepted"] == 0
+    ratio = unc["model_error"]["extrapolation_ratio"]
+    assert ratio > 1.5                                  # fitted at 50 A, flown at 4-46 A
+    assert unc["interval_includes"] == [f"model error (prior, extrapolation x{ratio:.1f})"]
+    sd = 0.015 * (1 + 0.8 * math.log(ratio))
+    assert unc["model_error"]["relative_sd"] == pytest.approx(sd, rel=1e-12)
+    e = unc["endurance_s"]
+    assert e["low"] == pytest.approx(result.endurance_s * math.exp(-1.959964 * sd), rel=1e-6)
+    assert e["high"] == pytest.approx(result.endurance_s * math.exp(1.959964 * sd), rel=1e-6)
+    assert "no parameter draws" in unc["method"]
     with pytest.raises(DataError, match="no covariance"):
         sample_parameters(HACKER, 10)
 

@@ -31,7 +31,7 @@ def wire(frame: proto.SampleFrame) -> bytes:
 def feed_in_chunks(parser, data: bytes, cuts) -> list:
     """Feed ``data`` split at the (sorted) cut positions."""
     frames, start = [], 0
-    for cut in sorted(set(c % (len(data) + 1) for c in cuts)) + [len(data)]:
+    for cut in sorted({c % (len(data) + 1) for c in cuts}) + [len(data)]:
         frames += parser.feed(data[start:cut])
         start = cut
     return frames
@@ -110,7 +110,8 @@ def test_parser_skips_a_frame_cut_at_connection_time():
     parser = proto.FrameParser()                      # not synced: starts mid-stream
     got = parser.feed(data[4:])
     assert got == frames[1:]
-    assert parser.frames_corrupt == 0 and parser.bytes_skipped == len(wire(frames[0])) - 4 - 1  # delimiter not counted
+    # the skipped bytes do not count the delimiter
+    assert parser.frames_corrupt == 0 and parser.bytes_skipped == len(wire(frames[0])) - 4 - 1
 
 
 # ---------------------------------------------------------------------------- faults
@@ -237,7 +238,10 @@ HARNESS = r"""
 #include <stdlib.h>
 #include <string.h>
 #include "dlab_protocol.h"
-static void hex(const uint8_t *b, size_t n) { for (size_t i = 0; i < n; i++) printf("%02x", b[i]); printf("\n"); }
+static void hex(const uint8_t *b, size_t n) {
+    for (size_t i = 0; i < n; i++) printf("%02x", b[i]);
+    printf("\n");
+}
 int main(void) {
     char kind[16];
     uint8_t out[256];
@@ -245,7 +249,9 @@ int main(void) {
         if (!strcmp(kind, "sample")) {
             unsigned seq, mask, n; uint16_t codes[6];
             scanf("%u %u %u", &seq, &mask, &n);
-            for (unsigned k = 0; k < n; k++) { unsigned c; scanf("%u", &c); codes[k] = (uint16_t)c; }
+            for (unsigned k = 0; k < n; k++) {
+                unsigned c; scanf("%u", &c); codes[k] = (uint16_t)c;
+            }
             hex(out, dlab_sample_frame((uint16_t)seq, (uint8_t)mask, codes, out));
         } else if (!strcmp(kind, "ack")) {
             unsigned cmd, status; unsigned long value;
@@ -258,7 +264,9 @@ int main(void) {
         } else if (!strcmp(kind, "command")) {
             char text[128]; uint8_t enc[64]; size_t n = 0; uint8_t type; uint32_t arg;
             scanf("%127s", text);
-            for (size_t i = 0; text[2 * i]; i++) { unsigned v; sscanf(text + 2 * i, "%2x", &v); enc[n++] = (uint8_t)v; }
+            for (size_t i = 0; text[2 * i]; i++) {
+                unsigned v; sscanf(text + 2 * i, "%2x", &v); enc[n++] = (uint8_t)v;
+            }
             int ok = dlab_parse_command(enc, n - 1, &type, &arg);   /* without the delimiter */
             printf("%d %u %lu\n", ok, ok ? type : 0, ok ? (unsigned long)arg : 0UL);
         }

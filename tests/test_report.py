@@ -142,7 +142,7 @@ def test_preset_report_skips_the_fit_with_a_note(tmp_path):
     mission = load_mission(MISSIONS / "paper-table5.toml")
     page = build_report("hacker-4100-4s-lifepo4", mission_result=run_mission(mission, draws=100))
     assert "fit plot skipped" in page
-    assert "interval unavailable" in page          # presets carry no covariance
+    assert "(model error only)" in page            # presets carry no parameter draws
     assert "paper Table 4" in page
     assert len(embedded_pngs(page)) == 2           # family and mission
 

@@ -17,6 +17,10 @@ BENCHMARKS = {
     "io_read_speed.py": (["--repeats", "1", "--rows", "20000"], "ms"),
     "acquire_throughput.py": (["--seconds", "5"], "corrupt"),
     "calibration_table1.py": ([], "Target: 3.3 kOhm Ke = 4.38 +/- 0.01 -> 4.380"),
+    "flightlog_read_speed.py": (["--mb", "2", "--blackbox-mb", "2.5", "--unfiltered-mb", "1"],
+                                "peak RSS MB"),
+    # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
+    "virtual_cells.py": (["--help"], "usage"),
 }
 
 

@@ -7,8 +7,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dischargelab.errors import DataError
-from dischargelab.io.segment import (choose_segment, detect_sign, find_segments, runs,
-                                     voltage_step_rest)
+from dischargelab.io.segment import (
+    choose_segment,
+    detect_sign,
+    find_segments,
+    runs,
+    voltage_step_rest,
+)
 
 
 def frame(t, v, i, **extra):

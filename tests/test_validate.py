@@ -12,7 +12,10 @@ from dischargelab.errors import DataError
 from dischargelab.model import Battery, CellParameters
 from dischargelab.simulate import Step, simulate
 from dischargelab.validate import (
-    compare_discharge, measured_time_to_cutoff, profile_steps, validate_discharge,
+    compare_discharge,
+    measured_time_to_cutoff,
+    profile_steps,
+    validate_discharge,
     validate_files,
 )
 
@@ -196,3 +199,105 @@ def test_case_object_plots(tmp_path):
     case = compare_discharge(PACK, data, {"source": "self.csv"}, cutoff_cell_V=3.0)
     out = save(case.plot(), tmp_path / "case.png")
     assert out.stat().st_size > 5_000
+
+
+# ---------------------------------------------------------------------------------------------
+# Interval coverage, thermal ambient, every family
+# ---------------------------------------------------------------------------------------------
+
+def test_interval_and_coverage_in_rows_and_summary():
+    from dischargelab.uncertainty import model_error_sd
+    from dischargelab.validate import summarise
+
+    exact, t_exact = model_discharge(PACK, 6.0, 3.0)
+    smaller = Battery(CELL.replace(C_Ah=CELL.C_Ah * 0.8), cells_series=3)
+    short, t_short = model_discharge(smaller, 6.0, 3.0)
+    rows = [validate_discharge(PACK, exact, {"source": "same.csv"}, cutoff_cell_V=3.0),
+            validate_discharge(PACK, short, {"source": "small.csv"}, cutoff_cell_V=3.0)]
+    # no parameter draws in PACK: the interval is the model error alone around the prediction
+    sd = model_error_sd(PACK, 6.0)
+    lo, hi = rows[0]["interval_s"]
+    predicted = rows[0]["endurance_predicted_s"]
+    assert lo == pytest.approx(predicted * np.exp(-1.959964 * sd), rel=1e-6)
+    assert hi == pytest.approx(predicted * np.exp(1.959964 * sd), rel=1e-6)
+    assert rows[0]["interval_includes"] == ["model error (prior, extrapolation x2.0)"]
+    assert rows[0]["covered"] is True                   # the model against itself
+    assert rows[1]["covered"] is False                  # 20 % less capacity: far outside
+    assert summarise(rows)["coverage"] == {"covered": 1, "runs": 2, "fraction": 0.5,
+                                           "level": 0.95}
+    half = exact[exact["time_s"] < 0.5 * t_exact]        # never reaches the cutoff: no verdict
+    row = validate_discharge(PACK, half, {"source": "half.csv"}, cutoff_cell_V=3.0)
+    assert row["covered"] is None and row["interval_s"] is not None
+    assert summarise([row])["coverage"]["fraction"] is None
+
+
+def thermal_battery():
+    from dischargelab.models import FAMILIES
+
+    values = FAMILIES["shepherd-thermal"].defaults()
+    values.update(CELL.as_dict())
+    values.update({"Cth_J_per_K": 40.0, "Rth_K_per_W": 12.0})
+    return Battery(CellParameters(values), cells_series=3, model="shepherd-thermal",
+                   fit_currents_A=(6.0,), extra={"ambient_C": 25.0})
+
+
+def test_thermal_family_simulates_the_run_from_its_ambient():
+    battery = thermal_battery()
+    sim = simulate(battery, [Step("current", 9.0)], cutoff_cell_V=3.0, ambient_C=40.0,
+                   points_per_step=2000)
+    t = np.arange(0.0, sim.time_s[-1], 2.0)
+    data = pd.DataFrame({"time_s": t, "current_A": np.full(t.size, 9.0),
+                         "voltage_V": np.interp(t, sim.time_s, sim.voltage_V),
+                         "temperature_C": np.interp(t, sim.time_s, sim.temperature_C)})
+    data.loc[len(data)] = [sim.time_s[-1] + 1.0, 9.0, 8.0, 50.0]   # past the cutoff
+    row = validate_discharge(battery, data, {"source": "hot.csv"}, cutoff_cell_V=3.0)
+    assert row["ambient_C"] == 40.0 and row["peak_temperature_C"] > 40.0
+    assert row["endurance_predicted_s"] == pytest.approx(sim.time_to_cutoff_s, rel=1e-4)
+    assert row["voltage_rmse_pct"] < 0.05 and row["covered"] is True
+    # without a logged temperature the battery's ambient (25 degC) is used: a colder cell
+    cold = validate_discharge(battery, data.drop(columns="temperature_C"), {"source": "x.csv"},
+                              cutoff_cell_V=3.0)
+    assert cold["ambient_C"] == 25.0
+    assert cold["endurance_predicted_s"] < row["endurance_predicted_s"]
+
+
+@pytest.mark.parametrize("name", ["shepherd", "shepherd-thermal", "ecm"])
+def test_every_family_flies_a_logged_profile(name):
+    from dischargelab.models import FAMILIES
+
+    if name not in FAMILIES:
+        pytest.skip(f"model family {name!r} is not registered")
+    fam = FAMILIES[name]
+    battery = Battery(CellParameters(fam.defaults()), model=name, fit_currents_A=(3.0,))
+    t = np.arange(0.0, 2400.0, 1.0)
+    i = 3.0 + 1.5 * np.sign(np.sin(t / 90.0))              # 1.5 A / 4.5 A square wave
+    sim = simulate(battery, [Step("profile", profile_time_s=tuple(t),
+                                  profile_current_A=tuple(i)), Step("current", 3.0)],
+                   cutoff_cell_V=3.2)
+    keep = sim.step == 0
+    data = pd.DataFrame({"time_s": t, "current_A": i,
+                         "voltage_V": np.interp(t, sim.time_s[keep], sim.voltage_V[keep])})
+    row = validate_discharge(battery, data, {"source": f"{name}.csv"}, cutoff_cell_V=3.2)
+    assert row["profile"] == "measured" and row["model"] == name
+    # the model against itself: the same engine run, sample by sample
+    assert row["voltage_rmse_pct"] < 1e-9
+    if sim.ended_by == "cutoff" and sim.step[-1] == 0:
+        assert row["endurance_error_s"] == pytest.approx(0.0, abs=1.0)
+
+
+def test_cli_validate_reports_coverage(tmp_path, capsys):
+    data, _ = model_discharge(PACK, 6.0, 3.0)
+    csv = tmp_path / "self.csv"
+    data.to_csv(csv, index=False)
+    battery = PACK.save(tmp_path / "pack.json")
+    with pytest.raises(SystemExit) as info:
+        cli_main(["validate", str(battery), str(csv), "--cutoff", "3.0", "--json"])
+    assert info.value.code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["files"][0]["covered"] is True and len(doc["files"][0]["interval_s"]) == 2
+    assert doc["summary"]["coverage"]["covered"] == 1
+    with pytest.raises(SystemExit) as info:
+        cli_main(["validate", str(battery), str(csv), "--cutoff", "3.0"])
+    assert info.value.code == 0
+    text = capsys.readouterr().out
+    assert "95 % interval coverage: 1/1 runs (100 %" in text and "covered" in text

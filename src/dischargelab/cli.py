@@ -1,8 +1,10 @@
 """Command line interface: parse -> call the library -> print a table or JSON.
 
 Every command accepts ``--json`` (JSON alone on stdout) and shows examples in
-``--help``. Errors the user can fix print one line on stderr and exit with
-status 2; no traceback unless ``DISCHARGELAB_DEBUG=1``.
+``--help``. Errors the user can fix (:class:`~dischargelab.errors.DischargelabError`
+and usage errors) print one line on stderr and exit with status 2; any other
+exception is a bug: its traceback is printed with a request to report it, and
+the status is 1. ``DISCHARGELAB_DEBUG=1`` shows tracebacks for every error.
 """
 
 from __future__ import annotations
@@ -11,8 +13,8 @@ import json
 import math
 import os
 import sys
+import traceback
 from pathlib import Path
-from typing import Optional
 
 import click
 from rich.console import Console
@@ -49,6 +51,12 @@ JSON_HELP = "Print the result as JSON alone on stdout (for scripts)."
 def print_json(data) -> None:
     """Write JSON (NaN/inf as null) alone on stdout."""
     sys.stdout.write(json.dumps(_json_safe(data), indent=2) + "\n")
+
+
+def print_json_line(data) -> None:
+    """Write one compact JSON object on its own line of stdout (JSON Lines) and flush."""
+    sys.stdout.write(json.dumps(_json_safe(data)) + "\n")
+    sys.stdout.flush()
 
 
 def _json_safe(value):
@@ -113,7 +121,8 @@ def data_options(func):
                           "(one value for all files, or one per file)."),
         click.option("--sign", type=click.Choice(["auto", "positive", "negative"]),
                      default="auto", show_default=True,
-                     help="Sign of the DISCHARGE current in the file; auto detects and reports it."),
+                     help="Sign of the DISCHARGE current in the file; auto detects and "
+                          "reports it."),
         click.option("--units", metavar="SPEC",
                      help="Units of the source columns when the header does not say, e.g. "
                           "voltage_V=mV,current_A=mA,time_s=ms (also h, min)."),
@@ -133,7 +142,7 @@ def expand_paths(items) -> list[str]:
     paths = []
     for item in items:
         item = str(item)
-        if any(c in item for c in "*?["):
+        if any(c in item for c in "*?[") and not Path(item).is_file():
             matches = sorted(glob.glob(item))
             if not matches:
                 raise DischargelabError(f"no file matches {item!r}")
@@ -143,15 +152,70 @@ def expand_paths(items) -> list[str]:
     return paths
 
 
+FORCE_HELP = "Replace output files that already exist (an input is never overwritten)."
+
+
+def force_option(func):
+    """The ``--force`` flag of every command that writes files."""
+    return click.option("--force", is_flag=True, help=FORCE_HELP)(func)
+
+
+def guard_outputs(outputs, inputs=(), force=False, figures=()) -> None:
+    """Apply the output policy before any work (:func:`dischargelab.atomic.check_outputs`).
+
+    ``figures`` are the outputs that are plots: their suffix must name a format.
+    """
+    from .atomic import check_outputs
+    from .errors import require
+
+    check_outputs(outputs, inputs, force)
+    figures = [f for f in figures if f]
+    if figures:
+        from .plot import check_path
+
+        for figure in figures:
+            check_path(figure)
+        require("matplotlib", "plot")
+
+
+def battery_input(battery) -> list:
+    """The battery argument as an input path when it names a file (not a preset)."""
+    return [battery] if battery is not None and Path(str(battery)).is_file() else []
+
+
+def load_battery_arg(battery):
+    """Load a BATTERY argument (battery file or preset); errors name the battery file."""
+    from .errors import DataError
+    from .model import load_battery
+
+    try:
+        return load_battery(battery)
+    except DischargelabError as exc:
+        path = Path(str(battery))
+        if not path.is_file():
+            raise
+        text = str(exc).removeprefix(f"{path}: ").removeprefix(f"{path.name}: ")
+        raise DataError(f"battery file {path}: {text}") from None
+
+
+def write_csv(frame, path) -> Path:
+    """Write a DataFrame as CSV atomically (:mod:`dischargelab.atomic`)."""
+    from .atomic import write_text
+
+    return write_text(path, frame.to_csv(index=False))
+
+
 def read_data_files(paths, columns=None, current=None, sign="auto", segment="auto", units=None,
                     status=None, verb="reading"):
     """Read measured files with the shared data options; returns [(data, meta), ...].
 
     Raises DischargelabError with one line on bad options or input.
     """
+    from .atomic import check_inputs
     from .io import parse_columns, parse_units, read_discharge
 
     paths = expand_paths(paths)
+    check_inputs(paths)
     currents = [None] * len(paths)
     if current:
         values = parse_number_list(current, "--current")
@@ -179,15 +243,40 @@ def read_data_files(paths, columns=None, current=None, sign="auto", segment="aut
     return loaded
 
 
-def load_curves(paths, columns=None, current=None, sign="auto", segment="auto", units=None):
-    """Read files into fit curves; returns (curves, metas)."""
+def check_plausible(loaded, pack: dict, strict: bool = False) -> list:
+    """Plausibility of read files for the described pack (:mod:`dischargelab.plausibility`).
+
+    Errors (and warnings when ``strict``) raise; the warnings are returned for
+    :func:`print_data_warnings`.
+    """
+    from .plausibility import check_discharges, raise_for
+
+    return raise_for(check_discharges(loaded, **pack), strict=strict)
+
+
+def print_data_warnings(warnings) -> None:
+    """Data warnings change the result: always on stderr, whatever --quiet or --json say."""
+    for finding in warnings:
+        err.print(f"warning: {finding.text(OPTION_OF_ARGUMENT)}", markup=False)
+
+
+def load_curves(paths, columns=None, current=None, sign="auto", segment="auto", units=None,
+                pack=None, strict=False):
+    """Read files into fit curves after the plausibility checks.
+
+    ``pack`` holds the keyword arguments of
+    :func:`dischargelab.plausibility.check_discharges` (cells_series,
+    strings_parallel, chemistry, e0_V). Returns ``(curves, metas, warnings)``.
+    """
     from .fit import Curve
 
+    loaded = read_data_files(paths, columns, current, sign, segment, units)
+    warnings = check_plausible(loaded, pack or {}, strict)
     curves, metas = [], []
-    for data, meta in read_data_files(paths, columns, current, sign, segment, units):
+    for data, meta in loaded:
         curves.append(Curve.from_frame(data, meta, name=Path(meta.get("source", "")).stem))
         metas.append(meta)
-    return curves, metas
+    return curves, metas, warnings
 
 
 def _parse_bounds(items) -> dict:
@@ -223,22 +312,24 @@ def _fmt(value, digits=4):
 
 
 def _print_fit(result, battery_path=None):
-    from .model import PARAMETER_NAMES
-
     rows = []
-    for n in PARAMETER_NAMES:
+    for n in result.family.names:
         v = result.parameters.as_dict()[n]
         if n in result.fixed:
             rows.append([n, _fmt(v, 6), "fixed", ""])
         else:
             lo, hi = result.ci95[n]
             rows.append([n, _fmt(v, 6), _fmt(result.stderr[n], 3), f"[{_fmt(lo)}, {_fmt(hi)}]"])
-    out.print(table(f"Cell model ({result.cells_series}S{result.strings_parallel}P pack, "
+    out.print(table(f"Cell model {result.model!r} ({result.cells_series}S"
+                    f"{result.strings_parallel}P pack, "
                     f"{len(result.curves)} curve(s), {result.n_samples} samples, "
                     f"{result.elapsed_s * 1000:.0f} ms)",
                     ["parameter", "value", "std. error", "95 % interval"], rows))
     out.print(f"RMSE {result.rmse_V * 1000:.2f} mV per cell "
               f"({result.rmse_V * result.cells_series * 1000:.1f} mV pack)")
+    if result.model_error:
+        out.print(f"held-out error (leave one curve out): "
+                  f"{100 * result.model_error['relative_sd']:.2f} % RMS time to cutoff")
     if result.paper_mode:
         for c, fitted in zip(result.curves, result.fit_currents_A):
             out.print(f"paper mode: fitted current {fitted:.4g} A vs measured "
@@ -264,6 +355,11 @@ def _print_fit(result, battery_path=None):
               help=f"Fix a parameter (repeatable). Names: {PARAMETER_HELP}.")
 @click.option("--bound", "bound", multiple=True, metavar="NAME=LOW:HIGH",
               help="Override a parameter's bounds (repeatable).")
+@click.option("--model", "model_name", default="auto", show_default=True, metavar="NAME",
+              help="Model family (see `dischargelab models`): shepherd, shepherd-thermal, ecm, "
+                   "or auto (one curve: shepherd, or shepherd-thermal when the file logs the "
+                   "cell temperature; several rates: the family with the smallest held-out "
+                   "error).")
 @click.option("--paper-mode", is_flag=True,
               help="Reproduce the paper: E0 given (--e0), current fitted with R, K, A, B, C. "
                    "Degenerate by construction; prints why.")
@@ -282,10 +378,17 @@ def _print_fit(result, battery_path=None):
               help="Write the battery file (JSON) here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="Save the data-vs-model plot (PNG, SVG or PDF).")
+@force_option
+@click.option("--strict", is_flag=True,
+              help="Treat data plausibility warnings (units, cell count, flat voltage) as "
+                   "errors.")
+@click.option("--quiet", is_flag=True,
+              help="Print only the result (warnings that change it are always shown).")
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
 def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, e0, fix, bound,
-            paper_mode, bootstrap,
-            no_rest, nominal_capacity, name, chemistry, output, plot_path, as_json):
+            model_name, paper_mode, bootstrap,
+            no_rest, nominal_capacity, name, chemistry, output, plot_path, force, strict, quiet,
+            as_json):
     """Fit the battery model to one or more discharge files.
 
     Several files (at different currents) are fitted together with shared
@@ -298,13 +401,25 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, e0, f
       dischargelab fit c10.csv c1.csv c4.csv --columns time_s=0,current_A=1,voltage_V=2
       dischargelab fit 1C_discharge_U.txt --current 2.28 --e0 3.9
       dischargelab fit zippy.csv --cells 2 --e0 3.85 --paper-mode
+      dischargelab fit c10.csv c1.csv c4.csv --model ecm -o cell.json
     """
-    from .fit import fit_battery
+    from .fit import AUTO, fit_battery
+    from .models import get_family
+
+    if model_name != AUTO:
+        get_family(model_name)  # option errors first
 
     fixed, bounds = _parse_fixed(fix, e0), _parse_bounds(bound)  # option errors first
-    curves, metas = load_curves(data, columns, current, sign, segment, units)
+    if nominal_capacity is not None and not nominal_capacity > 0:
+        raise DischargelabError("--nominal-capacity must be a positive number of Ah")
+    paths = expand_paths(data)
+    guard_outputs([output, plot_path], paths, force, figures=[plot_path])
+    pack = {"cells_series": cells, "strings_parallel": parallel, "chemistry": chemistry,
+            "e0_V": e0}
+    curves, metas, data_warnings = load_curves(paths, columns, current, sign, segment, units,
+                                               pack, strict)
     result = fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
-                         bounds=bounds, paper_mode=paper_mode,
+                         bounds=bounds, paper_mode=paper_mode, model=model_name,
                          use_rest=not no_rest, bootstrap=bootstrap)
     battery = result.battery
     label = name or ", ".join(c.name for c in curves)
@@ -312,29 +427,30 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, e0, f
 
     extra = dict(battery.extra)
     if nominal_capacity is not None:
-        if not nominal_capacity > 0:
-            raise DischargelabError("--nominal-capacity must be a positive number of Ah")
         extra["nominal_capacity_Ah"] = float(nominal_capacity)
     battery = _replace(battery, name=label, chemistry=chemistry, extra=extra)
-    if output:
-        battery.save(output)
     if plot_path:
         from .plot import save
 
         save(result.plot(), plot_path)
+    if output:
+        battery.save(output)
+    print_data_warnings(data_warnings)
     if as_json:
         doc = result.to_dict()
         doc["name"] = label
+        doc["data_warnings"] = [f.text(OPTION_OF_ARGUMENT) for f in data_warnings]
         if output:
             doc["battery_file"] = str(output)
         print_json(doc)
         return
-    for meta in metas:
-        summary = meta.get("summary")
-        if summary:
-            out.print(f"{meta.get('source', '')}: {summary}", markup=False)
+    if not quiet:
+        for meta in metas:
+            summary = meta.get("summary")
+            if summary:
+                out.print(f"{meta.get('source', '')}: {summary}", markup=False)
     _print_fit(result, output)
-    if not output:
+    if not output and not quiet:
         out.print("(not saved: add -o battery.json to keep this model)")
 
 
@@ -342,7 +458,8 @@ def _cutoff_options(func):
     func = click.option("--cutoff-pack", type=float, metavar="V",
                         help="Cutoff voltage of the whole pack [V] (instead of --cutoff).")(func)
     func = click.option("--cutoff", type=float, metavar="V",
-                        help="Cutoff voltage per cell [V], e.g. 3.0 for LiPo, 2.5 for Li-ion.")(func)
+                        help="Cutoff voltage per cell [V], e.g. 3.0 for LiPo, 2.5 for "
+                             "Li-ion.")(func)
     func = click.option("--parallel", type=click.IntRange(1), default=None,
                         help="Strings in parallel (default: as in the battery file).")(func)
     func = click.option("--cells", type=click.IntRange(1), default=None,
@@ -351,9 +468,7 @@ def _cutoff_options(func):
 
 
 def _battery_and_cutoff(battery_arg, cells, parallel, cutoff, cutoff_pack):
-    from .model import load_battery
-
-    battery = load_battery(battery_arg).with_pack(cells, parallel)
+    battery = load_battery_arg(battery_arg).with_pack(cells, parallel)
     if cutoff is None and cutoff_pack is None:
         raise DischargelabError("give a cutoff: --cutoff V per cell (e.g. 3.0 LiPo, 2.5 Li-ion) "
                                 "or --cutoff-pack V")
@@ -370,15 +485,19 @@ def _battery_and_cutoff(battery_arg, cells, parallel, cutoff, cutoff_pack):
                    "in the lowest-rate fitted curve).")
 @click.option("--power", type=float, metavar="W", help="Constant pack power [W].")
 @_cutoff_options
+@click.option("--ambient", type=float, metavar="C", default=None,
+              help="Ambient temperature [degC] for thermal models (default: the fitted data's, "
+                   "else 25); the cell temperature is simulated from it.")
 @click.option("--soc", type=click.FloatRange(0, 100, min_open=True), default=100.0,
               show_default=True, help="Initial state of charge [%] of the model capacity.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="Save the voltage curve (PNG, SVG or PDF).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
               help="Save the simulated time series as CSV.")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff_pack, soc,
-                plot_path, csv_path, as_json):
+def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff_pack, ambient,
+                soc, plot_path, csv_path, force, as_json):
     """Predict a constant-current or constant-power discharge until the cutoff.
 
     BATTERY is a battery file from `fit` or a preset name (see `presets`).
@@ -390,54 +509,31 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
       dischargelab predict battery.json --power 250 --cells 4 --cutoff 3.3 --plot p.png
       dischargelab predict hacker-4100-4s-lifepo4 --current 50 --cutoff-pack 10
     """
-    from .simulate import simulate_current, simulate_power
-    from .uncertainty import simulation_interval
+    from .predict import predict
 
     chosen = [x is not None for x in (current, c_rate, power)]
     if sum(chosen) != 1:
         raise DischargelabError("give exactly one load: --current A, --c-rate X or --power W")
+    guard_outputs([plot_path, csv_path], battery_input(battery), force, figures=[plot_path])
     bat, cut = _battery_and_cutoff(battery, cells, parallel, cutoff, cutoff_pack)
-    q0 = (1.0 - soc / 100.0) * bat.capacity_Ah
-    if power is not None:
-        def run(b):
-            return simulate_power(b, power, initial_charge_Ah=q0, **cut)
-    else:
-        amps = current if current is not None else c_rate * bat.rated_capacity_Ah
-
-        def run(b):
-            return simulate_current(b, amps, initial_charge_Ah=q0, **cut)
-    result = run(bat)
-    spread = simulation_interval(bat, run)
-    warnings = []
-    cell_current = float(result.current_A[0]) / bat.strings_parallel
-    side = bat.extrapolation(cell_current)
-    if side:
-        fitted = ", ".join(f"{x:.3g}" for x in bat.fit_currents_A)
-        warnings.append(f"extrapolation: {cell_current:.3g} A per cell is far {side} the fitted "
-                        f"currents ({fitted} A); the interval covers the parameter uncertainty "
-                        f"only, not the model's error away from the fitted rates (see validate)")
+    prediction = predict(bat, current=current, c_rate=c_rate, power=power,
+                         cutoff=cut.get("cutoff_cell_V"), cutoff_pack=cut.get("cutoff_pack_V"),
+                         soc=soc, ambient=ambient)
     if plot_path:
         from .plot import save
 
-        ax = result.plot()
-        ax.axhline(result.cutoff_pack_V, color="0.4", ls="--", lw=0.8)
-        ax.set_title(f"{result.steps[0].describe()}: {result.time_to_cutoff_s / 60:.1f} min to "
-                     f"{result.cutoff_pack_V:.2f} V", fontsize=10)
-        save(ax, plot_path)
+        save(prediction.plot(), plot_path)
     if csv_path:
-        result.to_pandas().to_csv(csv_path, index=False)
-    summary = result.to_dict()
-    if spread is not None:
-        summary["interval95"] = {key: list(spread[key]) for key in
-                                 ("time_to_cutoff_s", "capacity_Ah", "energy_Wh")}
-        summary["interval95"]["bootstrap_draws"] = spread["draws"] - spread["failed"]
-    summary["warnings"] = warnings
+        write_csv(prediction.to_pandas(), csv_path)
+    summary = prediction.to_dict()
+    warnings = summary["warnings"]
+    spread = summary.get("interval95")
     if as_json:
         print_json(summary)
         return
 
     def with_interval(text, key, scale=1.0, spec=".4g"):
-        if spread is None:
+        if not spread or key not in spread:
             return text
         lo, hi = spread[key]
         return f"{text}  [95 %: {lo * scale:{spec}} to {hi * scale:{spec}}]"
@@ -452,9 +548,15 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
                                                "capacity_Ah")],
             ["energy delivered", with_interval(f"{summary['energy_Wh']:.4g} Wh", "energy_Wh")],
             ["ended by", summary["ended_by"]]]
-    out.print(table(f"Prediction ({bat.cells_series}S{bat.strings_parallel}P)",
+    if summary.get("peak_temperature_C") is not None:
+        rows.append(["peak cell temperature", f"{summary['peak_temperature_C']:.1f} degC "
+                     f"(ambient {summary['ambient_C']:.1f} degC)"])
+    out.print(table(f"Prediction ({bat.cells_series}S{bat.strings_parallel}P, {bat.model})",
                     ["quantity", "value"], rows))
-    for warning in warnings:
+    if spread and spread.get("interval_includes"):
+        out.print("95 % interval includes: " + ", ".join(spread["interval_includes"]),
+                  markup=False)
+    for warning in warnings + list((spread or {}).get("warnings", [])):
         out.print(f"warning: {warning}", markup=False)
 
 
@@ -468,9 +570,10 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
               show_default=True, help="Horizontal axis.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="Save the plot (PNG, SVG or PDF).")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
 def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cutoff_pack, x_axis,
-               output, as_json):
+               output, force, as_json):
     """Simulate a family of discharges (like the paper's Figs 5, 7 and 10).
 
     \b
@@ -479,11 +582,13 @@ def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cuto
       dischargelab curves battery.json --c-rates 0.5,1,2,4 --cutoff 2.5 --x time -o c.png
       dischargelab curves battery.json --powers 100,200,400 --cutoff 3.3 --json
     """
+    from .predict import extrapolation_warning
     from .simulate import curve_family
 
     given = [x for x in (currents, c_rates, powers) if x]
     if len(given) != 1:
         raise DischargelabError("give exactly one of --currents, --c-rates or --powers")
+    guard_outputs([output], battery_input(battery), force, figures=[output])
     bat, cut = _battery_and_cutoff(battery, cells, parallel, cutoff, cutoff_pack)
     if powers:
         results = curve_family(bat, powers_W=parse_number_list(powers, "--powers"), **cut)
@@ -497,6 +602,10 @@ def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cuto
 
         save(plot_family(results, x=x_axis), output)
     rows = [r.to_dict() for r in results]
+    for row, res in zip(rows, results):
+        cell = float(res.current_A[0]) / bat.strings_parallel
+        side = bat.extrapolation(cell)
+        row["warnings"] = [extrapolation_warning(bat, cell, side)] if side else []
     if as_json:
         print_json(rows)
         return
@@ -508,6 +617,9 @@ def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cuto
                     [[f"{r[key]:.4g}", f"{r['time_to_cutoff_s'] / 60:.2f}",
                       f"{r['capacity_Ah']:.4g}", f"{r['energy_Wh']:.4g}", r["ended_by"]]
                      for r in rows]))
+    for row in rows:
+        for warning in row["warnings"]:
+            out.print(f"warning: {warning}", markup=False)
     if output:
         out.print(f"plot written to {output}")
 
@@ -535,11 +647,101 @@ def presets_cmd(as_json):
                      for r in rows]))
 
 
+@app.command("autopilot-params")
+@click.argument("battery")
+@click.option("--firmware", required=True, type=click.Choice(["ardupilot", "px4"]),
+              help="Autopilot firmware: ardupilot writes a .param file, px4 a QGroundControl "
+                   ".params file.")
+@click.option("--cells", required=True, type=click.IntRange(1), help="Cells in series of the "
+              "flight pack.")
+@click.option("--parallel", type=click.IntRange(1), default=None,
+              help="Strings in parallel (default: as in the battery file).")
+@click.option("--load", "load_current", type=float, metavar="A", default=None,
+              help="Pack current of normal flight (hover/cruise) at which the reserve is "
+                   "computed [A]; default 1C of the pack.")
+@click.option("--reserve-s", default=120.0, show_default=True, type=float, metavar="S",
+              help="Flight time left at that load when the low-voltage warning fires [s].")
+@click.option("--critical-reserve-s", type=float, metavar="S", default=None,
+              help="Flight time left at the critical level [s] (default: a third of the reserve).")
+@click.option("--cutoff", type=float, metavar="V", default=None,
+              help="Loaded cell voltage at which the pack is empty [V] (default by chemistry).")
+@click.option("--ambient", type=float, metavar="C", default=None,
+              help="Ambient temperature [degC] for thermal models.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Parameter file to write (.param for ArduPilot, .params for PX4).")
+@force_option
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def autopilot_params_cmd(battery, firmware, cells, parallel, load_current, reserve_s,
+                         critical_reserve_s, cutoff, ambient, output, force, as_json):
+    """Battery failsafe and scaling settings for ArduPilot or PX4 from the model.
+
+    The model is flown at the stated load; the low and critical voltages are the
+    resting pack voltages at which --reserve-s and --critical-reserve-s of flight
+    remain. Every value in the file carries a comment saying how it was derived.
+
+    \b
+    Examples:
+      dischargelab autopilot-params cell.json --firmware ardupilot --cells 4 --load 25 \\
+          -o battery.param
+      dischargelab autopilot-params cell.json --firmware px4 --cells 6 --reserve-s 90 \\
+          -o battery.params
+    """
+    from .autopilot import autopilot_params
+
+    guard_outputs([output], battery_input(battery), force)
+    result = autopilot_params(load_battery_arg(battery), firmware=firmware, cells=cells,
+                              parallel=parallel, load_current_A=load_current,
+                              reserve_s=reserve_s, critical_reserve_s=critical_reserve_s,
+                              cutoff=cutoff, ambient=ambient)
+    if output:
+        result.write(output, force=force)
+    if as_json:
+        doc = result.to_dict()
+        if output:
+            doc["file"] = str(output)
+        print_json(doc)
+        return
+    out.print(table(f"{firmware} battery settings", ["parameter", "value", "unit", "derivation"],
+                    [[s.name, s.text(), s.unit, s.comment] for s in result.settings]))
+    for note in result.notes:
+        out.print(f"note: {note}", markup=False)
+    if output:
+        out.print(f"parameter file written to {output}")
+    else:
+        out.print("(not saved: add -o FILE to write the parameter file)")
+
+
+@app.command("models")
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def models_cmd(as_json):
+    """List the model families `fit --model NAME` can fit, with their parameters.
+
+    
+    Examples:
+      dischargelab models
+      dischargelab fit c10.csv c1.csv c4.csv --model shepherd-thermal -o cell.json
+    """
+    from .models import family_table
+
+    rows = family_table()
+    if as_json:
+        print_json(rows)
+        return
+    for fam in rows:
+        out.print(f"[bold]{fam['name']}[/] (version {fam['version']}): {fam['title']}")
+        out.print(f"  {fam['description']}", markup=False)
+        params = ", ".join(f"{p['name']} [{p['unit']}]" for p in fam["parameters"])
+        out.print(f"  parameters: {params}", markup=False)
+        states = ", ".join(f"{s['name']} ({s['kind']})" for s in fam["states"])
+        out.print(f"  states: {states}", markup=False)
+
+
 @app.command("demo")
 @click.option("--out", "out_dir", default="demo-out", show_default=True,
               type=click.Path(file_okay=False), help="Folder for the plots and battery files.")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def demo_cmd(out_dir, as_json):
+def demo_cmd(out_dir, force, as_json):
     """Run the whole method on the bundled Samsung 30Q data (C/10, 1C, 4C).
 
     Fits the cell on 1C alone and on all three rates together, predicts each
@@ -551,9 +753,10 @@ def demo_cmd(out_dir, as_json):
     Example:
       dischargelab demo --out demo-out
     """
-    from .demo import run_demo
+    from .demo import check_demo, run_demo
 
-    summary = run_demo(Path(out_dir), console=None if as_json else out)
+    check_demo(out_dir, force)  # the plot extra and the output files, before any work
+    summary = run_demo(Path(out_dir), console=None if as_json else out, force=force)
     missions = summary.pop("missions")
     if as_json:
         summary["missions"] = {name: {k: v for k, v in m.to_dict().items() if k != "phases"}
@@ -566,14 +769,96 @@ def demo_cmd(out_dir, as_json):
     out.print(f"\nOpen {Path(out_dir) / 'report.html'} in a browser for the full report.")
 
 
-def main(argv: Optional[list[str]] = None) -> None:
-    """Entry point of the ``dischargelab`` command."""
+@app.command("convert")
+@click.argument("log", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="CSV file to write [default: LOG name with .discharge.csv].")
+@click.option("--flight", type=click.IntRange(1), metavar="N",
+              help="Only flight N (counting from 1) [default: every sample, with a flight "
+                   "column].")
+@click.option("--battery", type=click.IntRange(0), metavar="N",
+              help="Battery instance N [default: the first with data].")
+@click.option("--topic", metavar="NAME",
+              help="ULog topic or DataFlash message with the battery data, when not the "
+                   "standard one (battery_status; BAT/CURR).")
+@click.option("--fields", metavar="SPEC",
+              help="With --topic: voltage_V=FIELD,current_A=FIELD (values in V and A).")
+@force_option
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def convert_cmd(log, output, flight, battery, topic, fields, force, as_json):
+    """Convert a flight log's battery data to a canonical CSV.
+
+    Reads ArduPilot .bin/.log, PX4 .ulg, Betaflight/INAV blackbox and in-flight
+    logger CSV (found from the content) and writes time_s, voltage_V,
+    current_A (discharge positive), measured temperature and cell voltages,
+    the log's own counters and a flight column. The summary names the flights,
+    the charge drawn, the current-sensor offset and every dropped record.
+
+    \b
+    Examples:
+      dischargelab convert flight.bin -o flight.csv
+      dischargelab convert log.ulg --battery 1 --flight 2 -o pack2.csv
+      dischargelab convert btfl_001.bbl --json
+    """
+    from .io.flightlog import convert_flight_log
+
+    output = output or str(Path(Path(log).name).with_suffix(".discharge.csv"))
+    result = convert_flight_log(log, output, flight=flight, battery=battery, force=force,
+                                topic=topic, fields=fields)
+    if as_json:
+        print_json(result)
+        return
+    out.print(result["summary"], markup=False)
+    for note in result["notes"]:
+        out.print(f"note: {note}", markup=False)
+    out.print(f"{result['rows']} rows of {result['battery_label']} written to "
+              f"{result['output']}", markup=False)
+
+
+BUG_LINE = "this is a bug in dischargelab; please report it with the command you ran"
+
+#: Library argument names and the options that set them, for error messages.
+OPTION_OF_ARGUMENT = {"force": "--force", "cells_series": "--cells", "e0_V": "--e0",
+                      "units": "--units", "columns": "--columns", "chemistry": "--chemistry"}
+
+
+def cli_message(exc: DischargelabError) -> str:
+    """One line for a library error, with library arguments named as options."""
+    from .atomic import OutputExistsError
+    from .plausibility import PlausibilityError
+
+    if isinstance(exc, OutputExistsError):
+        text = (f"{exc.path} already exists; choose another file name, or pass --force to "
+                "replace it")
+    elif isinstance(exc, PlausibilityError):
+        text = exc.text(OPTION_OF_ARGUMENT)
+    else:
+        text = str(exc)
+    return " ".join(text.split())
+
+
+def _usage_line(exc: click.ClickException) -> str:
+    text = " ".join(exc.format_message().split())
+    ctx = getattr(exc, "ctx", None)
+    if ctx is not None:
+        text += f" (see: {ctx.command_path} --help)"
+    return text
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``dischargelab`` command.
+
+    Exit status: 0 success, 2 an error the user can fix (one line on stderr),
+    1 a bug (traceback and a request to report it), 130 interrupted; ``acquire``
+    adds its own (see its ``--help``). ``DISCHARGELAB_DEBUG=1`` re-raises every
+    error with its traceback.
+    """
     debug = os.environ.get("DISCHARGELAB_DEBUG") == "1"
     try:
         code = app.main(args=argv, prog_name="dischargelab", standalone_mode=False)
     except click.ClickException as exc:
-        exc.show()
-        sys.exit(exc.exit_code)
+        err.print(f"error: {_usage_line(exc)}", markup=False)
+        sys.exit(2)
     except click.exceptions.Abort:
         err.print("aborted")
         sys.exit(130)
@@ -585,13 +870,14 @@ def main(argv: Optional[list[str]] = None) -> None:
     except DischargelabError as exc:
         if debug:
             raise
-        err.print(f"error: {exc}", markup=False)
+        err.print(f"error: {cli_message(exc)}", markup=False)
         sys.exit(2)
-    except (OSError, ValueError) as exc:
+    except Exception:  # not a user error: show everything, never hide it
         if debug:
             raise
-        err.print(f"error: {exc}", markup=False)
-        sys.exit(2)
+        traceback.print_exc()
+        err.print(BUG_LINE, markup=False)
+        sys.exit(1)
     sys.exit(code if isinstance(code, int) else 0)
 
 
@@ -646,9 +932,10 @@ def _read_pairs_interactively() -> list[tuple[float, float]]:
               help="Write the calibration file (JSON) for 'acquire --calibration'.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="Save a plot of Ke per point, the fit and the linear range (PNG, PDF).")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
 def calibrate_cmd(pairs, csv_path, divider, meter_percent, meter_digits, meter_resolution,
-                  adc_bits, adc_reference, offset, alpha, output, plot_path, as_json):
+                  adc_bits, adc_reference, offset, alpha, output, plot_path, force, as_json):
     """Find the logger's scale factor Ke = V_real / V_measured (paper eq. 7).
 
     Give pairs of (multimeter reading, logger reading) taken with packs at
@@ -665,11 +952,11 @@ def calibrate_cmd(pairs, csv_path, divider, meter_percent, meter_digits, meter_r
       dischargelab calibrate -o cal.json          (type the points at the prompt)
       dischargelab acquire --calibration cal.json ...
     """
-    from .acquire.calibration import (MeterAccuracy, fit_calibration, parse_pair,
-                                      read_points_csv)
+    from .acquire.calibration import MeterAccuracy, fit_calibration, parse_pair, read_points_csv
 
     if csv_path and pairs:
         raise DischargelabError("give the points either with --pair or with --csv, not both")
+    guard_outputs([output, plot_path], [csv_path], force, figures=[plot_path])
     if csv_path:
         real, measured = read_points_csv(csv_path, divider or None)
     elif pairs:
@@ -688,14 +975,12 @@ def calibrate_cmd(pairs, csv_path, divider, meter_percent, meter_digits, meter_r
         result.calibration.save(output)
     if plot_path:
         from .errors import require
+        from .plot import save
 
         require("matplotlib", "plot").use("Agg")
-        import matplotlib.pyplot as plt
-
         ax = result.plot()
         ax.figure.tight_layout()
-        ax.figure.savefig(plot_path, dpi=120)
-        plt.close(ax.figure)
+        save(ax, plot_path, dpi=120)
     if as_json:
         data = result.to_dict()
         data["output"] = output
@@ -745,17 +1030,31 @@ def _acquire_summary_rows(result) -> list[list]:
     for key in ("frames_ok", "frames_lost", "frames_corrupt", "reconnects"):
         if key in result.stats:
             rows.append([key.replace("_", " "), result.stats[key]])
+    rows.append(["load at the end", {"switched off": "switched off by dischargelab",
+                                     "not switched off": "NOT switched off (switch it off)",
+                                     "not driven": "not driven by dischargelab"}
+                 [result.load_state]])
     rows.append(["data file", str(result.out)])
     from rich.markup import escape
 
     return [[escape(str(key)), escape(str(value))] for key, value in rows]
 
 
+#: What the end-of-test alarm says about the load, by ``AcquireResult.load_state``.
+_LOAD_LINES = {
+    "switched off": "load switched off, test stopped",
+    "not switched off": "test stopped, but the load could NOT be switched off: switch it off "
+                        "by hand NOW",
+    "not driven": "test stopped; dischargelab does not drive this load (no --switch-load "
+                  "relay): switch it off by hand NOW",
+}
+
+
 def _report_acquisition(result, as_json: bool) -> None:
     if result.ended_by in ("cutoff", "over-temperature", "link-lost"):
-        err.print(f"\a\n*** {result.message or result.ended_by} ***\n*** load switched off, "
-                  f"test stopped; event recorded in {result.out} ***", style="bold red",
-                  markup=False)
+        err.print(f"\a\n*** {result.message or result.ended_by} ***\n*** "
+                  f"{_LOAD_LINES[result.load_state]}; event recorded in {result.out} ***",
+                  style="bold red", markup=False)
     if result.error:
         err.print(f"error during the test: {result.error}", markup=False)
     if as_json:
@@ -826,8 +1125,10 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
 
     The producer/consumer program of the paper (section 3.2): samples are
     calibrated, written to a crash-safe log file (fsync every 0.5 s), shown live
-    and checked against the cutoff; on a cutoff the load is switched off, the
-    event is recorded and the command exits with status 3. Ctrl-C stops cleanly.
+    and checked against the cutoff; on a cutoff the load is switched off (when
+    dischargelab drives it: --switch-load relay or an electronic load; otherwise
+    you are told to switch it off), the event is recorded and the command exits
+    with status 3. Ctrl-C stops cleanly.
 
     \b
     Examples:
@@ -839,7 +1140,8 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
           --current 1.7
     """
     from .acquire.acquisition import AcquireSettings, prepare_acquisition
-    from .acquire.sensors import Thermistor, current_sensor as make_current_sensor
+    from .acquire.sensors import Thermistor
+    from .acquire.sensors import current_sensor as make_current_sensor
 
     if calibration_path and ke is not None:
         raise DischargelabError("give either --calibration or --ke, not both")
@@ -847,9 +1149,10 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
         from .acquire.live import check_display
 
         check_display()                    # before the port is opened or a file created
-    if Path(out_path).exists() and not force:
-        raise DischargelabError(f"{out_path} already exists; choose another --out or pass "
-                                "--force to overwrite it")
+    from .acquire.logview import is_serial_target
+
+    logview_file = logview_path if logview_path and not is_serial_target(logview_path) else None
+    guard_outputs([out_path, logview_file], [calibration_path], force)
     calibration = None
     if calibration_path:
         from .acquire.calibration import load_calibration
@@ -911,10 +1214,13 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
 @click.option("--seed", type=int, default=0, show_default=True, help="Noise and fault seed.")
 @click.option("--duration", "duration_s", type=click.FloatRange(min=0, min_open=True),
               metavar="S", help="Exit after this many wall seconds (default: until Ctrl-C).")
-@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+@force_option
+@click.option("--json", "as_json", is_flag=True,
+              help="JSON Lines on stdout: one object when the port is ready (event "
+                   "'started'), one with the summary when the device stops ('stopped').")
 def virtual_device_cmd(battery, cells, current_A, rate_Hz, speed, divider_gain, noise_mV,
                        drop_bytes, corrupt, disconnect_after, disconnect_for, disconnect_mode,
-                       baud, relay, link, record, seed, duration_s, as_json):
+                       baud, relay, link, record, seed, duration_s, force, as_json):
     """Run a virtual Arduino logger on a pseudo-terminal, driven by the battery model.
 
     Prints the port path, then answers the host like the firmware until Ctrl-C.
@@ -932,18 +1238,19 @@ def virtual_device_cmd(battery, cells, current_A, rate_Hz, speed, divider_gain, 
 
     from .acquire.virtual_device import VirtualDevice
 
-    device = VirtualDevice(battery, cells_series=cells, current_A=current_A, rate_Hz=rate_Hz,
-                           speed=speed, divider_gain=divider_gain, noise_mV=noise_mV,
-                           drop_bytes=drop_bytes, corrupt=corrupt,
+    guard_outputs([record], battery_input(battery), force)
+    device = VirtualDevice(load_battery_arg(battery), cells_series=cells, current_A=current_A,
+                           rate_Hz=rate_Hz, speed=speed, divider_gain=divider_gain,
+                           noise_mV=noise_mV, drop_bytes=drop_bytes, corrupt=corrupt,
                            disconnect_after_s=disconnect_after, disconnect_for_s=disconnect_for,
                            disconnect_mode=disconnect_mode, baudrate=baud or None, seed=seed,
                            link=link, record=record, relay=relay)
     port = device.start()
-    info = {"port": port, "battery": device.battery.name, "cells_series":
+    info = {"event": "started", "port": port, "battery": device.battery.name, "cells_series":
             device.battery.cells_series, "current_A": device.current_A, "speed": speed,
             "divider_gain": divider_gain}
     if as_json:
-        print_json(info)
+        print_json_line(info)
     else:
         out.print(port, markup=False)
         err.print(f"virtual logger: {device.battery.name} ({device.battery.cells_series}S), "
@@ -965,7 +1272,26 @@ def virtual_device_cmd(battery, cells, current_A, rate_Hz, speed, divider_gain, 
         pass
     finally:
         device.stop()
-    err.print(f"virtual logger stopped: {device.counts}", markup=False)
+    summary = device.summary()
+    if as_json:
+        print_json_line({"event": "stopped", **summary})
+    else:
+        err.print(table("Virtual logger stopped", ["", "value"], _device_summary_rows(summary)))
+
+
+def _device_summary_rows(summary: dict) -> list[list]:
+    """Rows of the virtual device's summary (see ``VirtualDevice.summary``)."""
+    frames = summary["frames"]
+    lost = {k: v for k, v in frames.items() if k not in ("produced", "sent") and v}
+    rows = [["battery", f"{summary['battery']} ({summary['cells_series']}S), "
+                        f"{summary['current_A']:g} A, x{summary['speed']:g}"],
+            ["battery time (s)", f"{summary['battery_time_s']:.1f}"],
+            ["charge drawn (Ah)", f"{summary['charge_Ah']:.4f}"],
+            ["frames produced", frames.get("produced", 0)],
+            ["frames sent intact", frames.get("sent", 0)]]
+    rows += [[f"frames {key.replace('-', ' ')}", value] for key, value in lost.items()]
+    rows += [["disconnects", summary["disconnects"]], ["commands received", summary["commands"]]]
+    return rows
 
 
 @app.command("demo-acquire")
@@ -977,8 +1303,9 @@ def virtual_device_cmd(battery, cells, current_A, rate_Hz, speed, divider_gain, 
               show_default=True, metavar="S", help="Wall-clock length of the discharge.")
 @click.option("--seed", type=int, default=1, show_default=True, help="Noise seed.")
 @click.option("--live/--no-live", default=True, show_default=True, help="Terminal panel.")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def demo_acquire_cmd(out_dir, battery, wall_seconds, seed, live, as_json):
+def demo_acquire_cmd(out_dir, battery, wall_seconds, seed, live, force, as_json):
     """A complete simulated test: virtual logger -> acquisition -> cutoff -> fit.
 
     A preset pack is discharged at 1C by a virtual logger on a pseudo-terminal
@@ -991,12 +1318,14 @@ def demo_acquire_cmd(out_dir, battery, wall_seconds, seed, live, as_json):
       dischargelab demo-acquire
       dischargelab demo-acquire --battery zippy-1100-2s --seconds 30 --out /tmp/demo
     """
-    from .acquire.demo import run_acquire_demo
+    from .acquire.demo import check_acquire_demo, run_acquire_demo
 
+    check_acquire_demo(out_dir, force)
     console = err if as_json else out
     view = "live" if live and console.is_terminal else "lines"
-    summary = run_acquire_demo(out_dir, battery=battery, wall_seconds=wall_seconds, seed=seed,
-                               view=view, console=console)
+    summary = run_acquire_demo(out_dir, battery=load_battery_arg(battery),
+                               wall_seconds=wall_seconds, seed=seed, view=view,
+                               console=console, force=force)
     if as_json:
         print_json(summary)
         return
@@ -1050,8 +1379,9 @@ def _print_mission(result) -> None:
     head = _duration_text(result.endurance_s)
     if unc and unc.get("available"):
         e = unc["endurance_s"]
-        head += (f"  (95 % interval {_duration_text(e['low'])} to {_duration_text(e['high'])}, "
-                 f"{unc['accepted']} draws)")
+        head += (f"  (95 % interval {_duration_text(e['low'])} to {_duration_text(e['high'])}: "
+                 + " + ".join(unc.get("interval_includes", ["parameters"]))
+                 + (f", {unc['accepted']} draws)" if unc.get("accepted") else ")"))
     else:
         head += "  (95 % interval unavailable: " + (
             unc["reason"] if unc else "no uncertainty requested (--draws 0)") + ")"
@@ -1062,7 +1392,8 @@ def _print_mission(result) -> None:
             ["cutoff / reserve", f"{m.cutoff_cell_V:g} V/cell ({m.cutoff_pack_V:.2f} V pack) / "
                                  f"{m.reserve_pct:g} %"],
             ["flight as planned", f"{_duration_text(result.flight_time_s)}"
-                                  f"{'' if result.completed else ' (NOT completed: ' + result.ended_by + ')'}"],
+                                  + ("" if result.completed else
+                                     f" (NOT completed: {result.ended_by})")],
             ["state of charge at landing", f"{result.soc_end_pct:.1f} %"],
             ["reserve reached at", _duration_text(result.reserve_time_s)],
             ["cutoff reached at", _duration_text(result.cutoff_time_s)],
@@ -1099,21 +1430,27 @@ def _print_mission(result) -> None:
               help="Cells in series (overrides the mission and battery files).")
 @click.option("--parallel", type=click.IntRange(1), default=None,
               help="Strings in parallel (overrides the mission and battery files).")
+@click.option("--ambient", type=float, metavar="C", default=None,
+              help="Ambient temperature [degC] for thermal models (overrides the mission file; "
+                   "default: the battery's, that of its fitted data).")
 @click.option("--draws", default=300, show_default=True, type=click.IntRange(0),
-              help="Parameter draws for the 95 % interval (0 = none; needs a fitted battery).")
+              help="Parameter draws for the 95 % interval (0 = no interval; without draws in "
+                   "the battery file the interval is the model error alone).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the draws.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="Save the flight profile plot (PNG, SVG or PDF).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
               help="Save voltage, current, power and state of charge through the flight (CSV).")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, draws, seed, plot_path,
-                  csv_path, as_json):
+def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, ambient, draws, seed,
+                  plot_path, csv_path, force, as_json):
     """Fly a mission (TOML) on a battery: flight time, max cruise, margin and its interval.
 
     BATTERY is a battery file from `fit` or a preset name; MISSION a TOML file of
     phases (current, power or flight condition; duration, until cutoff/reserve,
-    repeat blocks; one phase may be `stretch = true`). Bundled examples by name: paper-table5, fixed-wing-survey, multirotor-hover.
+    repeat blocks; one phase may be `stretch = true`). Bundled examples by name:
+    paper-table5, fixed-wing-survey, multirotor-hover.
 
     \b
     Examples:
@@ -1124,7 +1461,10 @@ def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, draws, see
     """
     from .mission import load_mission, run_mission
 
-    plan = load_mission(mission, battery=battery, cutoff_cell_V=cutoff, reserve_pct=reserve)
+    guard_outputs([plot_path, csv_path], battery_input(battery) + [mission], force,
+                  figures=[plot_path])
+    plan = load_mission(mission, battery=load_battery_arg(battery), cutoff_cell_V=cutoff,
+                        reserve_pct=reserve, ambient_C=ambient)
     plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
     with err.status("flying the mission", spinner="dots") as status:
         result = run_mission(plan, draws=draws, seed=seed,
@@ -1134,7 +1474,7 @@ def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, draws, see
 
         save(result.plot(), plot_path)
     if csv_path:
-        result.to_pandas().to_csv(csv_path, index=False)
+        write_csv(result.to_pandas(), csv_path)
     if as_json:
         print_json(result.to_dict())
         return
@@ -1155,9 +1495,10 @@ def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, draws, see
               help="Strings in parallel of the measured pack (default: as in the battery file).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="Save measured vs predicted curves (PNG, SVG or PDF).")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
 def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, cells, parallel,
-                 plot_path, as_json):
+                 plot_path, force, as_json):
     """Compare the model with measured discharges: endurance and voltage errors.
 
     Each DATA file is predicted with its own measured current (constant or the
@@ -1170,12 +1511,13 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
           time_s=0,current_A=1,voltage_V=2 --plot validation.png
       dischargelab validate battery.json log.txt --current 2.28 --cutoff 3.0 --json
     """
-    from .model import load_battery
     from .validate import summarise
 
-    bat = load_battery(battery).with_pack(cells, parallel)
+    paths = expand_paths(data)
+    guard_outputs([plot_path], battery_input(battery) + paths, force, figures=[plot_path])
+    bat = load_battery_arg(battery).with_pack(cells, parallel)
     with err.status("validating", spinner="dots") as status:
-        cases = _validation_cases(bat, data, cutoff, columns, current, sign, segment, units,
+        cases = _validation_cases(bat, paths, cutoff, columns, current, sign, segment, units,
                                   status)
     if plot_path:
         from .plot import plot_validation, save
@@ -1194,16 +1536,26 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
     body = [[Path(r["file"]).name, f(r["current_A"], ".3g") + ("" if r["profile"] == "constant"
                                                                else " (profile)"),
              f(r["endurance_measured_s"], ".0f"), f(r["endurance_predicted_s"], ".0f"),
+             "-" if r.get("interval_s") is None else
+             f"{r['interval_s'][0]:.0f} to {r['interval_s'][1]:.0f}",
+             {True: "yes", False: "NO", None: "-"}[r.get("covered")],
              f(r["endurance_error_s"], "+.0f"), f(r["endurance_error_pct"], "+.2f"),
              f(r["voltage_rmse_pct"], ".2f"), f(r["voltage_max_error_pct"], ".2f"),
              f(r["voltage_max_error_operational_pct"], ".2f"),
              {True: "yes", False: "no", None: "?"}[r["in_fit"]]] for r in rows]
     out.print(table(f"Validation to {cutoff:g} V/cell ({bat.cells_series}S{bat.strings_parallel}P)",
-                    ["file", "current [A]", "measured [s]", "predicted [s]",
-                     "error [s]", "error [%]", "V RMS [%]", "V max [%]", "V max >20% SOC [%]",
-                     "in fit"], body))
+                    ["file", "current [A]", "measured [s]", "predicted [s]", "95 % interval [s]",
+                     "covered", "error [s]", "error [%]", "V RMS [%]", "V max [%]",
+                     "V max >20% SOC [%]", "in fit"], body))
     out.print(f"mean |endurance error| {f(summary['mean_abs_endurance_error_pct'], '.2f')} %, "
               f"worst {f(summary['max_abs_endurance_error_pct'], '.2f')} %", markup=False)
+    cov = summary["coverage"]
+    if cov["runs"]:
+        parts = (["parameters"] if any("parameters" in r["interval_includes"] for r in rows)
+                 else []) + ["model error"]
+        out.print(f"95 % interval coverage: {cov['covered']}/{cov['runs']} runs "
+                  f"({100 * cov['fraction']:.0f} %; the intervals include "
+                  f"{' + '.join(parts)})", markup=False)
     for r in rows:
         for w in r["warnings"]:
             out.print(f"warning: {Path(r['file']).name}: {w}", markup=False)
@@ -1232,9 +1584,11 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
 @click.option("--title", default=None, help="Page title.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
               help="HTML file to write (one self-contained page).")
+@force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment, units,
-               cells, parallel, draws, seed, title, output, as_json):
+def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment,
+               units,
+               cells, parallel, draws, seed, title, output, force, as_json):
     """Write one self-contained HTML report for the pilot: model, fit, mission, validation.
 
     \b
@@ -1246,13 +1600,18 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
           --mission paper-table5 -o table5.html
     """
     from .mission import load_mission, run_mission
-    from .model import CUTOFF_CELL_VOLTAGE_V, load_battery
+    from .model import CUTOFF_CELL_VOLTAGE_V
     from .report import write_report
     from .validate import summarise
 
     if not output.lower().endswith((".html", ".htm")):
         raise DischargelabError(f"-o must name an .html file, got {output!r}")
-    bat = load_battery(battery)
+    validate_paths = expand_paths(validate_paths)
+    guard_outputs([output], battery_input(battery) + [mission_path] + validate_paths, force)
+    from .errors import require
+
+    require("matplotlib", "plot")  # the report's figures; checked before any work
+    bat = load_battery_arg(battery)
     result = None
     cases = []
     with err.status("building the report", spinner="dots") as status:
@@ -1275,8 +1634,12 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
                                       units, status)
         status.update("drawing plots")
         label = battery if isinstance(battery, str) else None
-        path = write_report(output, bat if bat.name else label, mission_result=result,
-                            validation=cases, title=title, cutoff_cell_V=cutoff)
+        from .atomic import atomic_path
+
+        with atomic_path(output) as tmp:
+            write_report(tmp, bat if bat.name else label, mission_result=result,
+                         validation=cases, title=title, cutoff_cell_V=cutoff)
+        path = Path(output)
     summary = {"report": str(path), "bytes": path.stat().st_size,
                "mission": None if result is None else result.to_dict(),
                "validation": [c.summary for c in cases],

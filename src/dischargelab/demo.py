@@ -42,22 +42,51 @@ def load_demo_curves():
     return frames, curves, metas
 
 
-def run_demo(out_dir: Path, console=None) -> dict:
+#: Files :func:`run_demo` writes into its folder.
+DEMO_OUTPUTS = ("battery-1C.json", "fit-battery-1C.png", "battery.json", "fit-battery.png",
+                "curves.png", "paper-table5.png", "survey.png", "report.html")
+
+
+def check_demo(out_dir, force: bool = False) -> None:
+    """Everything :func:`run_demo` needs, checked before any work.
+
+    Raises
+    ------
+    MissingExtraError
+        matplotlib (extra ``plot``) is not installed.
+    OutputError
+        A demo file exists in ``out_dir`` and ``force`` is false, or ``out_dir`` is a file.
+    """
+    from .atomic import OutputError, check_outputs
+    from .errors import require
+
+    require("matplotlib", "plot")
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputError(f"{out_dir} is a file; give a folder for the demo's files")
+    check_outputs([out_dir / name for name in DEMO_OUTPUTS], force=force)
+
+
+def run_demo(out_dir: Path, console=None, force: bool = False) -> dict:
     """Fit, predict, fly two missions, plot and report into ``out_dir``.
 
-    Returns a summary dict; ``summary["missions"]`` holds the MissionResult objects
-    (paper Table 5 on its preset, and a survey flight on a pack of the fitted cells).
+    Checks first (:func:`check_demo`) that matplotlib is installed and that no
+    demo file would be replaced unless ``force``. Returns a summary dict;
+    ``summary["missions"]`` holds the MissionResult objects (paper Table 5 on
+    its preset, and a survey flight on a pack of the fitted cells).
     """
     from dataclasses import replace
 
+    from .atomic import atomic_path
     from .fit import fit_battery
-    from .plot import plot_family, save
-    from .simulate import curve_family
     from .mission import load_mission, run_mission
+    from .plot import plot_family, save
     from .report import write_report
+    from .simulate import curve_family
     from .validate import compare_discharge, validate_discharge
 
     out_dir = Path(out_dir)
+    check_demo(out_dir, force)
     out_dir.mkdir(parents=True, exist_ok=True)
     say = console.print if console is not None else (lambda *a, **k: None)
     status = console.status if console is not None else _no_status
@@ -68,8 +97,8 @@ def run_demo(out_dir: Path, console=None) -> dict:
         say(f"[bold]{curve.name}[/]: {meta.get('summary', '')}")
 
     with status("fitting"):
-        one = fit_battery(curves[1], bootstrap=BOOTSTRAP)
-        all_rates = fit_battery(curves, bootstrap=BOOTSTRAP)
+        one = fit_battery(curves[1], bootstrap=BOOTSTRAP, model="auto")
+        all_rates = fit_battery(curves, bootstrap=BOOTSTRAP, model="auto")
     models = {"fit on 1C": one, "fit on C/10 + 1C + 4C": all_rates}
     files = {}
     for label, res, stem in (("1C", one, "battery-1C"), ("C/10+1C+4C", all_rates, "battery")):
@@ -106,10 +135,11 @@ def run_demo(out_dir: Path, console=None) -> dict:
     with status("writing the report"):
         cases = [compare_discharge(pack_file, data, meta, DEMO_CUTOFF_V)
                  for data, meta in zip(frames, metas)]
-        files["report.html"] = write_report(
-            out_dir / "report.html", pack_file, mission_result=survey_result,
-            validation=cases, title=f"Samsung 30Q: model, validation and a {PACK[0]}S{PACK[1]}P "
-                                    f"survey mission")
+        with atomic_path(out_dir / "report.html") as tmp:
+            write_report(tmp, pack_file, mission_result=survey_result, validation=cases,
+                         title=f"Samsung 30Q: model, validation and a {PACK[0]}S{PACK[1]}P "
+                               f"survey mission")
+        files["report.html"] = out_dir / "report.html"
 
     if console is not None:
         _print_summary(console, models, rows, files)
@@ -150,7 +180,8 @@ def _print_summary(console, models, rows, files):
     top = rows[-1]
     worst_all = max(abs(r[labels[1]]["endurance_error_pct"]) for r in rows)
     console.print(
-        f"The 1C-only model misses {top['rate']} by {top[labels[0]]['endurance_error_pct']:+.1f} %: "
+        f"The 1C-only model misses {top['rate']} by "
+        f"{top[labels[0]]['endurance_error_pct']:+.1f} %: "
         f"at {top['rate']} the cell heats itself to {top['max_temperature_C']:.0f} degC "
         f"(measured), which lowers its resistance, and the model is isothermal (paper 2.1). "
         f"Fitting all three rates together keeps every rate within {worst_all:.1f} %.",

@@ -1,15 +1,19 @@
-"""Fit the modified Shepherd model to one or several measured discharges.
+"""Fit any model family to one or several measured discharges.
 
 Method
 ------
 Bounded nonlinear least squares on the cell voltage, eq. (8) of the paper,
-solved by **variable projection**: for fixed nonlinear parameters (B, C and, in
-paper mode, a current scale) the model is linear in E0, R, K and A, which are
-eliminated by a linear least-squares solve; the reduced problem in (B, C) is
-solved with scipy's ``least_squares`` and Kaufman's analytic Jacobian from a
-small grid of starts. A final bounded ``least_squares`` polish over all free
-parameters (analytic Jacobian) enforces the bounds on the linear parameters when
-the projected solution violates them.
+solved by **variable projection** over the family's parameters: for fixed
+nonlinear parameters (for ``shepherd`` B, C and, in paper mode, a current scale)
+the voltage is linear in the family's linear parameters (E0, R, K, A), which are
+eliminated by a linear least-squares solve (bounded where a bound binds); the
+reduced problem is solved by projected Levenberg-Marquardt with Kaufman's
+analytic Jacobian from a small grid of starts. A final bounded ``least_squares``
+polish over all free parameters (analytic Jacobian) enforces the bounds on the
+linear parameters when the projected solution violates them. Families with a
+thermal state get their heat capacity and thermal resistance from the logged
+cell temperature afterwards (a linear regression, see
+:func:`dischargelab.models.base.fit_lumped_thermal`).
 
 Identifiability (see DESIGN.md and :mod:`dischargelab.identifiability`):
 
@@ -42,40 +46,22 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import stdtrit
 from scipy.optimize import least_squares
+from scipy.special import stdtrit
 
 from .errors import DataError, FitError
-from .identifiability import Identifiability, analyse, equilibrated_svd
-from .model import (
-    PARAMETER_NAMES, Battery, CellParameters, charge_from_current, cell_voltage,
-)
+from .identifiability import Identifiability, analyse, equilibrated_svd, plausibility, undetermined
+from .model import Battery, CellParameters, charge_from_current
+from .models import Family, Samples, get_family
+from .models.base import fit_lumped_thermal
 
 #: Name of the current-scale parameter fitted in paper mode.
 CURRENT_SCALE = "current_scale"
-
-#: Default bounds per cell. C is also bounded below by the largest discharged
-#: charge in the data (the model is undefined for q >= C).
-DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
-    "E0_V": (0.5, 6.0),
-    "R_ohm": (0.0, 2.0),
-    "K_V_per_Ah": (0.0, 20.0),
-    "A_V": (0.0, 3.0),
-    "B_per_Ah": (1e-3, 1e4),
-    "C_Ah": (1e-3, 1e4),
-    CURRENT_SCALE: (1.0, 1.0),
-}
-
-#: Default upper bound of C as a multiple of the largest discharged charge.
-C_UPPER_FACTOR = 20.0
 
 #: Bounds of the fitted/measured current ratio in paper mode (the paper's fits
 #: came within 2.5-5 % of the measured current). C is bounded below by the
 #: largest charge times the upper bound.
 PAPER_CURRENT_SCALE_BOUNDS = (0.9, 1.1)
-
-_LINEAR = ("E0_V", "R_ohm", "K_V_per_Ah", "A_V")
-_NONLINEAR = ("B_per_Ah", "C_Ah", CURRENT_SCALE)
 
 
 @dataclass
@@ -88,6 +74,11 @@ class Curve:
         Samples [s], [V], [A] from load start.
     name : str
         Label used in plots and tables (file name, rate).
+    temperature_C : array_like or None
+        Logged cell temperature [degC] at the same samples, when measured.
+    initial_charge_Ah : float
+        Pack charge already removed before the first sample [Ah] (0 = the curve
+        starts full; a flight that starts part-discharged has more).
     rest_voltage_V : float or None
         Pack voltage at rest (i = 0) just before the load step, at full charge of
         this curve; separates E0 from R when present.
@@ -101,6 +92,8 @@ class Curve:
     name: str = ""
     rest_voltage_V: float | None = None
     meta: dict = field(default_factory=dict)
+    temperature_C: np.ndarray | None = None
+    initial_charge_Ah: float = 0.0
 
     def __post_init__(self):
         self.time_s = np.asarray(self.time_s, dtype=float)
@@ -133,9 +126,14 @@ class Curve:
                             f"(use --sign to flip it, or --current A for files without one)")
         if self.rest_voltage_V is not None and not np.isfinite(self.rest_voltage_V):
             self.rest_voltage_V = None
+        if self.temperature_C is not None:
+            temp = np.asarray(self.temperature_C, dtype=float)
+            ok = temp.shape == self.time_s.shape and np.all(np.isfinite(temp)) and \
+                np.all((temp > -60) & (temp < 150))
+            self.temperature_C = temp if ok else None
 
     @classmethod
-    def from_frame(cls, data, meta: dict | None = None, name: str = "") -> "Curve":
+    def from_frame(cls, data, meta: dict | None = None, name: str = "") -> Curve:
         """Build from a canonical DataFrame (``time_s``, ``voltage_V``, ``current_A``)."""
         meta = dict(meta or {})
         missing = [c for c in ("time_s", "voltage_V", "current_A") if c not in data]
@@ -143,10 +141,12 @@ class Curve:
             raise DataError(f"data has no {', '.join(missing)} column; "
                             f"files without a current column need --current A")
         rest = (meta.get("rest_sample") or {}).get("voltage_V")
+        temp = data["temperature_C"].to_numpy(float) if "temperature_C" in data else None
         return cls(data["time_s"].to_numpy(float), data["voltage_V"].to_numpy(float),
                    data["current_A"].to_numpy(float),
                    name=name or str(meta.get("name") or meta.get("source", "")),
-                   rest_voltage_V=None if rest is None else float(rest), meta=meta)
+                   rest_voltage_V=None if rest is None else float(rest), meta=meta,
+                   temperature_C=temp)
 
     @property
     def mean_current_A(self) -> float:
@@ -155,28 +155,16 @@ class Curve:
         return float(np.trapezoid(self.current_A, self.time_s) / duration)
 
     @property
+    def ambient_C(self) -> float | None:
+        """Cell temperature at the start [degC] (the ambient of a test from rest)."""
+        return None if self.temperature_C is None else float(self.temperature_C[0])
+
+    @property
     def charge_Ah(self) -> np.ndarray:
         """Discharged charge from the first sample [Ah] (computed once)."""
         if getattr(self, "_charge", None) is None:
             self._charge = charge_from_current(self.time_s, self.current_A)
         return self._charge
-
-
-@dataclass
-class _Stack:
-    """Cell-level samples of all curves, rest points appended as i = 0, q = 0 samples."""
-
-    voltage: np.ndarray
-    current: np.ndarray
-    charge: np.ndarray
-    weight: np.ndarray  # sqrt weights per sample
-    curve: np.ndarray   # curve index per sample
-    is_rest: np.ndarray
-    n_curves: int
-
-    @property
-    def q_max(self) -> float:
-        return float(self.charge.max())
 
 
 #: The multi-start search runs on curves thinned to this many samples; the
@@ -197,44 +185,56 @@ def _thin(n: int, limit: int) -> np.ndarray:
 
 
 def _stack(curves, cells_series, strings_parallel, use_rest, weighting,
-           max_samples=MAX_SAMPLES_PER_CURVE) -> _Stack:
+           max_samples=MAX_SAMPLES_PER_CURVE) -> Samples:
+    """Cell-level samples of all curves (thinned), rest points appended as i = 0, q = 0."""
     parts = []
+    has_temp = all(c.temperature_C is not None for c in curves)
+    ambients = [c.ambient_C for c in curves if c.ambient_C is not None]
+    ambient = float(np.median(ambients)) if ambients else 25.0
     for k, c in enumerate(curves):
         keep = _thin(c.time_s.size, max_samples)
         v = c.voltage_V[keep] / cells_series
         i = c.current_A[keep] / strings_parallel
-        q = c.charge_Ah[keep] / strings_parallel
+        q0 = float(c.initial_charge_Ah) / strings_parallel
+        q = c.charge_Ah[keep] / strings_parallel + q0
+        t = c.time_s[keep] - c.time_s[0]
+        temp = c.temperature_C[keep] if has_temp else np.full(v.size, ambient)
         w = np.full(v.size, 1.0 / np.sqrt(v.size) if weighting == "equal" else 1.0)
         rest = np.zeros(v.size, bool)
         if use_rest and c.rest_voltage_V is not None:
             v = np.append(v, c.rest_voltage_V / cells_series)
-            i, q = np.append(i, 0.0), np.append(q, 0.0)
+            i, q, t = np.append(i, 0.0), np.append(q, q0), np.append(t, 0.0)
+            temp = np.append(temp, temp[0])
             w, rest = np.append(w, w[0]), np.append(rest, True)
-        parts.append((v, i, q, w, np.full(v.size, k), rest))
-    cols = [np.concatenate([p[j] for p in parts]) for j in range(6)]
+        parts.append((v, i, q, t, temp, w, np.full(v.size, k), rest))
+    cols = [np.concatenate([p[j] for p in parts]) for j in range(8)]
     if weighting == "equal":
-        cols[3] = cols[3] / cols[3].mean()
-    return _Stack(*cols, n_curves=len(curves))
+        cols[5] = cols[5] / cols[5].mean()
+    return Samples(voltage=cols[0], current=cols[1], charge=cols[2], time=cols[3],
+                   temperature=cols[4], weight=cols[5], curve=cols[6], is_rest=cols[7],
+                   n_curves=len(curves), has_temperature=has_temp, ambient_C=ambient)
 
 
-def _spec(fixed, bounds, stack: _Stack, paper_mode: bool):
+def _spec(family: Family, fixed, bounds, stack: Samples, paper_mode: bool):
     """Resolve fixed values and bounds; returns (fixed dict, bounds dict)."""
     fixed = {k: float(v) for k, v in (fixed or {}).items()}
     bounds = {k: tuple(map(float, v)) for k, v in (bounds or {}).items()}
-    allowed = set(PARAMETER_NAMES) | {CURRENT_SCALE}
+    allowed = set(family.names) | ({CURRENT_SCALE} if paper_mode else set())
     for name in list(fixed) + list(bounds):
         if name not in allowed:
-            raise FitError(f"unknown parameter {name!r}; use one of {', '.join(PARAMETER_NAMES)}")
-    b = dict(DEFAULT_BOUNDS)
+            raise FitError(f"unknown parameter {name!r} for model {family.name!r}; use one of "
+                           f"{', '.join(family.names)}")
+    b = {p.name: (p.lower, p.upper) for p in family.parameters}
+    b.update(family.fit_bounds(stack))
+    b[CURRENT_SCALE] = PAPER_CURRENT_SCALE_BOUNDS if paper_mode else (1.0, 1.0)
     if paper_mode:
-        b[CURRENT_SCALE] = PAPER_CURRENT_SCALE_BOUNDS
-    b.update(bounds)
-    # the model is undefined for q >= C: C must stay above the largest charge
-    # (in paper mode the charge scales with the fitted current: use its upper bound)
-    scale_hi = b[CURRENT_SCALE][1] if paper_mode else 1.0
-    lo_c = stack.q_max * scale_hi * (1.0 + 1e-4)
-    hi_c = b["C_Ah"][1] if "C_Ah" in bounds else stack.q_max * C_UPPER_FACTOR
-    b["C_Ah"] = (max(b["C_Ah"][0], lo_c), max(hi_c, lo_c * 1.01))
+        # the charge scales with the fitted current: C must stay above the scaled charge
+        lo_c = stack.q_max * PAPER_CURRENT_SCALE_BOUNDS[1] * (1.0 + 1e-4)
+        b["C_Ah"] = (max(b["C_Ah"][0], lo_c), max(b["C_Ah"][1], lo_c * 1.01))
+    if "C_Ah" in bounds:
+        lo_c = b["C_Ah"][0]
+        b["C_Ah"] = (max(bounds["C_Ah"][0], lo_c), max(bounds["C_Ah"][1], lo_c * 1.01))
+    b.update({k: v for k, v in bounds.items() if k != "C_Ah"})
     if "C_Ah" in fixed and fixed["C_Ah"] <= stack.q_max:
         raise FitError(f"fixed C_Ah = {fixed['C_Ah']:g} Ah is not above the "
                        f"{stack.q_max:g} Ah already discharged in the data (q >= C)")
@@ -243,30 +243,33 @@ def _spec(fixed, bounds, stack: _Stack, paper_mode: bool):
             raise FitError(f"bounds for {name} are empty: {lo:g} .. {hi:g}")
         if name in fixed and not lo <= fixed[name] <= hi and name in bounds:
             raise FitError(f"fixed {name} = {fixed[name]:g} is outside its bounds {lo:g}..{hi:g}")
+    for name, value in family.fit_fixed(stack).items():
+        fixed.setdefault(name, value)
     if not paper_mode:
         fixed[CURRENT_SCALE] = 1.0
+    elif not hasattr(family, "input_derivatives"):
+        raise FitError(f"paper mode fits the paper's model; model {family.name!r} has no "
+                       "fitted current scale")
     return fixed, b
 
 
 class _Model:
-    """Cell-voltage model over the stacked samples with a given set of free parameters.
+    """A family's cell voltage over the stacked samples with a given set of free parameters."""
 
-    The basis columns of the linear parameters (1, -i, -K-term, exp-term) depend
-    only on the nonlinear ones; they are computed once per nonlinear point.
-    """
-
-    def __init__(self, stack: _Stack, fixed: dict):
+    def __init__(self, family: Family, stack: Samples, fixed: dict, bounds: dict | None = None):
+        self.family = family
         self.s = stack
         self.fixed = fixed
-        self.linear = [n for n in _LINEAR if n not in fixed]
-        self.nonlinear = [n for n in _NONLINEAR if n not in fixed]
+        names = family.names
+        self.linear = [n for n in names if family.parameter(n).linear and n not in fixed]
+        self.nonlinear = [n for n in names if not family.parameter(n).linear and n not in fixed]
+        if CURRENT_SCALE not in fixed:
+            self.nonlinear.append(CURRENT_SCALE)
         self.free = self.linear + self.nonlinear
-        self._basis_key = None
+        self.bounds = bounds or {}
         self._weighted = not np.all(stack.weight == 1.0)
         self._weighted_voltage = stack.voltage * stack.weight
-        self._lin_idx = [_LINEAR.index(n) for n in self.linear]
-        self._fixed_lin = [(_LINEAR.index(n), self.fixed[n]) for n in _LINEAR
-                           if n in self.fixed and self.fixed[n] != 0]
+        self._scaled = (1.0, stack)
 
     def full(self, values: dict) -> dict:
         out = dict(self.fixed)
@@ -275,108 +278,108 @@ class _Model:
 
     def params(self, values: dict) -> tuple[CellParameters, float]:
         full = self.full(values)
-        return CellParameters(*(full[n] for n in PARAMETER_NAMES)), full[CURRENT_SCALE]
+        return CellParameters({n: full[n] for n in self.family.names}), full[CURRENT_SCALE]
 
-    def basis(self, full: dict):
-        """Basis columns (E0, R, K, A order) and intermediates at the nonlinear point (cached)."""
-        key = (full["B_per_Ah"], full["C_Ah"], full[CURRENT_SCALE])
-        if key != self._basis_key:
-            b, c, scale = key
-            q = self.s.charge * scale
-            denom = c - q
-            gain = c / denom
-            pol = self.s.current * scale + q
-            expo = np.exp(-b * q)
-            phi = np.empty((q.size, 4))
-            phi[:, 0] = 1.0
-            np.multiply(self.s.current, -scale, out=phi[:, 1])
-            np.multiply(gain, -pol, out=phi[:, 2])
-            phi[:, 3] = expo
-            self._basis_key = key
-            self._basis_val = (q, denom, gain, pol, expo, phi)
-        return self._basis_val
+    def data(self, scale: float) -> Samples:
+        """The samples with current and charge times the paper-mode current scale."""
+        if scale == 1.0:
+            return self.s
+        if self._scaled[0] != scale:
+            from dataclasses import replace
+
+            self._scaled = (scale, replace(self.s, current=self.s.current * scale,
+                                           charge=self.s.charge * scale, _cache={}))
+        return self._scaled[1]
 
     def voltage(self, values):
         full = self.full(values)
-        return self.basis(full)[5] @ np.array([full[n] for n in _LINEAR])
+        with np.errstate(invalid="ignore", over="ignore"):
+            return self.family.fit_voltage(full, self.data(full[CURRENT_SCALE]))
 
     def jacobian(self, values, names):
         """Analytic dV/d(name) for the named parameters, shape (n, len(names))."""
         full = self.full(values)
-        q, denom, gain, pol, expo, phi = self.basis(full)
-        out = np.empty((q.size, len(names)))
-        for k, n in enumerate(names):
-            if n in _LINEAR:
-                out[:, k] = phi[:, _LINEAR.index(n)]
-            elif n == "B_per_Ah":
-                out[:, k] = -full["A_V"] * q * expo
-            elif n == "C_Ah":
-                out[:, k] = full["K_V_per_Ah"] * q * pol / denom ** 2
-            else:  # current scale: i, i_f and q all scale with it
-                dv_di = -full["R_ohm"] - full["K_V_per_Ah"] * gain
-                dv_dq = (-full["K_V_per_Ah"] * (full["C_Ah"] * pol / denom ** 2 + gain)
-                         - full["A_V"] * full["B_per_Ah"] * expo)
-                out[:, k] = dv_di * self.s.current + dv_dq * self.s.charge
+        scale = full[CURRENT_SCALE]
+        data = self.data(scale)
+        own = [n for n in names if n != CURRENT_SCALE]
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            jac = self.family.jacobian(full, data, own)
+        if CURRENT_SCALE not in names:
+            return jac
+        dv_di, dv_dq = self.family.input_derivatives(full, data)
+        col = dv_di * self.s.current + dv_dq * self.s.charge
+        out = np.empty((col.size, len(names)))
+        out[:, [k for k, n in enumerate(names) if n != CURRENT_SCALE]] = jac
+        out[:, names.index(CURRENT_SCALE)] = col
         return out
 
     # --- variable projection over the nonlinear parameters -------------------------
     def project(self, theta):
-        """Linear solve for the linear parameters at nonlinear values ``theta``.
+        """Linear solve for the free linear parameters at nonlinear values ``theta``.
 
-        Returns (values dict, weighted residual, weighted linear basis, its
-        Gram-matrix Cholesky factor). The last call is cached: least_squares asks
-        for the residual and the Jacobian at the same point.
+        Returns (values dict, weighted residual, weighted basis of the linear
+        parameters not held at a bound, its inverse-Gram solver). The last call is
+        cached: the solver asks for the residual and the Jacobian at one point.
         """
         key = np.asarray(theta, dtype=float).tobytes()
         if getattr(self, "_cache_key", None) == key:
             return self._cache
         values = dict(zip(self.nonlinear, theta))
-        values.update({n: 0.0 for n in self.linear})
-        basis = self.basis(self.full(values))[5]
-        rhs = self._weighted_voltage
-        if self._fixed_lin:
-            base = sum(value * basis[:, k] for k, value in self._fixed_lin)
-            rhs = rhs - (base * self.s.weight if self._weighted else base)
+        values.update(dict.fromkeys(self.linear, 0.0))
+        w = self.s.weight
+        offset = self.voltage(values)
+        rhs = self._weighted_voltage - (offset * w if self._weighted else offset)
         if self.linear:
-            phi = basis if len(self._lin_idx) == 4 else basis[:, self._lin_idx]
+            phi = self.jacobian(values, self.linear)
             if self._weighted:
-                phi = phi * self.s.weight[:, None]
+                phi = phi * w[:, None]
+            if not np.all(np.isfinite(phi)) or not np.all(np.isfinite(rhs)):
+                resid = np.full(rhs.size, np.inf)
+                self._cache_key, self._cache = key, (values, resid, None, None)
+                return self._cache
             coef, chol = _solve_normal(phi, rhs)
+            held = self._violations(coef)
+            if held.any():
+                coef = _bounded_linear(phi, rhs, self._linear_bounds())
+                held = self._at_bound(coef)
+                keep = ~held
+                fixed_part = phi[:, held] @ coef[held]
+                if keep.any():
+                    sub, chol = _solve_normal(phi[:, keep], rhs - fixed_part)
+                    coef[keep] = sub
+                    phi_free = phi[:, keep]
+                else:
+                    phi_free, chol = None, None
+            else:
+                phi_free = phi
             values.update(zip(self.linear, coef))
             resid = phi @ coef - rhs
         else:
-            phi, chol, resid = None, None, -rhs
-        self._cache_key, self._cache = key, (values, resid, phi, chol)
+            phi_free, chol, resid = None, None, -rhs
+        self._cache_key, self._cache = key, (values, resid, phi_free, chol)
         return self._cache
 
+    def _linear_bounds(self):
+        lo = np.array([self.bounds.get(n, (-np.inf, np.inf))[0] for n in self.linear])
+        hi = np.array([self.bounds.get(n, (-np.inf, np.inf))[1] for n in self.linear])
+        return lo, hi
+
+    def _violations(self, coef):
+        lo, hi = self._linear_bounds()
+        return (coef < lo) | (coef > hi)
+
+    def _at_bound(self, coef):
+        lo, hi = self._linear_bounds()
+        span = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
+        return (coef <= lo + 1e-12 * span) | (coef >= hi - 1e-12 * span)
+
     def grid_costs(self, starts) -> np.ndarray:
-        """Projected residual sum of squares at many nonlinear points in one batch."""
-        starts = np.atleast_2d(starts)
-        if CURRENT_SCALE in self.nonlinear or len(self._lin_idx) == 0:
-            return np.array([float(r @ r) for r in map(self.varpro_residual, starts)])
-        point = {n: starts[:, [k]] for k, n in enumerate(self.nonlinear)}
-        b = point.get("B_per_Ah", self.fixed.get("B_per_Ah"))
-        c = point.get("C_Ah", self.fixed.get("C_Ah"))
-        q, i = self.s.charge, self.s.current
-        gain = c / (c - q)
-        phi = np.empty((starts.shape[0], q.size, 4))
-        phi[:, :, 0] = 1.0
-        phi[:, :, 1] = -i
-        phi[:, :, 2] = -gain * (i + q)
-        phi[:, :, 3] = np.exp(-b * q)
-        rhs = np.broadcast_to(self._weighted_voltage, phi.shape[:2])
-        if self._fixed_lin:
-            base = sum(value * phi[:, :, k] for k, value in self._fixed_lin)
-            rhs = rhs - base * self.s.weight
-        phi = phi[:, :, self._lin_idx] * self.s.weight[None, :, None]
-        gram = np.einsum("mni,mnj->mij", phi, phi)
-        norm = np.sqrt(np.einsum("mii->mi", gram))
-        norm[norm == 0] = 1.0
-        gram = gram / (norm[:, :, None] * norm[:, None, :])
-        proj = np.einsum("mni,mn->mi", phi, rhs) / norm
-        coef = np.linalg.pinv(gram, hermitian=True) @ proj[:, :, None]
-        resid = np.einsum("mni,mi->mn", phi, coef[:, :, 0] / norm) - rhs
-        return np.einsum("mn,mn->m", resid, resid)
+        """Projected residual sum of squares at each nonlinear starting point."""
+        out = np.empty(len(starts))
+        for k, theta in enumerate(np.atleast_2d(starts)):
+            r = self.varpro_residual(theta)
+            out[k] = float(r @ r) if np.all(np.isfinite(r)) else np.inf
+        return out
 
     def varpro_residual(self, theta):
         return self.project(theta)[1]
@@ -388,6 +391,29 @@ class _Model:
             return jac
         # Kaufman's approximation: P_perp dV/dtheta, P_perp = I - phi (phi^T phi)^-1 phi^T
         return jac - phi @ _cho_apply(chol, phi.T @ jac)
+
+
+def _bounded_linear(phi, rhs, bounds):
+    """Bounded linear least squares (BVLS) for the linear parameters.
+
+    Solved on the square Cholesky form of the normal equations
+    (``min |L^T c - L^-1 phi^T rhs|``, the same minimiser) with equilibrated
+    columns, so each solve costs a few columns squared, not the samples.
+    """
+    from scipy.linalg import cho_factor, solve_triangular
+    from scipy.optimize import lsq_linear
+
+    lo, hi = bounds
+    norm = np.sqrt(np.einsum("ij,ij->j", phi, phi))
+    norm[norm == 0] = 1.0
+    scaled = phi / norm
+    gram = scaled.T @ scaled
+    gram[np.diag_indices_from(gram)] += 1e-12
+    factor, _ = cho_factor(gram, lower=True)
+    lower = np.tril(factor)
+    target = solve_triangular(lower, scaled.T @ rhs, lower=True)
+    sol = lsq_linear(lower.T, target, bounds=(lo * norm, hi * norm), method="bvls", tol=1e-12)
+    return np.clip(sol.x / norm, lo, hi)
 
 
 def _solve_normal(phi, rhs):
@@ -406,7 +432,7 @@ def _solve_normal(phi, rhs):
     if sign > 0 and logdet > -27.6:
         inverse = np.linalg.inv(gram)
     else:
-        inverse = np.linalg.pinv(gram)
+        inverse = np.linalg.pinv(gram, hermitian=True)
     solver = (inverse, norm)
     return _cho_apply(solver, phi.T @ rhs), solver
 
@@ -445,6 +471,21 @@ class FitResult:
     nfev: int
     n_starts: int
     bootstrap: np.ndarray | None = None
+    model: str = "shepherd"
+    ambient_C: float = 25.0
+    thermal: dict | None = None
+    model_error: dict | None = None
+    implausible: list = field(default_factory=list)
+
+    @property
+    def physical(self) -> bool:
+        """True when no parameter sits at a bound and no value is physically implausible."""
+        return not self.identifiability.at_bounds and not self.implausible
+
+    @property
+    def family(self) -> Family:
+        """The fitted model family."""
+        return get_family(self.model)
 
     # ---- derived ---------------------------------------------------------------
     @property
@@ -454,10 +495,15 @@ class FitResult:
                      for c in self.curves)
 
     def predicted_voltage(self, curve: Curve) -> np.ndarray:
-        """Model pack voltage [V] at the samples of ``curve`` (paper mode: fitted current)."""
-        s, p = self.cells_series, self.strings_parallel
-        i = curve.current_A / p * self.current_scale
-        return s * cell_voltage(self.parameters, i, curve.charge_Ah / p * self.current_scale)
+        """Model pack voltage [V] at the samples of ``curve`` (paper mode: fitted current;
+        thermal families at the curve's logged temperature)."""
+        data = _stack([curve], self.cells_series, self.strings_parallel, use_rest=False,
+                      weighting="samples", max_samples=curve.time_s.size)
+        if self.current_scale != 1.0:
+            data.current = data.current * self.current_scale
+            data.charge = data.charge * self.current_scale
+        with np.errstate(invalid="ignore", over="ignore"):
+            return self.cells_series * self.family.fit_voltage(self.parameters, data)
 
     @property
     def battery(self) -> Battery:
@@ -469,22 +515,25 @@ class FitResult:
         capacities = [float(c.charge_Ah[-1]) / self.strings_parallel for c in self.curves]
         lowest = int(np.argmin([abs(x) for x in self.fit_currents_A]))
         extra["measured_capacity_Ah"] = capacities[lowest]
+        extra["ambient_C"] = self.ambient_C
         if self.bootstrap is not None:
-            extra["bootstrap"] = {"names": list(PARAMETER_NAMES),
+            extra["bootstrap"] = {"names": list(self.family.names),
                                   "samples": np.round(self.bootstrap, 12).tolist()}
         return Battery(self.parameters, self.cells_series, self.strings_parallel,
                        covariance=self.covariance, fit_currents_A=self.fit_currents_A,
-                       extra=extra)
+                       extra=extra, model=self.model)
 
     def to_dict(self) -> dict:
         """The ``fit --json`` document (keys are only ever added, never renamed)."""
+        names = self.family.names
         out = {
-            "model": "tremblay",
+            "model": self.model,
             "cells_series": self.cells_series,
             "strings_parallel": self.strings_parallel,
             "parameters": self.parameters.as_dict(),
-            "stderr": {n: self.stderr[n] for n in PARAMETER_NAMES},
-            "ci95": {n: list(self.ci95[n]) for n in PARAMETER_NAMES},
+            "units": {p.name: p.unit for p in self.family.parameters},
+            "stderr": {n: self.stderr[n] for n in names},
+            "ci95": {n: list(self.ci95[n]) for n in names},
             "fixed": {n: v for n, v in self.fixed.items() if n != CURRENT_SCALE
                       or self.paper_mode},
             "rmse_V": self.rmse_V,
@@ -496,7 +545,12 @@ class FitResult:
             "notes": list(self.notes),
             "identifiability": self.identifiability.to_dict(),
             "fit_time_s": self.elapsed_s,
+            "ambient_C": self.ambient_C,
         }
+        if self.thermal is not None:
+            out["thermal"] = dict(self.thermal)
+        if self.model_error is not None:
+            out["model_error"] = dict(self.model_error)
         if self.paper_mode:
             out["paper_mode"] = {
                 "current_scale": self.current_scale,
@@ -506,12 +560,26 @@ class FitResult:
             }
         return out
 
+    def predict(self, **load):
+        """Predict a discharge with the fitted battery (see :meth:`Battery.predict`)."""
+        return self.battery.predict(**load)
+
+    def save(self, path, *, name: str = "", chemistry: str | None = None):
+        """Write the battery file (JSON, atomically); returns the path."""
+        from dataclasses import replace as _replace
+
+        bat = self.battery
+        bat = _replace(bat, name=name or ", ".join(c.name for c in self.curves),
+                       chemistry=chemistry or bat.chemistry)
+        return bat.save(path)
+
     def report(self) -> str:
         """Plain-text summary: parameters with 95 % intervals, RMSE, warnings."""
-        lines = [f"modified Shepherd model, per cell ({self.cells_series}S{self.strings_parallel}P "
-                 f"pack), {len(self.curves)} curve(s), {self.n_samples} samples"]
-        for n in PARAMETER_NAMES:
-            value = getattr(self.parameters, n)
+        lines = [f"{self.family.title} [{self.model}], per cell ({self.cells_series}S"
+                 f"{self.strings_parallel}P pack), {len(self.curves)} curve(s), "
+                 f"{self.n_samples} samples"]
+        for n in self.family.names:
+            value = self.parameters[n]
             if n in self.fixed:
                 lines.append(f"  {n:12s} {value:12.6g}   (fixed)")
             else:
@@ -521,6 +589,10 @@ class FitResult:
         if self.paper_mode:
             lines.append(f"  fitted current scale {self.current_scale:.4f} "
                          f"(fitted/measured current)")
+        if self.thermal is not None:
+            lines.append(f"  thermal: heat capacity {self.thermal['Cth_J_per_K']:.3g} J/K, "
+                         f"thermal resistance {self.thermal['Rth_K_per_W']:.3g} K/W "
+                         f"({self.thermal['source']})")
         lines.append(f"  RMSE {self.rmse_V * 1000:.2f} mV per cell "
                      f"({self.rmse_V * self.cells_series * 1000:.1f} mV pack)")
         lines += [f"  note: {m}" for m in self.notes]
@@ -534,38 +606,30 @@ class FitResult:
         return plot_fit(self, ax=ax, **kwargs)
 
 
-def guess_parameters(curves, cells_series: int = 1, strings_parallel: int = 1) -> dict:
-    """Starting values from the data (per cell).
+def guess_parameters(curves, cells_series: int = 1, strings_parallel: int = 1,
+                     model="shepherd") -> dict:
+    """Starting values from the data (per cell), from the family's own ``guess``.
 
-    C from the integrated Ah (a little above the largest discharged charge),
-    E0 + A from the rest voltage when present (else the first sample), R + K from
-    the voltage step at load start when a rest sample exists, B from the length of
-    the initial exponential drop.
+    For ``shepherd``: C from the integrated Ah (a little above the largest
+    discharged charge), E0 + A from the rest voltage when present (else the first
+    sample), R + K from the voltage step at load start when a rest sample exists,
+    B from the length of the initial exponential drop.
     """
     curves = [curves] if isinstance(curves, Curve) else list(curves)
-    q_max = max(float(c.charge_Ah[-1]) for c in curves) / strings_parallel
-    c0 = curves[0]
-    v_first = c0.voltage_V[0] / cells_series
-    i_first = c0.current_A[0] / strings_parallel
-    rest = None if c0.rest_voltage_V is None else c0.rest_voltage_V / cells_series
-    r_step = (rest - v_first) / i_first if rest is not None and i_first > 0 else 0.01
-    return {"E0_V": (rest if rest is not None else v_first) - 0.05,
-            "R_ohm": max(r_step, 0.0), "K_V_per_Ah": 0.01, "A_V": 0.05,
-            "B_per_Ah": 10.0 / q_max, "C_Ah": q_max * 1.05}
+    stack = _stack(curves, cells_series, strings_parallel, True, "equal")
+    return get_family(model).guess(stack)
 
 
-def _starts(model: _Model, q_max: float, bounds: dict, guess: dict | None):
+def _starts(model: _Model, bounds: dict, guess: dict | None):
     """Grid of starting points for the nonlinear parameters (clipped into bounds)."""
-    grid = {
-        "B_per_Ah": [x / q_max for x in (2.0, 8.0, 30.0, 100.0)],
-        "C_Ah": [q_max * f for f in (1.003, 1.03, 1.15)],
-        CURRENT_SCALE: [1.0],
-    }
-    if guess:
-        for n in model.nonlinear:
-            if n in guess:
-                grid[n] = [guess[n]] + grid[n]
-    axes = [grid[n] for n in model.nonlinear]
+    grid = model.family.start_grid(model.s, model.nonlinear)
+    base = model.family.guess(model.s)
+    axes = []
+    for n in model.nonlinear:
+        values = list(grid.get(n, [1.0 if n == CURRENT_SCALE else base[n]]))
+        if guess and n in guess:
+            values = [guess[n]] + values
+        axes.append(values)
     mesh = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T if axes else \
         np.empty((1, 0))
     lo = np.array([bounds[n][0] for n in model.nonlinear])
@@ -577,9 +641,9 @@ def _starts(model: _Model, q_max: float, bounds: dict, guess: dict | None):
 def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 fixed: dict | None = None, bounds: dict | None = None,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
-                weighting: str = "equal", n_best: int = 1, bootstrap: int = 0,
-                seed: int = 0) -> FitResult:
-    """Fit the cell model to one or several discharges with shared parameters.
+                weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
+                seed: int = 0, model="shepherd", model_error: bool = True) -> FitResult:
+    """Fit a model family to one or several discharges with shared parameters.
 
     Parameters
     ----------
@@ -590,25 +654,31 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     fixed : dict, optional
         ``{name: value}`` parameters held fixed (e.g. ``{"E0_V": 4.1}``).
     bounds : dict, optional
-        ``{name: (lower, upper)}`` overriding :data:`DEFAULT_BOUNDS`.
+        ``{name: (lower, upper)}`` overriding the family's default bounds.
     guess : dict, optional
-        Starting values for B_per_Ah / C_Ah tried before the built-in grid.
+        Starting values of nonlinear parameters tried before the built-in grid.
     paper_mode : bool
-        Reproduce the paper's setup: E0 must be fixed, the current is scaled by a
-        fitted factor (bounds ``current_scale``) together with R, K, A, B, C.
-        The result is degenerate by construction and says so.
+        Reproduce the paper's setup (``shepherd`` only): E0 must be fixed, the
+        current is scaled by a fitted factor together with R, K, A, B, C. The
+        result is degenerate by construction and says so.
     use_rest : bool
         Use each curve's rest voltage (i = 0) as a data point.
     weighting : {"equal", "samples"}
         "equal" gives each curve the same total weight whatever its length.
-    n_best : int
-        Number of best grid starts refined by the variable-projection solver.
+    n_best : int, optional
+        Number of best grid starts refined by the variable-projection solver
+        (default: the family's ``n_best``).
     bootstrap : int
         Number of moving-block bootstrap refits stored with the result (0 = none);
-        they carry the parameter uncertainty into simulations without assuming
-        the linearised covariance holds far from the optimum.
+        they carry the parameter uncertainty into simulations.
     seed : int
         Seed of the bootstrap.
+    model : str or Family
+        Model family name (``dischargelab.models.FAMILIES``), or ``"auto"``: pick
+        by evidence (see :func:`choose_model`).
+    model_error : bool
+        With two or more curves at different currents, estimate the model's own
+        error from leave-one-curve-out predictions (stored in ``model_error``).
 
     Returns
     -------
@@ -623,6 +693,12 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     curves = [curves] if isinstance(curves, Curve) else list(curves)
     if not curves:
         raise FitError("no discharge curves to fit")
+    if model == AUTO:
+        return _fit_auto(curves, t_start, cells_series=cells_series,
+                         strings_parallel=strings_parallel, fixed=fixed, bounds=bounds,
+                         guess=guess, paper_mode=paper_mode, use_rest=use_rest,
+                         weighting=weighting, n_best=n_best, bootstrap=bootstrap, seed=seed)
+    family = get_family(model)
     if cells_series < 1 or strings_parallel < 1:
         raise FitError("cells in series and strings in parallel must be at least 1")
     if weighting not in ("equal", "samples"):
@@ -631,57 +707,62 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     requested_fixed = dict(fixed or {})
     if paper_mode:
         if "E0_V" not in requested_fixed:
-            raise FitError("paper mode needs E0 (the paper's only input): give --e0 V")
+            raise FitError("paper mode needs E0 (the paper's only input): give E0_V in fixed")
         if len(curves) != 1:
-            raise FitError("paper mode fits one curve (the paper's setup); give one file")
-    fixed, bnds = _spec(requested_fixed, bounds, stack, paper_mode)
+            raise FitError("paper mode fits one curve (the paper's setup); give one curve")
+    fixed, bnds = _spec(family, requested_fixed, bounds, stack, paper_mode)
     notes, warnings = [], []
-    _resolve_e0_r(stack, fixed, notes, warnings)
+    _resolve_e0_r(family, stack, fixed, notes, warnings)
     for c in curves:
         used = _thin(c.time_s.size, MAX_SAMPLES_PER_CURVE).size
         if used < c.time_s.size:
             notes.append(f"curve {c.name or '?'}: {used} of {c.time_s.size} samples used "
                          f"(evenly thinned in time)")
-    model = _Model(stack, fixed)
-    if not model.free:
+    mdl = _Model(family, stack, fixed, bnds)
+    if not mdl.free:
         raise FitError("every parameter is fixed; nothing to fit")
 
-    q_max = stack.q_max
-    starts, lo, hi = _starts(model, q_max, bnds, guess)
+    starts, lo, hi = _starts(mdl, bnds, guess)
     nfev = 0
     theta = np.empty(0)
-    if model.nonlinear:
+    if mdl.nonlinear:
         # coarse to fine: search on a thinned copy of the data, refine on all of it
-        coarse = _Model(_stack(curves, cells_series, strings_parallel, use_rest, weighting,
-                               max_samples=SEARCH_SAMPLES_PER_CURVE), fixed)
+        coarse = _Model(family, _stack(curves, cells_series, strings_parallel, use_rest,
+                                       weighting, max_samples=SEARCH_SAMPLES_PER_CURVE),
+                        fixed, bnds)
         cost = coarse.grid_costs(starts)
         nfev += len(starts)
+        if not np.any(np.isfinite(cost)):
+            raise FitError("the model cannot be evaluated on these data at any starting point; "
+                           "check the data (current sign, units) and the bounds")
         best = None
-        for k in np.argsort(cost)[:max(1, n_best)]:
+        refine = family.n_best if n_best is None else n_best
+        for k in np.argsort(cost)[:max(1, refine)]:
             sol = _varpro_solve(coarse, starts[k], lo, hi)
             nfev += sol.nfev
             if best is None or sol.cost < best.cost:
                 best = sol
-        sol = _varpro_solve(model, best.x, lo, hi)
+        sol = _varpro_solve(mdl, best.x, lo, hi)
         nfev += sol.nfev
         theta = sol.x
-    values = dict(model.project(theta)[0])
-    values = _polish(model, values, bnds)
+    values = dict(mdl.project(theta)[0])
+    values = _polish(mdl, values, bnds)
     nfev += 1
 
-    params, scale = model.params(values)
-    residual = model.voltage(values) - stack.voltage
+    params, scale = mdl.params(values)
+    residual = mdl.voltage(values) - stack.voltage
     if not np.all(np.isfinite(residual)):
         raise FitError("the fit reached a region where the model is undefined (q >= C); "
                        "check the data and the bounds on C_Ah")
     w = stack.weight
-    jac = model.jacobian(values, model.free) * w[:, None]
+    jac = mdl.jacobian(values, mdl.free) * w[:, None]
     svd = equilibrated_svd(jac)
     cov_free, dof_eff = _covariance(svd, residual * w, stack)
-    names_all = list(PARAMETER_NAMES)
-    cov = np.zeros((6, 6))
-    idx = [names_all.index(n) for n in model.free if n in names_all]
-    sub = [k for k, n in enumerate(model.free) if n in names_all]
+    names_all = list(family.names)
+    n_all = len(names_all)
+    cov = np.zeros((n_all, n_all))
+    idx = [names_all.index(n) for n in mdl.free if n in names_all]
+    sub = [k for k, n in enumerate(mdl.free) if n in names_all]
     cov[np.ix_(idx, idx)] = cov_free[np.ix_(sub, sub)]
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -690,33 +771,191 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     np.fill_diagonal(corr, 1.0)
     t_crit = float(stdtrit(max(dof_eff, 1.0), 0.975))  # Student t quantile
     stderr, ci95 = {}, {}
-    for k, n in enumerate(PARAMETER_NAMES):
-        v = float(getattr(params, n))
+    for k, n in enumerate(names_all):
+        v = float(params[n])
         if n in fixed:
             stderr[n], ci95[n] = 0.0, (v, v)
         else:
             e = float(sd[k]) if np.isfinite(sd[k]) else float("nan")
             stderr[n], ci95[n] = e, (v - t_crit * e, v + t_crit * e)
 
-    ident = analyse(jac, model.free, values, bnds, paper_mode=paper_mode, svd=svd)
+    thermal = None
+    if family.thermal:
+        params, thermal = _thermal(family, params, stack, notes)
+    ident = analyse(jac, mdl.free, values, bnds, paper_mode=paper_mode, svd=svd)
+    _physical_limits(family, ident, notes)
     warnings += ident.warnings
     measured = ~stack.is_rest
     rmse = float(np.sqrt(np.mean(residual[measured] ** 2)))
+    implausible = plausibility(family, params, ci95, fixed, stack, rmse)
+    warnings += implausible + undetermined(family, params, ci95, fixed)
     samples = None
     if bootstrap:
-        samples = _bootstrap(model, values, residual, bnds, int(bootstrap), seed)
-    return FitResult(
+        samples = _bootstrap(mdl, values, residual, bnds, int(bootstrap), seed)
+        if thermal is not None:
+            for name in ("Cth_J_per_K", "Rth_K_per_W"):
+                samples[:, names_all.index(name)] = params[name]
+    result = FitResult(
         parameters=params, stderr=stderr, ci95=ci95, covariance=cov, correlation=corr,
-        free=list(model.free), fixed={n: v for n, v in fixed.items()}, bounds=bnds,
+        free=list(mdl.free), fixed=dict(fixed), bounds=bnds,
         rmse_V=rmse, n_samples=int(measured.sum()), warnings=warnings, notes=notes,
         identifiability=ident, curves=curves, cells_series=int(cells_series),
         strings_parallel=int(strings_parallel), current_scale=float(scale),
-        paper_mode=paper_mode, elapsed_s=time.perf_counter() - t_start, nfev=nfev,
-        n_starts=len(starts), bootstrap=samples,
+        paper_mode=paper_mode, elapsed_s=0.0, nfev=nfev,
+        n_starts=len(starts), bootstrap=samples, model=family.name,
+        ambient_C=float(stack.ambient_C), thermal=thermal, implausible=implausible,
     )
+    if model_error and not paper_mode:
+        result.model_error = held_out_error(
+            curves, model=family.name, cells_series=cells_series,
+            strings_parallel=strings_parallel, fixed=requested_fixed, bounds=bounds,
+            use_rest=use_rest, weighting=weighting)
+    result.elapsed_s = time.perf_counter() - t_start
+    return result
 
 
-def _lag1_correlation(residual, stack: _Stack) -> float:
+#: ``model`` value that picks the family by evidence.
+AUTO = "auto"
+
+#: A physically plausible family is preferred when its held-out error is within this
+#: much (absolute, as a fraction) of the best one's.
+PHYSICAL_PREFERENCE = 0.01
+
+
+def choose_model(curves) -> tuple[list[str], str]:
+    """Candidate families for ``model="auto"`` and why.
+
+    One curve without temperature: ``shepherd`` (nothing can tell a richer model
+    apart). One curve with a logged temperature: ``shepherd-thermal`` (its
+    temperature dependence comes from physics priors, the self-heating from the
+    log). Two or more curves at different currents: every family that the data
+    can feed, compared by leave-one-curve-out prediction error.
+    """
+    from .models import FAMILIES
+
+    has_temp = all(c.temperature_C is not None for c in curves)
+    currents = [c.mean_current_A for c in curves]
+    several = len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
+    if not several:
+        if has_temp:
+            return ["shepherd-thermal"], ("one rate with a logged temperature: shepherd-thermal "
+                                          "(self-heating from the log, Arrhenius prior)")
+        return ["shepherd"], "one rate without temperature: the paper's shepherd model"
+    names = [n for n in FAMILIES if has_temp or not get_family(n).thermal]
+    return names, "several rates: the family with the smallest held-out-curve error"
+
+
+def _fit_auto(curves, t_start, **kw) -> FitResult:
+    """Fit every candidate of :func:`choose_model`; keep the best held-out error."""
+    names, why = choose_model(curves)
+    if kw.get("paper_mode"):
+        names, why = ["shepherd"], "paper mode: the paper's model"
+    if len(names) == 1:
+        res = fit_battery(curves, model=names[0], **kw)
+        res.notes.insert(0, f"model {names[0]!r} chosen automatically: {why}")
+        return res
+    fits, scores = {}, {}
+    for name in names:
+        try:
+            fits[name] = fit_battery(curves, model=name, **dict(kw, bootstrap=0))
+        except FitError:
+            continue
+        err = fits[name].model_error
+        scores[name] = err["relative_sd"] if err else np.inf
+    if not fits:
+        raise FitError("no model family could be fitted to these data")
+    order = sorted(fits, key=lambda n: (scores[n], list(fits).index(n)))
+    best = order[0]
+    physical = [n for n in order if fits[n].physical]
+    if physical and physical[0] != best and \
+            scores[physical[0]] <= scores[best] + PHYSICAL_PREFERENCE:
+        best = physical[0]
+        why += (f", preferring physically plausible parameters within "
+                f"{100 * PHYSICAL_PREFERENCE:g} points of the best")
+    res = fit_battery(curves, model=best, **kw) if kw.get("bootstrap") else fits[best]
+    table = ", ".join(f"{n} {100 * scores[n]:.2f} %"
+                      + ("" if fits[n].physical else " (implausible parameters)") for n in fits)
+    res.notes.insert(0, f"model {best!r} chosen automatically: {why} (held-out time-to-cutoff "
+                        f"error RMS: {table})")
+    res.elapsed_s = time.perf_counter() - t_start
+    return res
+
+
+def _physical_limits(family: Family, ident: Identifiability, notes: list) -> None:
+    """Parameters at a bound that marks an absent effect become notes, not bound problems."""
+    keep = []
+    for name, side, bound in ident.at_bounds:
+        par = family.parameter(name) if name in family.names else None
+        if par is not None and par.limit_note:
+            notes.append(f"{name} = {bound:g} at its {side} bound: {par.limit_note}")
+            ident.warnings = [w for w in ident.warnings if not w.startswith(f"{name} = ")]
+        else:
+            keep.append((name, side, bound))
+    ident.at_bounds = keep
+
+
+def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list):
+    """Heat capacity and thermal resistance from the logged temperature (else defaults)."""
+    fitted = fit_lumped_thermal(family, params, stack)
+    if fitted is None:
+        source = ("default (no logged temperature)" if not stack.has_temperature
+                  else "default (the data show less than 2 K of self-heating)")
+        notes.append(f"thermal model: {source}; heat capacity {params['Cth_J_per_K']:.3g} J/K, "
+                     f"thermal resistance {params['Rth_K_per_W']:.3g} K/W")
+        return params, {"Cth_J_per_K": float(params["Cth_J_per_K"]),
+                        "Rth_K_per_W": float(params["Rth_K_per_W"]), "source": source}
+    params = params.replace(Cth_J_per_K=fitted["Cth_J_per_K"],
+                            Rth_K_per_W=fitted["Rth_K_per_W"])
+    notes.append(f"thermal model fitted to the logged cell temperature: heat capacity "
+                 f"{fitted['Cth_J_per_K']:.3g} J/K, thermal resistance "
+                 f"{fitted['Rth_K_per_W']:.3g} K/W (RMSE {fitted['rmse_K']:.2f} K)")
+    return params, dict(fitted, source="logged temperature")
+
+
+def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=None,
+                   bounds=None, use_rest=True, weighting="equal") -> dict | None:
+    """The model's own error from leave-one-curve-out predictions.
+
+    Each curve in turn is left out, the model is fitted to the others, and the
+    time to the left-out curve's last voltage is predicted at its mean current
+    (thermal families from its starting temperature). Needs two or more curves
+    whose currents differ by 20 % or more.
+
+    Returns
+    -------
+    dict or None
+        ``{"relative_sd", "errors_pct", "source": "held-out", "curves"}``: the
+        root-mean-square relative error of the held-out times to cutoff.
+    """
+    from .errors import SimulationError
+    from .simulate import simulate_current
+
+    currents = [c.mean_current_A for c in curves]
+    if len(curves) < 2 or max(currents) < 1.2 * min(currents):
+        return None
+    errors, names = [], []
+    for k, left in enumerate(curves):
+        rest = [c for j, c in enumerate(curves) if j != k]
+        try:
+            res = fit_battery(rest, cells_series=cells_series, strings_parallel=strings_parallel,
+                              fixed=fixed, bounds=bounds, use_rest=use_rest, weighting=weighting,
+                              model=model, model_error=False)
+            sim = simulate_current(res.battery, left.mean_current_A,
+                                   cutoff_pack_V=float(left.voltage_V[-1]),
+                                   ambient_C=left.ambient_C)
+        except (FitError, SimulationError, DataError):
+            continue
+        measured = float(left.time_s[-1] - left.time_s[0])
+        if np.isfinite(sim.time_to_cutoff_s) and measured > 0:
+            errors.append(100.0 * (sim.time_to_cutoff_s - measured) / measured)
+            names.append(left.name)
+    if not errors:
+        return None
+    rel = float(np.sqrt(np.mean(np.square(errors)))) / 100.0
+    return {"relative_sd": rel, "errors_pct": errors, "curves": names, "source": "held-out"}
+
+
+def _lag1_correlation(residual, stack: Samples) -> float:
     """Lag-1 autocorrelation of the residuals within each curve, pooled, in [0, 0.999]."""
     num = den = 0.0
     for k in range(stack.n_curves):
@@ -727,7 +966,7 @@ def _lag1_correlation(residual, stack: _Stack) -> float:
     return min(max(num / den if den > 0 else 0.0, 0.0), 0.999)
 
 
-def _block_length(residual, stack: _Stack) -> int:
+def _block_length(residual, stack: Samples) -> int:
     """Block length of the moving-block bootstrap: the residuals' correlation length."""
     rho = _lag1_correlation(residual, stack)
     return max(1, int(np.ceil((1 + rho) / (1 - rho))))
@@ -739,7 +978,7 @@ def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed
     Circular moving-block bootstrap of the residuals within each curve (blocks as
     long as the residuals' correlation length, so the smooth model-misfit pattern
     is resampled, not only the noise); each replica is refitted from the optimum.
-    Returns an array (n, 6) in PARAMETER_NAMES order; fixed parameters constant.
+    Returns an array (n, parameters) in the family's order; fixed parameters constant.
     """
     from dataclasses import replace as _replace
 
@@ -750,7 +989,7 @@ def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed
     theta0 = np.array([values[k] for k in model.nonlinear])
     lo = np.array([bounds[k][0] for k in model.nonlinear])
     hi = np.array([bounds[k][1] for k in model.nonlinear])
-    out = np.empty((n, 6))
+    out = np.empty((n, len(model.family.names)))
     for b in range(n):
         voltage = fitted.copy()
         for k in range(stack.n_curves):
@@ -760,11 +999,12 @@ def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed
             starts = rng.integers(0, m, int(np.ceil(m / length)))
             pick = ((starts[:, None] + np.arange(length)[None, :]) % m).ravel()[:m]
             voltage[idx] = fitted[idx] - residual[idx][pick]
-        replica = _Model(_replace(stack, voltage=voltage), model.fixed)
+        # the filtered currents in the cache depend on time and current only: shared
+        replica = _Model(model.family, _replace(stack, voltage=voltage), model.fixed, bounds)
         theta = _varpro_solve(replica, theta0, lo, hi).x if model.nonlinear else theta0
         vals = _polish(replica, dict(replica.project(theta)[0]), bounds)
         params, _ = replica.params(vals)
-        out[b] = params.as_array()
+        out[b] = params.as_array(model.family.names)
     return out
 
 
@@ -832,9 +1072,9 @@ def _varpro_solve(model: _Model, theta0, lo, hi, max_iter: int = 200) -> _Soluti
     return _Solution(x=x, cost=cost, nfev=nfev)
 
 
-def _resolve_e0_r(stack: _Stack, fixed: dict, notes: list, warnings: list):
+def _resolve_e0_r(family: Family, stack: Samples, fixed: dict, notes: list, warnings: list):
     """Apply the documented resolution of the E0/R collinearity (see module docstring)."""
-    if "E0_V" in fixed or "R_ohm" in fixed:
+    if "E0_V" not in family.names or "E0_V" in fixed or "R_ohm" in fixed:
         return
     currents = []
     for k in range(stack.n_curves):
@@ -854,7 +1094,7 @@ def _resolve_e0_r(stack: _Stack, fixed: dict, notes: list, warnings: list):
     warnings.append(
         "E0 and R are not separable from one constant-current curve without a rest sample: "
         "only E0 - R*i is determined, so R is set to 0 and E0 absorbs R*i. Predictions at "
-        "other currents miss the ohmic drop. Fix: give --e0 V (e.g. from a low-rate curve), "
+        "other currents miss the ohmic drop. Fix: give E0 (e.g. from a low-rate curve), "
         "log the rest voltage before the load starts, or add a curve at a second current.")
 
 
@@ -884,7 +1124,7 @@ def _polish(model: _Model, values: dict, bounds: dict) -> dict:
     return out
 
 
-def _covariance(svd, resid: np.ndarray, stack: _Stack):
+def _covariance(svd, resid: np.ndarray, stack: Samples):
     """Parameter covariance with an AR(1) effective-sample-size correction.
 
     Returns (covariance of the free parameters, effective degrees of freedom).

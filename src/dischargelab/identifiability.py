@@ -187,3 +187,81 @@ def _explain(involved: dict, ratio: float, warnings: list) -> str | None:
         f"{ratio:.1e}): {text} can change together with almost no change of the curve. "
         f"Fix one of them or add a curve at another current.")
     return "other"
+
+
+#: Plausible per-cell rest voltage at full charge [V] of lithium cells (any chemistry).
+FULL_CELL_VOLTAGE_RANGE_V = (3.0, 4.5)
+
+#: A fitted capacity above this multiple of the discharged charge is implausible.
+CAPACITY_EXCESS_FACTOR = 1.5
+
+#: RMSE above this fraction of the voltage span: the model does not follow the data.
+RMSE_SPAN_FRACTION = 0.05
+
+
+def plausibility(family, params, ci95: dict, fixed: dict, data, rmse_V: float) -> list[str]:
+    """Plain-language warnings when fitted values are physically implausible.
+
+    Checks: the rest voltage at full charge (the model at q = 0, i = 0) against
+    the range of lithium cells; negative resistances; a capacity far above the
+    charge the data discharged; an RMSE large against the voltage span. (Intervals
+    that span zero are reported by :func:`undetermined`: a value the data do not
+    fix is uncertain, not implausible.)
+
+    Parameters
+    ----------
+    family : models.Family
+    params : mapping
+        Fitted per-cell values.
+    ci95 : dict
+        ``{name: (low, high)}``.
+    fixed : dict
+        Parameters held fixed (not checked for intervals).
+    data : models.Samples
+        The fitted samples (per cell).
+    rmse_V : float
+        Fit RMSE per cell [V].
+    """
+    out = []
+    state = family.initial_state(dict(params), temperature_C=data.ambient_C)
+    full = float(np.asarray(family.voltage(params, state, 0.0)).ravel()[0])
+    lo, hi = FULL_CELL_VOLTAGE_RANGE_V
+    if not lo <= full <= hi:
+        out.append(f"the fitted cell rests at {full:.2f} V when full, outside the {lo:g}-{hi:g} "
+                   "V of lithium cells: check the cell count (cells in series) and the voltage "
+                   "units")
+    if "E0_V" in params and not 2.0 <= float(params["E0_V"]) <= 5.0:
+        out.append(f"E0 = {float(params['E0_V']):.3g} V is not a cell voltage: the parameters fit "
+                   "the curve but mean nothing physically; try a model with more physics "
+                   "(model='shepherd-thermal' or 'ecm') or fit fewer rates at once")
+    for p in family.parameters:
+        value = float(params[p.name])
+        if p.unit == "ohm" and value < 0:
+            out.append(f"{p.name} = {value:.3g} ohm is a negative resistance: the data cannot "
+                       "separate it; fix it or add a curve at another current")
+    q_max = data.q_max
+    if "C_Ah" in params and float(params["C_Ah"]) > CAPACITY_EXCESS_FACTOR * q_max:
+        out.append(f"capacity C = {float(params['C_Ah']):.3g} Ah is far above the {q_max:.3g} Ah "
+                   "the data discharged: the curve does not reach the knee, so the capacity is "
+                   "a guess; discharge to the cutoff or fix C_Ah to the rated capacity")
+    span = float(np.ptp(data.voltage[~data.is_rest])) if (~data.is_rest).any() else 0.0
+    if span > 0 and rmse_V > RMSE_SPAN_FRACTION * span:
+        out.append(f"the fit misses the data by {rmse_V * 1000:.0f} mV RMS, "
+                   f"{100 * rmse_V / span:.0f} % of the voltage span: the model does not follow "
+                   "this curve; check the data or try another model")
+    return out
+
+
+def undetermined(family, params, ci95: dict, fixed: dict) -> list[str]:
+    """Warnings for positive parameters whose 95 % interval spans zero (undetermined)."""
+    out = []
+    for p in family.parameters:
+        if p.name in fixed or p.lower < 0 or p.limit_note:
+            continue
+        low, high = ci95.get(p.name, (np.nan, np.nan))
+        value = float(params[p.name])
+        if np.isfinite(low) and low < 0 < value and high > 0:
+            out.append(f"{p.name}'s 95 % interval [{low:.3g}, {high:.3g}] {p.unit} spans zero: "
+                       "the data do not determine it; add a curve at another current (or log "
+                       "the rest voltage before the load) or fix it")
+    return out

@@ -1,32 +1,49 @@
-"""Small JSON files (battery, calibration): atomic writes, one-line read errors."""
+"""Small JSON files (battery, calibration): atomic writes, one-line read errors.
+
+Writing goes through :mod:`dischargelab.atomic` (the one place for atomic
+files); :func:`write_json` is re-exported here for existing imports.
+"""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+from .atomic import write_json
 from .errors import DataError
 
 
-def write_json(path, data) -> Path:
-    """Write ``data`` as indented JSON via a temporary file and a rename; returns the path.
+def read_json(path, missing: str, what: str | None = None) -> dict:
+    """Parse a JSON file.
 
-    A crash mid-write leaves the previous file intact, never a truncated one.
+    Parameters
+    ----------
+    path : path-like
+    missing : str
+        The one-line message when the file does not exist.
+    what : str, optional
+        What the file should be ("battery file", "calibration file"), for messages.
+
+    Raises
+    ------
+    DataError
+        Missing or unreadable file, or not valid JSON (naming the file and ``what``).
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    tmp.replace(path)
-    return path
-
-
-def read_json(path, missing: str) -> dict:
-    """Parse a JSON file; ``missing`` is the one-line message when it does not exist."""
     path = Path(path)
     if not path.is_file():
         raise DataError(missing)
+    label = f"{what} {path}" if what else str(path)
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DataError(f"cannot read {label}: {exc.strerror or exc}") from None
+    try:
+        return json.loads(raw.decode("utf-8-sig"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: not valid JSON ({exc})") from None
+        reason = " ".join(str(exc).split())
+        raise DataError(f"{label}: not valid JSON ({reason})") from None
+    except RecursionError:
+        raise DataError(f"{label}: not valid JSON (nested too deeply)") from None
+
+
+__all__ = ["read_json", "write_json"]

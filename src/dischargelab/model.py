@@ -22,6 +22,7 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -29,139 +30,122 @@ import numpy as np
 
 from .errors import DataError
 from .jsonfile import read_json, write_json
+from .models import DEFAULT_FAMILY, get_family
 
-#: Canonical parameter names, in the order used by every array and matrix.
+#: Parameter names of the paper's model (``shepherd``), in the order of its arrays.
 PARAMETER_NAMES: tuple[str, ...] = ("E0_V", "R_ohm", "K_V_per_Ah", "A_V", "B_per_Ah", "C_Ah")
 
-#: Parameters that enter the model linearly (for fixed B and C).
+#: Parameters of the paper's model that enter the voltage linearly (for fixed B and C).
 LINEAR_PARAMETERS: tuple[str, ...] = ("E0_V", "R_ohm", "K_V_per_Ah", "A_V")
 
-#: Name of the model in battery files and JSON output.
-MODEL_NAME = "tremblay"
+#: Name of the default model family in battery files and JSON output.
+MODEL_NAME = DEFAULT_FAMILY
 
 #: Cell currents beyond this factor of the fitted range are extrapolations.
 EXTRAPOLATION_FACTOR = 2.0
 
 
-@dataclass(frozen=True)
-class CellParameters:
-    """Coefficients of the modified Shepherd model for ONE cell.
+class CellParameters(Mapping):
+    """Coefficients of a cell model: an immutable ``{name: value}`` mapping.
 
-    Attributes
-    ----------
-    E0_V : battery constant voltage [V]
-    R_ohm : internal resistance [ohm]
-    K_V_per_Ah : polarisation constant [V/Ah]
-    A_V : exponential zone amplitude [V]
-    B_per_Ah : exponential zone time constant inverse [1/Ah]
-    C_Ah : maximum capacity [Ah]
-
-    Each field may also be a numpy array (e.g. samples for uncertainty
-    propagation); all functions below broadcast.
+    Values are read as items (``p["R_ohm"]``) or attributes (``p.R_ohm``).
+    Positional arguments are the paper's six parameters in
+    :data:`PARAMETER_NAMES` order (``CellParameters(E0, R, K, A, B, C)``).
+    Values may be numpy arrays (parameter draws); the families broadcast.
     """
 
-    E0_V: float
-    R_ohm: float
-    K_V_per_Ah: float
-    A_V: float
-    B_per_Ah: float
-    C_Ah: float
+    __slots__ = ("_values",)
+
+    def __init__(self, *args, **kwargs):
+        if len(args) == 1 and isinstance(args[0], Mapping) and not kwargs:
+            values = dict(args[0])
+        else:
+            if len(args) > len(PARAMETER_NAMES):
+                raise DataError(f"expected at most {len(PARAMETER_NAMES)} positional "
+                                f"parameters, got {len(args)}")
+            values = dict(zip(PARAMETER_NAMES, args))
+            values.update(kwargs)
+        object.__setattr__(self, "_values", values)
+
+    def __getitem__(self, name):
+        return self._values[name]
+
+    def __iter__(self):
+        return iter(self._values)
+
+    def __len__(self):
+        return len(self._values)
+
+    def __getattr__(self, name):
+        try:
+            return object.__getattribute__(self, "_values")[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    def __setattr__(self, name, value):
+        raise AttributeError("CellParameters is immutable; use .replace(...)")
+
+    def __repr__(self):
+        inner = ", ".join(f"{k}={v!r}" for k, v in self._values.items())
+        return f"CellParameters({inner})"
+
+    def __eq__(self, other):
+        if not isinstance(other, Mapping):
+            return NotImplemented
+        return set(self) == set(other) and all(np.array_equal(self[k], other[k]) for k in self)
+
+    __hash__ = None
 
     def as_dict(self) -> dict[str, float]:
-        """Parameters as ``{name: float}`` in :data:`PARAMETER_NAMES` order."""
-        return {name: float(getattr(self, name)) for name in PARAMETER_NAMES}
+        """Parameters as ``{name: float}``."""
+        return {name: float(value) for name, value in self._values.items()}
 
-    def as_array(self) -> np.ndarray:
-        """Parameters as an array in :data:`PARAMETER_NAMES` order."""
-        return np.array([getattr(self, name) for name in PARAMETER_NAMES], dtype=float)
+    def as_array(self, names=None) -> np.ndarray:
+        """Parameters as an array in ``names`` order (default: insertion order)."""
+        names = tuple(self._values) if names is None else names
+        return np.array([self._values[n] for n in names], dtype=float)
 
     @classmethod
-    def from_array(cls, values) -> "CellParameters":
-        """Build from a sequence in :data:`PARAMETER_NAMES` order."""
+    def from_array(cls, values, names=PARAMETER_NAMES) -> CellParameters:
+        """Build from a sequence in ``names`` order."""
         values = list(values)
-        if len(values) != len(PARAMETER_NAMES):
-            raise DataError(f"expected {len(PARAMETER_NAMES)} parameter values, got {len(values)}")
-        return cls(*values)
+        if len(values) != len(names):
+            raise DataError(f"expected {len(names)} parameter values, got {len(values)}")
+        return cls(dict(zip(names, values)))
 
     @classmethod
-    def from_dict(cls, values: dict) -> "CellParameters":
-        """Build from a mapping with exactly the canonical keys."""
-        missing = [n for n in PARAMETER_NAMES if n not in values]
+    def from_dict(cls, values: dict, names=PARAMETER_NAMES) -> CellParameters:
+        """Build from a mapping holding at least ``names``."""
+        missing = [n for n in names if n not in values]
         if missing:
             raise DataError(f"battery parameters are missing {', '.join(missing)}")
-        return cls(**{n: float(values[n]) for n in PARAMETER_NAMES})
+        try:
+            return cls({n: float(values[n]) for n in names})
+        except (TypeError, ValueError):
+            raise DataError("battery parameters must be numbers") from None
 
-    def replace(self, **changes) -> "CellParameters":
+    def replace(self, **changes) -> CellParameters:
         """Copy with some parameters changed."""
-        return replace(self, **changes)
+        values = dict(self._values)
+        values.update(changes)
+        return CellParameters(values)
 
 
-def cell_voltage(params: CellParameters, current_A, charge_Ah, filtered_current_A=None):
-    """Terminal voltage of one cell, eq. (6) of [1]_.
+def cell_voltage(params, current_A, charge_Ah, filtered_current_A=None):
+    """Terminal voltage of one cell of the paper's model, eq. (6) of [1]_ [V].
 
-    Parameters
-    ----------
-    params : CellParameters
-    current_A : array_like
-        Cell current [A], discharge positive.
-    charge_Ah : array_like
-        Charge removed since full charge [Ah].
-    filtered_current_A : array_like, optional
-        Filtered current ``i_f`` [A] of the polarisation-resistance term;
-        defaults to ``current_A`` (the paper's simplification).
-
-    Returns
-    -------
-    numpy.ndarray
-        Voltage [V]. Where ``charge_Ah >= C_Ah`` the model is undefined and the
-        value is ``-inf`` (the limit as ``q -> C`` from below).
+    Kept for scripts; the model itself lives in :mod:`dischargelab.models.shepherd`.
+    ``filtered_current_A`` is ``i_f`` of the polarisation term (default: the
+    current). Where ``charge_Ah >= C_Ah`` the value is ``-inf``.
 
     References
     ----------
     .. [1] paper eq. (6); Tremblay & Dessaint (2009).
     """
-    i = np.asarray(current_A, dtype=float)
-    q = np.asarray(charge_Ah, dtype=float)
-    i_f = i if filtered_current_A is None else np.asarray(filtered_current_A, dtype=float)
-    C = np.asarray(params.C_Ah, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        gain = C / (C - q)
-        v = (
-            params.E0_V
-            - params.R_ohm * i
-            - params.K_V_per_Ah * gain * (i_f + q)
-            + params.A_V * np.exp(-params.B_per_Ah * q)
-        )
-    return np.where(q < C, v, -np.inf)
-
-
-def voltage_jacobian(params: CellParameters, current_A, charge_Ah, filtered_current_A=None):
-    """Partial derivatives of :func:`cell_voltage` with respect to each parameter.
-
-    Returns
-    -------
-    numpy.ndarray, shape (n, 6)
-        Columns in :data:`PARAMETER_NAMES` order: dV/dE0 [-], dV/dR [A],
-        dV/dK [Ah], dV/dA [-], dV/dB [V Ah], dV/dC [V/Ah]. Only valid where
-        ``charge_Ah < C_Ah``.
-    """
-    i = np.asarray(current_A, dtype=float)
-    q = np.asarray(charge_Ah, dtype=float)
-    i_f = i if filtered_current_A is None else np.asarray(filtered_current_A, dtype=float)
-    i, q, i_f = np.broadcast_arrays(i, q, i_f)
-    C, K = params.C_Ah, params.K_V_per_Ah
-    denom = C - q
-    gain = C / denom
-    pol = i_f + q
-    expo = np.exp(-params.B_per_Ah * q)
-    jac = np.empty(q.shape + (6,))
-    jac[..., 0] = 1.0
-    jac[..., 1] = -i
-    jac[..., 2] = -gain * pol
-    jac[..., 3] = expo
-    jac[..., 4] = -params.A_V * q * expo
-    jac[..., 5] = K * q * pol / denom**2  # d/dC [C/(C-q)] = -q/(C-q)^2
-    return jac
+    state = {"charge_Ah": charge_Ah}
+    if filtered_current_A is not None:
+        state["i_f_A"] = filtered_current_A
+    return get_family("shepherd").voltage(params, state, current_A)
 
 
 def charge_from_current(time_s, current_A, initial_charge_Ah: float = 0.0) -> np.ndarray:
@@ -177,18 +161,17 @@ def charge_from_current(time_s, current_A, initial_charge_Ah: float = 0.0) -> np
     return initial_charge_Ah + q / 3600.0
 
 
-def pack_voltage(params: CellParameters, current_A, charge_Ah, cells_series: int = 1,
+def pack_voltage(params, current_A, charge_Ah, cells_series: int = 1,
                  strings_parallel: int = 1, filtered_current_A=None):
-    """Pack terminal voltage [V] for pack current [A] and pack charge [Ah].
+    """Pack terminal voltage [V] of the paper's model for pack current [A] and charge [Ah].
 
     Each of the ``strings_parallel`` strings carries ``current_A / p``; the pack
-    voltage is ``cells_series`` times the cell voltage (balanced cells, [1]_ 2.1).
+    voltage is ``cells_series`` times the cell voltage (balanced cells, paper 2.1).
     """
     p = float(strings_parallel)
+    i = np.asarray(current_A, dtype=float) / p
     i_f = None if filtered_current_A is None else np.asarray(filtered_current_A, dtype=float) / p
-    return cells_series * cell_voltage(
-        params, np.asarray(current_A, dtype=float) / p, np.asarray(charge_Ah, dtype=float) / p, i_f
-    )
+    return cells_series * cell_voltage(params, i, np.asarray(charge_Ah, dtype=float) / p, i_f)
 
 
 @dataclass(frozen=True)
@@ -198,7 +181,7 @@ class Battery:
     Attributes
     ----------
     parameters : CellParameters
-        Per-cell coefficients.
+        Per-cell coefficients of the model family ``model``.
     cells_series, strings_parallel : int
         Pack configuration ``sSpP``.
     name : str
@@ -206,12 +189,14 @@ class Battery:
     chemistry : str or None
         ``"lipo"``, ``"li-ion"``, ``"lifepo4"`` or None when unknown.
     covariance : numpy.ndarray or None
-        6x6 covariance of the parameters in :data:`PARAMETER_NAMES` order
-        (zero rows/columns for fixed parameters), from the fit.
+        Covariance of the parameters in the family's parameter order (zero
+        rows/columns for fixed parameters), from the fit.
     fit_currents_A : tuple of float
         Cell currents [A] of the curves the model was fitted to (empty for presets).
     extra : dict
         Everything else stored in the file (fit statistics, warnings, source).
+    model : str
+        Model family name (see :func:`dischargelab.models.get_family`).
     """
 
     parameters: CellParameters
@@ -222,11 +207,28 @@ class Battery:
     covariance: np.ndarray | None = None
     fit_currents_A: tuple[float, ...] = ()
     extra: dict = field(default_factory=dict)
+    model: str = DEFAULT_FAMILY
+
+    @property
+    def family(self):
+        """The model family object."""
+        return get_family(self.model)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Parameter names in the family's order."""
+        return self.family.names
 
     @property
     def capacity_Ah(self) -> float:
         """Pack model capacity ``C * p`` [Ah]."""
-        return float(self.parameters.C_Ah) * self.strings_parallel
+        return float(self.parameters["C_Ah"]) * self.strings_parallel
+
+    @property
+    def ambient_C(self) -> float:
+        """Ambient temperature of the fitted data [degC] (25 when unknown)."""
+        value = self.extra.get("ambient_C")
+        return 25.0 if value is None else float(value)
 
     @property
     def rated_capacity_Ah(self) -> float:
@@ -255,13 +257,33 @@ class Battery:
             return "below"
         return None
 
-    def voltage(self, current_A, charge_Ah, filtered_current_A=None):
-        """Pack voltage [V] for pack current [A] and pack charge [Ah]."""
-        return pack_voltage(self.parameters, current_A, charge_Ah, self.cells_series,
-                            self.strings_parallel, filtered_current_A)
+    def extrapolation_ratio(self, cell_current_A: float) -> float:
+        """How far a cell current [A] lies outside the fitted currents (1 = inside)."""
+        fitted = [abs(x) for x in self.fit_currents_A if x]
+        cell = abs(float(cell_current_A))
+        if not fitted or cell == 0:
+            return 1.0
+        return max(1.0, cell / max(fitted), min(fitted) / cell)
+
+    def voltage(self, current_A, charge_Ah, filtered_current_A=None, temperature_C=None):
+        """Pack voltage [V] for pack current [A] and pack charge [Ah] with every other
+        state at rest (lowpass states at the current, temperature at the ambient)."""
+        fam = self.family
+        p = self.strings_parallel
+        i = np.asarray(current_A, dtype=float) / p
+        state = {}
+        for st in fam.states:
+            if st.kind == "charge":
+                state[st.name] = np.asarray(charge_Ah, dtype=float) / p
+            elif st.kind == "thermal":
+                state[st.name] = self.ambient_C if temperature_C is None else temperature_C
+            else:
+                state[st.name] = i if filtered_current_A is None else \
+                    np.asarray(filtered_current_A, dtype=float) / p
+        return self.cells_series * fam.voltage(self.parameters, state, i)
 
     def with_pack(self, cells_series: int | None = None,
-                  strings_parallel: int | None = None) -> "Battery":
+                  strings_parallel: int | None = None) -> Battery:
         """Same cells in another pack configuration."""
         return replace(
             self,
@@ -272,53 +294,86 @@ class Battery:
 
     def to_dict(self) -> dict:
         """JSON-ready dictionary (the battery file format)."""
+        from . import __version__
+
+        fam = self.family
         out = dict(self.extra)
         out.update({
-            "model": MODEL_NAME,
+            "model": fam.name,
+            "model_version": fam.version,
+            "written_by": f"dischargelab {__version__}",
             "name": self.name,
             "chemistry": self.chemistry,
             "cells_series": int(self.cells_series),
             "strings_parallel": int(self.strings_parallel),
-            "parameters": self.parameters.as_dict(),
+            "parameters": {n: float(self.parameters[n]) for n in fam.names},
             "fit_currents_A": [float(x) for x in self.fit_currents_A],
         })
         if self.covariance is not None:
-            out["covariance"] = {"names": list(PARAMETER_NAMES),
+            out["covariance"] = {"names": list(fam.names),
                                  "matrix": np.asarray(self.covariance).tolist()}
         return out
 
     @classmethod
-    def from_dict(cls, data: dict) -> "Battery":
-        """Inverse of :meth:`to_dict`; raises :class:`DataError` on a malformed file."""
-        if not isinstance(data, dict) or "parameters" not in data:
+    def from_dict(cls, data: dict) -> Battery:
+        """Inverse of :meth:`to_dict`; raises :class:`DataError` on a malformed file.
+
+        Files written before model families existed (``"model": "tremblay"``) load
+        as ``shepherd``.
+        """
+        if not isinstance(data, dict) or not isinstance(data.get("parameters"), dict):
             raise DataError("not a battery file: no 'parameters' object")
-        model = data.get("model", MODEL_NAME)
-        if model != MODEL_NAME:
-            raise DataError(f"battery file model is {model!r}; only {MODEL_NAME!r} is supported")
+        fam = get_family(data.get("model", DEFAULT_FAMILY))
+        version = data.get("model_version", 1)
+        if not isinstance(version, int) or version > fam.version:
+            raise DataError(f"battery file model {fam.name!r} version {version!r} is newer than "
+                            f"this dischargelab understands ({fam.version}); upgrade dischargelab")
+        params = CellParameters.from_dict(data["parameters"], fam.names)
         cov = None
         if data.get("covariance"):
-            names = data["covariance"].get("names", list(PARAMETER_NAMES))
-            if list(names) != list(PARAMETER_NAMES):
+            cov_data = data["covariance"]
+            if not isinstance(cov_data, dict) or "matrix" not in cov_data:
+                raise DataError("battery file covariance must have 'names' and 'matrix'")
+            names = cov_data.get("names", list(fam.names))
+            if list(names) != list(fam.names):
                 raise DataError("battery file covariance has unexpected parameter names")
-            cov = np.asarray(data["covariance"]["matrix"], dtype=float)
-            if cov.shape != (6, 6):
-                raise DataError(f"battery file covariance must be 6x6, got {cov.shape}")
-        known = {"model", "name", "chemistry", "cells_series", "strings_parallel",
-                 "parameters", "fit_currents_A", "covariance"}
+            try:
+                cov = np.asarray(cov_data["matrix"], dtype=float)
+            except (TypeError, ValueError):
+                raise DataError("battery file covariance matrix is not numeric") from None
+            n = len(fam.names)
+            if cov.shape != (n, n):
+                raise DataError(f"battery file covariance must be {n}x{n}, got {cov.shape}")
+        known = {"model", "model_version", "written_by", "name", "chemistry", "cells_series",
+                 "strings_parallel", "parameters", "fit_currents_A", "covariance"}
+        try:
+            cells = int(data.get("cells_series", 1))
+            strings = int(data.get("strings_parallel", 1))
+            currents = tuple(float(x) for x in data.get("fit_currents_A", ()))
+        except (TypeError, ValueError):
+            raise DataError("battery file pack fields (cells_series, strings_parallel, "
+                            "fit_currents_A) must be numbers") from None
+        if cells < 1 or strings < 1:
+            raise DataError("battery file cells_series and strings_parallel must be >= 1")
         return cls(
-            parameters=CellParameters.from_dict(data["parameters"]),
-            cells_series=int(data.get("cells_series", 1)),
-            strings_parallel=int(data.get("strings_parallel", 1)),
-            name=str(data.get("name", "")),
-            chemistry=data.get("chemistry"),
-            covariance=cov,
-            fit_currents_A=tuple(float(x) for x in data.get("fit_currents_A", ())),
-            extra={k: v for k, v in data.items() if k not in known},
+            parameters=params, cells_series=cells, strings_parallel=strings,
+            name=str(data.get("name", "")), chemistry=data.get("chemistry"), covariance=cov,
+            fit_currents_A=currents, extra={k: v for k, v in data.items() if k not in known},
+            model=fam.name,
         )
 
     def save(self, path) -> Path:
         """Write the battery file (JSON, atomically); returns the path."""
         return write_json(path, self.to_dict())
+
+    def predict(self, *, current=None, c_rate=None, power=None, cutoff=None, cutoff_pack=None,
+                soc=100.0, ambient=None):
+        """Constant-current or constant-power discharge with its 95 % interval
+        (see :func:`dischargelab.predict.predict`)."""
+        from .predict import predict
+
+        return predict(self, current=current, c_rate=c_rate, power=power, cutoff=cutoff,
+                       cutoff_pack=cutoff_pack, soc=soc, ambient=ambient)
 
 
 def load_battery(source) -> Battery:
@@ -376,6 +431,7 @@ def preset_table() -> list[dict]:
     for key, bat in PRESETS.items():
         row = {"preset": key, "name": bat.name, "chemistry": bat.chemistry,
                "cells_series": bat.cells_series}
+        row["model"] = bat.model
         row.update(bat.parameters.as_dict())
         rows.append(row)
     return rows
@@ -383,7 +439,7 @@ def preset_table() -> list[dict]:
 
 __all__ = [
     "PARAMETER_NAMES", "LINEAR_PARAMETERS", "MODEL_NAME", "CellParameters", "Battery",
-    "cell_voltage", "voltage_jacobian", "charge_from_current", "pack_voltage",
+    "cell_voltage", "charge_from_current", "pack_voltage",
     "load_battery", "PRESETS", "NOMINAL_CELL_VOLTAGE_V", "CUTOFF_CELL_VOLTAGE_V",
     "preset_table",
 ]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import require
+from .errors import DataError, require
 
 
 def pyplot():
@@ -44,15 +44,36 @@ def _axes(ax, figsize=(8, 5)):
     return ax
 
 
-def save(ax, path, dpi: int = 130) -> Path:
-    """Save the figure holding ``ax`` to ``path`` (format from the suffix) and close it."""
-    plt = pyplot()
+#: File suffixes :func:`save` can write (matplotlib's static formats).
+FIGURE_SUFFIXES = (".png", ".svg", ".svgz", ".pdf", ".jpg", ".jpeg", ".eps", ".ps", ".tif",
+                   ".tiff", ".webp")
+
+
+def check_path(path) -> Path:
+    """Check that ``path`` names a figure format :func:`save` can write; returns it.
+
+    Raises
+    ------
+    DataError
+        The suffix is not one of :data:`FIGURE_SUFFIXES`.
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig = ax.figure
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    if path.suffix.lower() not in FIGURE_SUFFIXES:
+        raise DataError(f"plot file {path} must end in one of {', '.join(FIGURE_SUFFIXES)} "
+                        "(the suffix chooses the format)")
     return path
+
+
+def save(ax, path, dpi: int = 130) -> Path:
+    """Save the figure holding ``ax`` to ``path`` atomically (format from the suffix); close it."""
+    from .atomic import save_figure
+
+    plt = pyplot()
+    fig = ax.figure
+    try:
+        return save_figure(fig, path, dpi=dpi)
+    finally:
+        plt.close(fig)
 
 
 def plot_fit(result, ax=None, x: str = "charge"):
@@ -279,7 +300,7 @@ def _xvalues(charge_Ah, time_s, x):
         return np.asarray(charge_Ah)
     if x == "time":
         return np.asarray(time_s) / 60.0
-    raise ValueError(f"x must be 'charge' or 'time', got {x!r}")
+    raise DataError(f"x must be 'charge' or 'time', got {x!r}")
 
 
 def _xlabel(x):
@@ -290,3 +311,18 @@ def _colors(n):
     plt = pyplot()
     cmap = plt.get_cmap("viridis")
     return [cmap(v) for v in np.linspace(0.0, 0.85, max(n, 1))]
+
+
+def plot_discharge(discharge, ax=None):
+    """A measured discharge: voltage (left axis) and current (right axis) against time."""
+    ax = _axes(ax)
+    ax.plot(discharge.time_s / 60.0, discharge.voltage_V, color="C0", lw=1.2, label="voltage")
+    ax.set_xlabel("time from load start [min]")
+    ax.set_ylabel("voltage [V]", color="C0")
+    twin = ax.twinx()
+    twin.plot(discharge.time_s / 60.0, discharge.current_A, color="C3", lw=0.8, alpha=0.7,
+              label="current")
+    twin.set_ylabel("current [A]", color="C3")
+    ax.set_title(discharge.name or "discharge", fontsize=10)
+    ax.grid(alpha=0.3)
+    return ax

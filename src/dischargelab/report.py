@@ -15,7 +15,7 @@ import html
 import io
 import re
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -358,12 +358,16 @@ def _mission_section(result) -> str:
             rows.insert(3, [f"margin on '{st['phase']}'", _minutes(st["margin_s"])])
     if unc is not None and not unc.get("available"):
         rows.append(["uncertainty", unc.get("reason", "unavailable")])
+    elif unc and not unc.get("accepted"):
+        rows.append(["uncertainty method", unc["method"]])
     elif unc:
         rejected = (f"; {100 * unc['rejected_fraction']:.0f} % of the draws tried were "
                     f"unphysical and rejected" if unc.get("rejected") else "")
         rows.append(["uncertainty method", f"{unc['method']}: {unc['accepted']} parameter sets"
                                            f"{rejected}; the mission completes with "
                                            f"{100 * unc['completed_fraction']:.0f} % of them"])
+    if unc and unc.get("interval_includes"):
+        rows.append(["the interval includes", " + ".join(unc["interval_includes"])])
     parts.append(_table(["quantity", "value"], rows, text_columns=(1,)))
     parts.append(_figure(result.plot(), "Pack voltage through the flight, phases shaded, "
                                         "cutoff and reserve marked (paper Fig. 11 style).",
@@ -453,14 +457,15 @@ def build_report(battery, *, mission_result=None, validation=None, title: str | 
             cutoff_cell_V = CUTOFF_CELL_VOLTAGE_V.get(battery.chemistry or "")
     name = battery.name or label or "battery"
     title = title or f"Battery and endurance report: {name}"
-    now = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     from . import __version__
 
     cards = []
     if mission_result is not None:
         unc = mission_result.uncertainty
         interval = "" if not unc or not unc.get("available") else \
-            f"95 %: {_interval_text(unc, 'endurance_s')}"
+            f"95 %: {_interval_text(unc, 'endurance_s')}" + \
+            ("" if unc.get("accepted") else " (model error only)")
         cards.append(("endurance" + (" (land at reserve)" if mission_result.stretch else ""),
                       _minutes(mission_result.endurance_s), interval or
                       "interval unavailable (no covariance)"))

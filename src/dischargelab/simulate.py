@@ -8,13 +8,9 @@ Loads are given as data (PyBaMM-style experiment steps)::
 Sign convention: current and power are positive on discharge; all arrays are
 pack-level (pack current, pack voltage, pack charge). A step without a duration
 runs until the cutoff. The time to cutoff is found by root finding on the
-closed-form model (constant current) or by event location on the charge ODE
-(constant power), never by scanning a grid.
-
-Constant power: at each instant the cell current solves ``V(i, q) * i = P`` with
-``V = a(q) - b(q) * i`` (eq. 6 is linear in i), i.e.
-``i = (a - sqrt(a**2 - 4*b*P)) / (2*b)``, the low-current branch. When
-``a**2 < 4*b*P`` the battery cannot deliver the power ("power limit").
+one engine (:mod:`dischargelab.engine`) for every model family: the stop is
+located by bisection inside the last time step, never by scanning a grid.
+Thermal families simulate the cell temperature from ``ambient_C``.
 
 References
 ----------
@@ -26,62 +22,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
+from . import engine
+from .engine import Step
 from .errors import SimulationError
 from .model import Battery, load_battery
 
-STEP_KINDS = ("current", "power", "rest")
-
 #: Points per simulated step on the output curve.
-POINTS_PER_STEP = 200
-
-
-@dataclass(frozen=True)
-class Step:
-    """One load step.
-
-    Parameters
-    ----------
-    kind : {"current", "power", "rest"}
-    value : float
-        Pack current [A] or pack electric power [W] (discharge positive); ignored for rest.
-    duration_s : float or None
-        Duration [s]; None runs until the cutoff (not allowed for rest).
-    name : str
-        Label (flight phase name, ...).
-    """
-
-    kind: str
-    value: float = 0.0
-    duration_s: float | None = None
-    name: str = ""
-
-    def __post_init__(self):
-        if self.kind not in STEP_KINDS:
-            raise SimulationError(f"step kind must be one of {', '.join(STEP_KINDS)}, "
-                                  f"got {self.kind!r}")
-        if not np.isfinite(self.value) or (self.kind != "rest" and self.value < 0):
-            raise SimulationError(f"step {self.name or self.kind!r}: load must be a finite "
-                                  f"value >= 0 (discharge positive), got {self.value}")
-        if self.duration_s is None and self.kind == "rest":
-            raise SimulationError("a rest step needs a duration")
-        if self.duration_s is not None and not (self.duration_s >= 0 and
-                                                np.isfinite(self.duration_s)):
-            raise SimulationError(f"step {self.name or self.kind!r}: duration must be >= 0 s, "
-                                  f"got {self.duration_s}")
-
-    def describe(self) -> str:
-        """Human-readable step, e.g. 'discharge at 20 A for 60 s'."""
-        if self.kind == "rest":
-            load = "rest"
-        elif self.kind == "current":
-            load = f"discharge at {self.value:g} A"
-        else:
-            load = f"hold {self.value:g} W"
-        until = "until cutoff" if self.duration_s is None else f"for {self.duration_s:g} s"
-        return f"{load} {until}"
+POINTS_PER_STEP = 100
 
 
 @dataclass
@@ -107,6 +55,15 @@ class SimulationResult:
     ended_by: str
     battery: Battery = field(repr=False)
     initial_charge_Ah: float = 0.0
+    temperature_C: np.ndarray | None = None
+    ambient_C: float | None = None
+
+    @property
+    def peak_temperature_C(self) -> float | None:
+        """Highest simulated cell temperature [degC] (None for isothermal families)."""
+        if self.temperature_C is None or not self.battery.family.thermal:
+            return None
+        return float(np.max(self.temperature_C))
 
     @property
     def duration_s(self) -> float:
@@ -133,11 +90,14 @@ class SimulationResult:
         import pandas as pd
 
         names = [s.name or s.kind for s in self.steps]
-        return pd.DataFrame({
+        frame = pd.DataFrame({
             "time_s": self.time_s, "current_A": self.current_A, "voltage_V": self.voltage_V,
             "power_W": self.power_W, "charge_Ah": self.charge_Ah, "energy_Wh": self.energy_Wh,
             "step": [names[k] for k in self.step],
         })
+        if self.peak_temperature_C is not None:
+            frame["temperature_C"] = self.temperature_C
+        return frame
 
     def to_dict(self) -> dict:
         """Summary for JSON output (the ``predict --json`` keys plus ``ended_by``)."""
@@ -155,7 +115,11 @@ class SimulationResult:
             "ended_by": self.ended_by,
             "cells_series": self.battery.cells_series,
             "strings_parallel": self.battery.strings_parallel,
+            "model": self.battery.model,
         })
+        if self.peak_temperature_C is not None:
+            out["ambient_C"] = self.ambient_C
+            out["peak_temperature_C"] = self.peak_temperature_C
         return out
 
     def plot(self, ax=None, x: str = "time", **kwargs):
@@ -175,43 +139,10 @@ def _cutoff_pack(battery: Battery, cutoff_cell_V, cutoff_pack_V) -> float:
     return float(value)
 
 
-def linear_in_current(battery: Battery):
-    """Pack voltage as a line in the current: returns ``a_b(q_pack) -> (a, b)``.
-
-    Eq. (6) with ``i_f = i`` is linear in the current, so at pack charge ``Q`` [Ah]
-    the pack voltage is ``V = a(Q) - b(Q) * I`` with ``a`` [V] and ``b`` [ohm]
-    vectorised over ``Q`` (and over parameter samples).
-    """
-    p = battery.strings_parallel
-    s = battery.cells_series
-    prm = battery.parameters
-    C = prm.C_Ah
-
-    def a_b(q_pack):
-        q = np.asarray(q_pack, dtype=float) / p
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            gain = C / (C - q)
-            a = prm.E0_V - prm.K_V_per_Ah * gain * q + prm.A_V * np.exp(-prm.B_per_Ah * q)
-            b = prm.R_ohm + prm.K_V_per_Ah * gain
-        # pack level: V = s*(a - b*i/p)
-        return s * a, s * b / p
-
-    return a_b
-
-
-def power_current(a, b, power_W):
-    """Low-current root of (a - b*i)*i = P; NaN where the power cannot be delivered."""
-    disc = a * a - 4.0 * b * power_W
-    with np.errstate(invalid="ignore", divide="ignore"):
-        root = np.sqrt(np.where(disc >= 0, disc, np.nan))
-        # numerically stable form of (a - root) / (2b)
-        i = 2.0 * power_W / (a + root)
-    return i
-
-
 def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
              cutoff_pack_V: float | None = None, initial_charge_Ah: float = 0.0,
-             points_per_step: int = POINTS_PER_STEP) -> SimulationResult:
+             points_per_step: int = POINTS_PER_STEP, ambient_C: float | None = None,
+             reserve_charge_Ah: float | None = None) -> SimulationResult:
     """Run load steps one after another until the profile ends or the cutoff is reached.
 
     Parameters
@@ -223,7 +154,12 @@ def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
     initial_charge_Ah : float
         Pack charge already removed at the start [Ah] (0 = full).
     points_per_step : int
-        Output samples per step (the time to cutoff does not depend on it).
+        Engine time steps for a step that runs to the cutoff (the time to cutoff
+        does not depend on it for isothermal families).
+    ambient_C : float, optional
+        Ambient temperature [degC] for thermal families (default: the fitted data's).
+    reserve_charge_Ah : float, optional
+        Stop when this pack charge has been removed [Ah].
 
     Returns
     -------
@@ -246,46 +182,60 @@ def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
     if not 0 <= initial_charge_Ah < q_max:
         raise SimulationError(f"initial charge removed {initial_charge_Ah:g} Ah must be in "
                               f"[0, {q_max:g}) Ah (the model capacity C x parallel strings)")
-    a_b = linear_in_current(battery)
+    ambient = battery.ambient_C if ambient_C is None else float(ambient_C)
     first_load = next((st for st in steps if st.kind != "rest"), None)
     if first_load is not None:
-        v0 = _start_voltage(a_b, first_load, initial_charge_Ah)
+        v0 = _start_voltage(battery, first_load, initial_charge_Ah, ambient)
         if not v0 > cutoff:
             raise SimulationError(
                 f"cutoff {cutoff / battery.cells_series:.3f} V/cell ({cutoff:.3f} V pack) is not "
                 f"below the starting voltage {v0 / battery.cells_series:.3f} V/cell under "
-                f"'{first_load.describe()}'; lower the cutoff or check --cells / --cutoff-pack")
-
-    pieces = []
-    t0, q0, e0 = 0.0, float(initial_charge_Ah), 0.0
-    ended_by = "end"
-    for k, st in enumerate(steps):
-        piece, ended = _run_step(st, a_b, cutoff, t0, q0, q_max, points_per_step)
-        piece["energy_Wh"] = e0 + _cumulative_energy(piece["time_s"], piece["power_W"])
-        piece["step"] = np.full(piece["time_s"].size, k)
-        pieces.append(piece)
-        t0, q0, e0 = piece["time_s"][-1], piece["charge_Ah"][-1], piece["energy_Wh"][-1]
-        if ended:
-            ended_by = ended
-            break
-    cat = {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0]}
+                f"'{first_load.describe()}'; lower the cutoff or check the cell count")
+    res = engine.run(battery.family, dict(battery.parameters), steps, cutoff_pack_V=cutoff,
+                     cells_series=battery.cells_series,
+                     strings_parallel=battery.strings_parallel, ambient_C=ambient,
+                     initial_charge_Ah=initial_charge_Ah, reserve_charge_Ah=reserve_charge_Ah,
+                     record=True, steps_per_discharge=max(int(points_per_step), 50))
+    ser = res.series
+    t, i, v = ser["time_s"], ser["current_A"], ser["voltage_V"]
+    power = i * v
     return SimulationResult(
-        time_s=cat["time_s"], current_A=cat["current_A"], voltage_V=cat["voltage_V"],
-        power_W=cat["power_W"], charge_Ah=cat["charge_Ah"], energy_Wh=cat["energy_Wh"],
-        step=cat["step"].astype(int), steps=steps, cutoff_pack_V=cutoff, ended_by=ended_by,
-        battery=battery, initial_charge_Ah=float(initial_charge_Ah),
+        time_s=t, current_A=i, voltage_V=v, power_W=power, charge_Ah=ser["charge_Ah"],
+        energy_Wh=_cumulative_energy(t, power), step=ser["step"], steps=steps,
+        cutoff_pack_V=cutoff, ended_by=str(res.ended_by[0]), battery=battery,
+        initial_charge_Ah=float(initial_charge_Ah), temperature_C=ser["temperature_C"],
+        ambient_C=ambient,
     )
 
 
-def _start_voltage(a_b, step: Step, q0: float) -> float:
-    a, b = a_b(q0)
+def _start_voltage(battery: Battery, step: Step, q0: float, ambient_C: float) -> float:
+    """Pack voltage [V] as ``step`` starts from rest with ``q0`` [Ah] removed.
+
+    The terminal voltage of every family is affine in the current for a given
+    state, ``V = a - b I``; a power step draws the low-current root of
+    ``(a - b I) I = P``.
+
+    Raises
+    ------
+    SimulationError
+        The power cannot be delivered at the start.
+    """
+    fam, prm = battery.family, battery.parameters
+    s, p = battery.cells_series, battery.strings_parallel
+    state = fam.initial_state(dict(prm), charge_Ah=q0 / p, temperature_C=ambient_C)
+    a = s * float(fam.voltage(prm, state, 0.0))
+    b = s * (a / s - float(fam.voltage(prm, state, 1.0))) / p
     if step.kind == "current":
-        return float(a - b * step.value)
-    i = power_current(a, b, step.value)
-    if not np.isfinite(i):
+        return a - b * step.value
+    if step.kind == "profile":
+        first = min(int(np.searchsorted(step.profile_time_s, 0.0, side="right")),
+                    len(step.profile_current_A) - 1)   # the current the engine applies first
+        return a - b * step.profile_current_A[first]
+    disc = a * a - 4.0 * b * step.value
+    if not disc >= 0:
         raise SimulationError(f"the battery cannot deliver {step.value:g} W: its maximum power "
                               f"at the start is {a * a / (4 * b):.1f} W; lower the power")
-    return float(a - b * i)
+    return a - b * 2.0 * step.value / (a + np.sqrt(disc))
 
 
 def _cumulative_energy(t, p):
@@ -295,149 +245,37 @@ def _cumulative_energy(t, p):
     return e / 3600.0
 
 
-def _run_step(st: Step, a_b, cutoff, t0, q0, q_max, n):
-    if st.kind == "power":
-        return _run_power(st, a_b, cutoff, t0, q0, q_max, n)
-    current = 0.0 if st.kind == "rest" else float(st.value)
-    return _run_current(st, current, a_b, cutoff, t0, q0, q_max, n)
-
-
-def _pack_voltage(a_b, current, q):
-    a, b = a_b(q)
-    return a - b * current
-
-
-def _run_current(st, current, a_b, cutoff, t0, q0, q_max, n):
-    """Constant current: q(t) = q0 + i t / 3600, cutoff by Brent's method on the closed form."""
-    ended = None
-    duration = st.duration_s
-    q_limit = q_max * (1.0 - 1e-12)
-    if _pack_voltage(a_b, current, q0) <= cutoff:
-        ended = "cutoff"
-        duration = 0.0
-    elif current > 0:
-        q_end = q_limit if duration is None else min(q0 + current * duration / 3600.0, q_limit)
-        if duration is None or _pack_voltage(a_b, current, q_end) <= cutoff:
-            q_cut = brentq(lambda q: _pack_voltage(a_b, current, q) - cutoff, q0, q_limit,
-                           xtol=1e-12, rtol=1e-12)
-            duration = (q_cut - q0) * 3600.0 / current
-            ended = "cutoff"
-    t = np.linspace(0.0, duration, max(n, 2))
-    q = q0 + current * t / 3600.0
-    if ended:
-        q[-1] = q0 + current * duration / 3600.0
-    v = _pack_voltage(a_b, current, q)
-    if ended:
-        v[-1] = cutoff  # exact at the root
-    return {"time_s": t0 + t, "current_A": np.full(t.size, current), "voltage_V": v,
-            "power_W": v * current, "charge_Ah": q}, ended
-
-
-def _run_power(st, a_b, cutoff, t0, q0, q_max, n):
-    """Constant power: integrate dq/dt = i(q)/3600 with events at the cutoff and power limit."""
-    power = float(st.value)
-
-    def current_at(q):
-        a, b = a_b(q)
-        return power_current(a, b, power)
-
-    def rhs(_t, y):
-        i = current_at(y[0])
-        return [i / 3600.0 if np.isfinite(i) else 0.0]
-
-    def cutoff_event(_t, y):
-        i = current_at(y[0])
-        if not np.isfinite(i):
-            return -1.0
-        return float(_pack_voltage(a_b, i, y[0]) - cutoff)
-
-    def limit_event(_t, y):
-        a, b = a_b(y[0])
-        return float(a * a - 4.0 * b * power)
-
-    cutoff_event.terminal = True
-    cutoff_event.direction = -1
-    limit_event.terminal = True
-    limit_event.direction = -1
-
-    if not np.isfinite(current_at(q0)):
-        return _single_point(t0, q0, 0.0, a_b), "power limit"
-    if cutoff_event(0, [q0]) <= 0:
-        return _single_point(t0, q0, current_at(q0), a_b), "cutoff"
-    if power == 0:
-        duration = st.duration_s
-        t = np.linspace(0.0, duration, max(n, 2))
-        v = _pack_voltage(a_b, 0.0, np.full(t.size, q0))
-        return {"time_s": t0 + t, "current_A": np.zeros(t.size), "voltage_V": v,
-                "power_W": np.zeros(t.size), "charge_Ah": np.full(t.size, q0)}, None
-    # upper time bound: the charge left at the smallest possible current (P / a_max)
-    t_end = st.duration_s
-    if t_end is None:
-        a0, _ = a_b(q0)
-        t_end = (q_max - q0) * 3600.0 * max(a0, 1e-9) / power * 1.01 + 1.0
-    sol = solve_ivp(rhs, (0.0, t_end), [q0], method="RK45", dense_output=True,
-                    events=(cutoff_event, limit_event), rtol=1e-9, atol=1e-12,
-                    max_step=max(t_end / 50.0, 1e-3))
-    if sol.status == -1:
-        raise SimulationError(f"constant-power integration failed: {sol.message}")
-    ended = None
-    duration = sol.t[-1]
-    if sol.t_events[0].size:
-        ended, duration = "cutoff", float(sol.t_events[0][0])
-    if sol.t_events[1].size and (ended is None or sol.t_events[1][0] < duration):
-        ended, duration = "power limit", float(sol.t_events[1][0])
-    if st.duration_s is None and ended is None:
-        raise SimulationError("constant-power step did not reach the cutoff; check the cutoff")
-    t = np.linspace(0.0, duration, max(n, 2))
-    q = sol.sol(t)[0]
-    i = current_at(q)
-    if ended == "power limit":
-        # at the limit the discriminant is zero: i = a / (2b)
-        a, b = a_b(q[-1])
-        i[-1] = a / (2.0 * b)
-    v = _pack_voltage(a_b, i, q)
-    if ended == "cutoff":
-        v[-1] = cutoff
-    return {"time_s": t0 + t, "current_A": i, "voltage_V": v, "power_W": v * i,
-            "charge_Ah": q}, ended
-
-
-def _single_point(t0, q0, current, a_b):
-    v = _pack_voltage(a_b, current, q0)
-    return {"time_s": np.array([t0]), "current_A": np.array([current]),
-            "voltage_V": np.array([v]), "power_W": np.array([v * current]),
-            "charge_Ah": np.array([q0])}
-
-
 def simulate_current(battery, current_A: float, *, cutoff_cell_V: float | None = None,
                      cutoff_pack_V: float | None = None, initial_charge_Ah: float = 0.0,
-                     points: int = POINTS_PER_STEP) -> SimulationResult:
+                     points: int = POINTS_PER_STEP,
+                     ambient_C: float | None = None) -> SimulationResult:
     """Constant-current discharge [A, pack] until the cutoff (paper Figs 5, 7, 10)."""
     if not current_A > 0:
         raise SimulationError(f"discharge current must be > 0 A, got {current_A}")
     return simulate(battery, [Step("current", float(current_A))], cutoff_cell_V=cutoff_cell_V,
                     cutoff_pack_V=cutoff_pack_V, initial_charge_Ah=initial_charge_Ah,
-                    points_per_step=points)
+                    points_per_step=points, ambient_C=ambient_C)
 
 
 def simulate_power(battery, power_W: float, *, cutoff_cell_V: float | None = None,
                    cutoff_pack_V: float | None = None, initial_charge_Ah: float = 0.0,
-                   points: int = POINTS_PER_STEP) -> SimulationResult:
+                   points: int = POINTS_PER_STEP,
+                   ambient_C: float | None = None) -> SimulationResult:
     """Constant-power discharge [W, pack] until the cutoff or the power limit."""
     if not power_W > 0:
         raise SimulationError(f"discharge power must be > 0 W, got {power_W}")
     return simulate(battery, [Step("power", float(power_W))], cutoff_cell_V=cutoff_cell_V,
                     cutoff_pack_V=cutoff_pack_V, initial_charge_Ah=initial_charge_Ah,
-                    points_per_step=points)
+                    points_per_step=points, ambient_C=ambient_C)
 
 
 def curve_family(battery, currents_A=None, *, powers_W=None, cutoff_cell_V=None,
-                 cutoff_pack_V=None) -> list[SimulationResult]:
+                 cutoff_pack_V=None, ambient_C=None) -> list[SimulationResult]:
     """Constant-current (or constant-power) discharges at several loads (paper Figs 5, 7, 10)."""
     battery = load_battery(battery)
     if (currents_A is None) == (powers_W is None):
         raise SimulationError("give either currents or powers for a curve family")
-    kw = dict(cutoff_cell_V=cutoff_cell_V, cutoff_pack_V=cutoff_pack_V)
+    kw = dict(cutoff_cell_V=cutoff_cell_V, cutoff_pack_V=cutoff_pack_V, ambient_C=ambient_C)
     if currents_A is not None:
         return [simulate_current(battery, i, **kw) for i in currents_A]
     return [simulate_power(battery, p, **kw) for p in powers_W]

@@ -1,127 +1,177 @@
-"""Propagate the fit's parameter uncertainty into mission endurance by covariance sampling.
+"""95 % intervals of predictions and missions: parameter draws plus the model's own error.
 
-When the fit stored bootstrap refits (``fit --bootstrap N``, the command-line
-default), those parameter sets are flown: each is a real fit of the data with
-resampled residuals, so the draws stay on the data even where the model is far
-from linear in its parameters. Otherwise the fit's 6x6 covariance
-(``Battery.covariance``, :data:`~dischargelab.model.PARAMETER_NAMES` order,
-zeros for fixed parameters) is sampled: multivariate normal draws (seeded),
-unphysical draws rejected (negative resistance, polarisation or exponential
-terms, capacity not above the charge measured during the fit, ...). Either way
-the mission is flown once per draw and the percentiles of the outcomes are
-reported (95 % interval by default).
+Two parts go into every interval (and ``interval_includes`` says which did):
 
-Flying the mission for hundreds of draws one by one through
-:func:`dischargelab.simulate.simulate` takes seconds to minutes (constant-power
-phases integrate an ODE per phase and per root-finding step), so the draws are
-evaluated all at once in the *charge domain*: every array below has one entry
-per draw (``CellParameters`` fields broadcast), with
+* **Parameters.** When the fit stored bootstrap refits (``fit --bootstrap N``, the
+  command-line default) those parameter sets are flown: each is a real fit of the
+  data with resampled residuals. Otherwise the fit covariance
+  (``Battery.covariance``, in the model family's parameter order, zeros for
+  fixed parameters) is sampled: multivariate normal draws (seeded), draws
+  outside the family's parameter bounds or with a capacity not above the charge
+  measured during the fit rejected. All draws are flown at once through the one
+  engine (:func:`dischargelab.engine.run`, vectorised over the draws), so every
+  model family works and no model equation is evaluated here.
+* **Model error.** The model itself is not exact, and less so away from the
+  currents it was fitted at. Its relative standard deviation of a time to cutoff
+  (or endurance) is :func:`model_error_sd`: from held-out-curve residuals when
+  the fit had several rates, else from a documented prior; both grow with the
+  extrapolation ratio. Each draw's time is multiplied by ``exp(sigma z)``,
+  ``z ~ N(0, 1)`` (seeded, :data:`MODEL_ERROR_SAMPLES` values shared out over the
+  draws) and the central percentile interval is taken. Without parameter draws
+  (presets, hand-written files) the interval is the model error alone around the
+  point value, ``t exp(+-z_(1+level)/2 sigma)``.
 
-* the same split ``V = a(q) - b(q) i`` and the same low-current root of
-  ``V i = P`` as :mod:`dischargelab.simulate` (its helpers are reused);
-* the charge at which a phase reaches the cutoff (or the power limit) found by
-  bisection on the monotone voltage, the time between two charges by
-  Gauss-Legendre quadrature of ``dt/dq = 3600 / i(q)``, and the charge after a
-  fixed-duration constant-power phase by classical Runge-Kutta in time;
-* the longest stretch phase by bisection on the charge at its end.
-
-The nominal values always come from the :mod:`dischargelab.mission` path through
-``simulate``; the tests check that this evaluator reproduces them.
+A draw that cannot reach the cutoff (the cutoff at or above its starting
+voltage, or a power it cannot deliver) is a result, not a failure: its time is
+0 s, it is counted (``draws_not_reaching_cutoff``) and reported.
 
 References
 ----------
 .. [1] JCGM 101:2008, "Evaluation of measurement data - Supplement 1: Propagation
    of distributions using a Monte Carlo method".
+.. [2] B. Efron, R. Tibshirani, "An Introduction to the Bootstrap", Chapman & Hall
+   (1993), chapter 13 (percentile intervals).
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+import math
 
 import numpy as np
 
-from .errors import DataError
-from .model import PARAMETER_NAMES, Battery, CellParameters
-from .simulate import linear_in_current, power_current
+from . import engine
+from .errors import DataError, SimulationError
+from .model import Battery, CellParameters
 
-#: Default number of parameter draws.
+#: Default number of covariance draws.
 DEFAULT_DRAWS = 300
 
-#: Runge-Kutta steps per fixed-duration constant-power phase.
-RK4_STEPS = 24
+#: Prior relative standard deviation of a time to cutoff inside the fitted currents [-]
+#: (the paper reports endurance errors of 1-6 % on unseen rates; 1.5 % is one sigma of
+#: the better half).
+PRIOR_RELATIVE_SD = 0.015
 
-#: Gauss-Legendre nodes for the time between two charges at constant power.
-QUADRATURE_NODES = 32
+#: Smallest relative standard deviation taken from held-out curves [-] (a handful of
+#: curves cannot show an error below this).
+MIN_HELD_OUT_SD = 0.005
 
-#: Bisection iterations (charge resolution ``capacity * 2**-BISECTION_STEPS``).
-BISECTION_STEPS = 50
+#: Growth of the model error with the logarithm of the extrapolation ratio [-].
+EXTRAPOLATION_GROWTH = 0.8
 
-_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(QUADRATURE_NODES)
+#: Model-error samples per interval (shared out over the parameter draws).
+MODEL_ERROR_SAMPLES = 4000
+
+#: Engine time steps per discharge when flying the draws.
+DRAW_STEPS_PER_DISCHARGE = 100
+
+#: Keys of a prediction that scale with the model error.
+PREDICTION_KEYS = ("time_to_cutoff_s", "capacity_Ah", "energy_Wh")
 
 
 # ---------------------------------------------------------------------------------------------
-# Sampling
+# Parameter draws
 # ---------------------------------------------------------------------------------------------
 
-def _physical(values: np.ndarray, min_capacity_Ah: float) -> np.ndarray:
-    """Rows of parameter draws (PARAMETER_NAMES order) that describe a physical cell."""
-    e0, r, k, a, b, c = values.T
-    return (e0 > 0) & (r >= 0) & (k >= 0) & (a >= 0) & (b > 0) & (c > min_capacity_Ah)
+def _physical(values: np.ndarray, battery: Battery, min_capacity_Ah: float) -> np.ndarray:
+    """Rows of parameter draws (family order) that describe a physical cell.
+
+    Each parameter must stay at or above the family's lower bound (no negative
+    resistance, polarisation, exponential term, heat capacity, ...; the upper
+    bounds only limit the fit's search and are not applied), except where the
+    battery's own value is already below it; the capacity must exceed the charge
+    measured during the fit.
+    """
+    ok = np.ones(len(values), dtype=bool)
+    for k, par in enumerate(battery.family.parameters):
+        if float(battery.parameters[par.name]) >= par.lower:
+            ok &= values[:, k] >= par.lower
+        if par.name == "C_Ah":
+            ok &= values[:, k] > min_capacity_Ah
+    return ok
 
 
-def sample_parameters(battery: Battery, draws: int = DEFAULT_DRAWS, *, seed: int = 0,
-                      max_rounds: int = 50):
-    """Draw cell parameters from the fit covariance, rejecting unphysical draws.
+def bootstrap_parameters(battery: Battery) -> dict | None:
+    """Bootstrap parameter sets stored in the battery file, ``{name: array}``, or None.
 
-    Parameters
-    ----------
-    battery : Battery
-        Must carry ``covariance`` (6x6).
-    draws : int
-        Number of accepted draws wanted.
-    seed : int
-        Seed of ``numpy.random.default_rng``.
-    max_rounds : int
-        Batches of draws tried before giving up.
-
-    Returns
-    -------
-    params : CellParameters
-        Each field an array of shape ``(draws,)``.
-    info : dict
-        ``requested``, ``accepted``, ``rejected``, ``rejected_fraction``, ``warnings``.
+    Parameters the file does not list (held fixed during the refits) take the
+    battery's value.
 
     Raises
     ------
     DataError
-        No covariance, or fewer than half the draws physical after ``max_rounds``.
+        The stored bootstrap is malformed.
+    """
+    boot = battery.extra.get("bootstrap") if isinstance(battery.extra, dict) else None
+    if not boot:
+        return None
+    names = list(boot.get("names", [])) if isinstance(boot, dict) else []
+    family_names = battery.family.names
+    if not names or any(n not in family_names for n in names):
+        raise DataError(f"battery file bootstrap names must be parameters of the "
+                        f"{battery.model!r} model ({', '.join(family_names)})")
+    try:
+        samples = np.asarray(boot.get("samples", []), dtype=float)
+    except (TypeError, ValueError):
+        raise DataError("battery file bootstrap samples must be numbers") from None
+    if samples.ndim != 2 or samples.shape[1] != len(names) or len(samples) < 2 or \
+            not np.all(np.isfinite(samples)):
+        raise DataError(f"battery file bootstrap must be a list of at least 2 rows of "
+                        f"{len(names)} numbers")
+    out = {n: np.full(len(samples), float(battery.parameters[n])) for n in family_names}
+    out.update({n: samples[:, k] for k, n in enumerate(names)})
+    return out
+
+
+def sample_parameters(battery: Battery, draws: int = DEFAULT_DRAWS, *, seed: int = 0,
+                      max_rounds: int = 50):
+    """Parameter draws of the battery: its bootstrap refits, else covariance samples.
+
+    Parameters
+    ----------
+    battery : Battery
+        Must carry bootstrap refits or a covariance (family order, n x n).
+    draws : int
+        Number of accepted covariance draws wanted (bootstrap refits are all used).
+    seed : int
+        Seed of ``numpy.random.default_rng``.
+    max_rounds : int
+        Batches of covariance draws tried before giving up.
+
+    Returns
+    -------
+    params : CellParameters
+        Each parameter an array of shape ``(n,)``.
+    info : dict
+        ``requested``, ``accepted``, ``tried``, ``rejected``, ``rejected_fraction``,
+        ``warnings``, ``method``, ``bootstrap`` (True for stored refits).
+
+    Raises
+    ------
+    DataError
+        No bootstrap and no covariance, or fewer than half the covariance draws
+        physical after ``max_rounds``.
     """
     boot = bootstrap_parameters(battery)
     if boot is not None:
-        params = CellParameters(*[boot[:, k] for k in range(6)])
-        return params, {"requested": int(len(boot)), "accepted": int(len(boot)),
-                        "tried": int(len(boot)), "rejected": 0, "rejected_fraction": 0.0,
-                        "warnings": [], "method": f"bootstrap refits stored by the fit "
-                                                  f"({len(boot)} moving-block replicas)"}
+        n = len(next(iter(boot.values())))
+        return CellParameters(boot), {
+            "requested": n, "accepted": n, "tried": n, "rejected": 0,
+            "rejected_fraction": 0.0, "warnings": [], "bootstrap": True,
+            "method": f"bootstrap refits stored by the fit ({n} moving-block replicas)"}
     if battery.covariance is None:
         raise DataError("the battery has no covariance (presets and hand-written files); "
                         "fit it from a measured discharge to get an uncertainty")
     if draws < 2:
         raise DataError(f"need at least 2 draws, got {draws}")
+    names = battery.family.names
     cov = np.asarray(battery.covariance, dtype=float)
-    if cov.shape != (6, 6) or not np.all(np.isfinite(cov)):
-        raise DataError("battery covariance must be a finite 6x6 matrix")
-    cov = 0.5 * (cov + cov.T)
-    values, vectors = np.linalg.eigh(cov)
-    warnings = []
-    scale = max(float(values.max()), 0.0)
-    if values.min() < -1e-8 * max(scale, 1e-300):
-        warnings.append("the stored covariance is not positive semi-definite; negative "
-                        "eigenvalues were set to zero")
-    factor = vectors * np.sqrt(np.clip(values, 0.0, None))
-    mean = battery.parameters.as_array()
+    if cov.shape != (len(names), len(names)) or not np.all(np.isfinite(cov)):
+        raise DataError(f"battery covariance must be a finite {len(names)}x{len(names)} "
+                        f"matrix")
+    factor, warnings = _covariance_factor(cov)
+    mean = battery.parameters.as_array(names)
     min_capacity = float(battery.extra.get("measured_capacity_Ah", 0.0) or 0.0)
-    if not _physical(mean[None, :], min_capacity)[0]:
+    if not _physical(mean[None, :], battery, min_capacity)[0]:
         min_capacity = 0.0
     rng = np.random.default_rng(seed)
     accepted, tried = [], 0
@@ -129,10 +179,10 @@ def sample_parameters(battery: Battery, draws: int = DEFAULT_DRAWS, *, seed: int
         need = draws - sum(len(x) for x in accepted)
         if need <= 0:
             break
-        batch = mean + rng.standard_normal((max(2 * need, 16), 6)) @ factor.T
+        batch = mean + rng.standard_normal((max(2 * need, 16), len(names))) @ factor.T
         tried += len(batch)
-        accepted.append(batch[_physical(batch, min_capacity)])
-    sample = np.concatenate(accepted)[:draws] if accepted else np.empty((0, 6))
+        accepted.append(batch[_physical(batch, battery, min_capacity)])
+    sample = np.concatenate(accepted)[:draws] if accepted else np.empty((0, len(names)))
     if len(sample) < draws:
         raise DataError(f"only {len(sample)} of {tried} parameter draws are physical; the fit "
                         f"covariance is too wide to sample (check the fit warnings)")
@@ -141,30 +191,35 @@ def sample_parameters(battery: Battery, draws: int = DEFAULT_DRAWS, *, seed: int
     if fraction > 0.1:
         warnings.append(f"{100 * fraction:.0f} % of the parameter draws were unphysical and "
                         f"rejected: the interval is a truncated-normal estimate")
-    params = CellParameters(*[sample[:, k] for k in range(6)])
+    params = CellParameters({n: sample[:, k] for k, n in enumerate(names)})
     info = {"requested": int(draws), "accepted": int(len(sample)), "tried": int(tried),
             "rejected": int(rejected), "rejected_fraction": float(fraction),
-            "warnings": warnings,
+            "warnings": warnings, "bootstrap": False,
             "method": "covariance sampling (multivariate normal, unphysical draws rejected)"}
     return params, info
 
 
-def bootstrap_parameters(battery: Battery):
-    """Bootstrap parameter sets stored in the battery file (n x 6 array) or None."""
-    boot = battery.extra.get("bootstrap") if isinstance(battery.extra, dict) else None
-    if not boot:
-        return None
-    if list(boot.get("names", [])) != list(PARAMETER_NAMES):
-        raise DataError("battery file bootstrap has unexpected parameter names")
-    samples = np.asarray(boot.get("samples", []), dtype=float)
-    if samples.ndim != 2 or samples.shape[1] != 6 or len(samples) < 2 or \
-            not np.all(np.isfinite(samples)):
-        raise DataError("battery file bootstrap must be a list of at least 2 rows of 6 numbers")
-    return samples
+def _covariance_factor(cov: np.ndarray):
+    """Square-root factor of a symmetric covariance (negative eigenvalues set to 0)."""
+    cov = 0.5 * (cov + cov.T)
+    values, vectors = np.linalg.eigh(cov)
+    warnings = []
+    scale = max(float(values.max()), 0.0)
+    if values.min() < -1e-8 * max(scale, 1e-300):
+        warnings.append("the stored covariance is not positive semi-definite; negative "
+                        "eigenvalues were set to zero")
+    return vectors * np.sqrt(np.clip(values, 0.0, None)), warnings
+
+
+def has_parameter_draws(battery: Battery) -> bool:
+    """True when the battery carries bootstrap refits or a non-zero covariance."""
+    if bootstrap_parameters(battery) is not None:
+        return True
+    return battery.covariance is not None and bool(np.any(np.asarray(battery.covariance)))
 
 
 def interval(values, level: float = 0.95) -> tuple[float, float]:
-    """Central percentile interval of finite ``values``."""
+    """Central percentile interval of the finite ``values``."""
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
     if v.size == 0:
@@ -175,350 +230,397 @@ def interval(values, level: float = 0.95) -> tuple[float, float]:
 
 
 # ---------------------------------------------------------------------------------------------
-# Vectorised mission outcomes in the charge domain
+# Model error
 # ---------------------------------------------------------------------------------------------
 
-class DrawFlight:
-    """Outcomes of one mission for many parameter sets at once (see the module docstring).
+def _model_error_base(battery: Battery) -> tuple[float, str]:
+    """(relative sd inside the fitted currents, "held-out" | "prior")."""
+    stored = battery.extra.get("model_error") if isinstance(battery.extra, dict) else None
+    if not isinstance(stored, dict) or stored.get("source") != "held-out":
+        return PRIOR_RELATIVE_SD, "prior"
+    value = stored.get("relative_sd")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not math.isfinite(value) or value < 0:
+        raise DataError(f"battery file model_error.relative_sd must be a number >= 0, "
+                        f"got {value!r}")
+    return max(float(value), MIN_HELD_OUT_SD), "held-out"
+
+
+def model_error_sd(battery: Battery, cell_current_A: float) -> float:
+    """Relative standard deviation of a time to cutoff or endurance from the model's error.
+
+    ``sigma = s0 (1 + 0.8 ln r)`` with ``r = battery.extrapolation_ratio(cell_current_A)``
+    (>= 1; 1 inside the fitted currents) and
+
+    * ``s0 = max(s_held_out, 0.005)`` when the battery file holds
+      ``model_error = {"relative_sd": s_held_out, "source": "held-out"}`` (stored by
+      the fit from leave-one-curve-out predictions when >= 2 rates were fitted);
+    * ``s0 = 0.015`` otherwise (prior: the paper's endurance errors on unseen rates
+      were 1-6 %).
 
     Parameters
     ----------
-    mission : dischargelab.mission.Mission
-    params : CellParameters
-        Fields are arrays of shape ``(n,)`` (one per draw) or scalars.
+    battery : Battery
+    cell_current_A : float
+        Cell current of the prediction [A] (pack current / strings in parallel).
+
+    Returns
+    -------
+    float
+        Relative standard deviation [-] (e.g. 0.015 = 1.5 %).
     """
+    base, _ = _model_error_base(battery)
+    ratio = battery.extrapolation_ratio(cell_current_A)
+    return base * (1.0 + EXTRAPOLATION_GROWTH * math.log(ratio))
 
-    def __init__(self, mission, params: CellParameters):
-        arrays = [np.atleast_1d(np.asarray(getattr(params, n), dtype=float))
-                  for n in PARAMETER_NAMES]
-        n = max(a.size for a in arrays)
-        arrays = [np.broadcast_to(a, (n,)).copy() for a in arrays]
-        self.params = CellParameters(*arrays)
-        self.mission = mission
-        self.n = n
-        battery = replace(mission.battery, parameters=self.params)
-        self.a_b = linear_in_current(battery)
-        self.capacity = arrays[5] * battery.strings_parallel
-        self.q_start = (1.0 - mission.initial_soc_pct / 100.0) * self.capacity
-        self.q_reserve = (1.0 - mission.reserve_pct / 100.0) * self.capacity
-        self.v_cut = mission.cutoff_pack_V
-        self._stop_cache = {}
 
-    # -- one phase --------------------------------------------------------------------------
-    def current(self, phase, q):
-        """Pack current [A] of a phase at pack charge ``q`` (NaN beyond the power limit)."""
-        if phase.kind == "current":
-            return np.full(np.shape(q), float(phase.value))
-        a, b = self.a_b(q)
-        return power_current(a, b, float(phase.value))
+def _model_error_info(battery: Battery, ratio: float) -> dict:
+    """Model error for an (effective) extrapolation ratio: sd, source, label."""
+    base, source = _model_error_base(battery)
+    sd = base * (1.0 + EXTRAPOLATION_GROWTH * math.log(max(ratio, 1.0)))
+    return {"relative_sd": sd, "base_relative_sd": base, "source": source,
+            "extrapolation_ratio": float(ratio),
+            "label": f"model error ({source}, extrapolation x{ratio:.1f})"}
 
-    def _loaded_voltage_gap(self, phase, q):
-        """Loaded pack voltage minus the cutoff at charge q (-1 beyond the power limit)."""
-        a, b = self.a_b(q)
-        if phase.kind == "current":
-            gap = a - b * phase.value - self.v_cut
-        else:
-            disc = a * a - 4.0 * b * phase.value
-            gap = np.where(disc >= 0, 0.5 * (a + np.sqrt(np.clip(disc, 0, None))) - self.v_cut,
-                           -1.0)
-        return np.where(np.isfinite(gap), gap, -1.0)
 
-    def stop_charge(self, phase) -> np.ndarray:
-        """Pack charge [Ah] at which this load reaches the cutoff or the power limit."""
-        key = (phase.kind, float(phase.value))
-        if key not in self._stop_cache:
-            lo = np.zeros(self.n)
-            hi = self.capacity * (1.0 - 1e-12)
-            ok_at_zero = self._loaded_voltage_gap(phase, lo) > 0
-            for _ in range(BISECTION_STEPS):
-                mid = 0.5 * (lo + hi)
-                above = self._loaded_voltage_gap(phase, mid) > 0
-                lo = np.where(above, mid, lo)
-                hi = np.where(above, hi, mid)
-            self._stop_cache[key] = np.where(ok_at_zero, lo, 0.0)
-        return self._stop_cache[key]
+def _z_level(level: float) -> float:
+    from scipy.stats import norm
 
-    def time_between(self, phase, q0, q1) -> np.ndarray:
-        """Time [s] for the phase's load to take the charge from ``q0`` to ``q1``."""
-        q0 = np.asarray(q0, dtype=float)
-        q1 = np.asarray(q1, dtype=float)
-        dq = np.clip(q1 - q0, 0.0, None)
-        if phase.kind == "current":
-            return dq * 3600.0 / phase.value
-        half = 0.5 * dq
-        mid = q0 + half
-        nodes = mid[None, :] + half[None, :] * _NODES[:, None]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            inv = 3600.0 / self.current(phase, nodes)
-            total = half * np.sum(_WEIGHTS[:, None] * inv, axis=0)
-        return np.where(dq > 0, total, 0.0)
+    return float(norm.ppf(0.5 + level / 2.0))
 
-    def advance(self, phase, q0, duration_s) -> np.ndarray:
-        """Charge [Ah] after ``duration_s`` (scalar or per draw) at the phase's load.
 
-        NaN where the power failed.
-        """
-        if phase.value == 0 or np.all(np.asarray(duration_s) == 0):
-            return np.array(q0, dtype=float)
-        if phase.kind == "current":
-            return q0 + phase.value * duration_s / 3600.0
-        h = duration_s / RK4_STEPS
-        q = np.array(q0, dtype=float)
-        f = lambda x: self.current(phase, x) / 3600.0  # noqa: E731
-        for _ in range(RK4_STEPS):
-            k1 = f(q)
-            k2 = f(q + 0.5 * h * k1)
-            k3 = f(q + 0.5 * h * k2)
-            k4 = f(q + h * k3)
-            q = q + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        return q
+def _error_factors(n: int, sd: float, seed: int):
+    """``(rows, factor)``: each of ``n`` draws repeated, times ``exp(sd z)`` (seeded)."""
+    copies = max(1, math.ceil(MODEL_ERROR_SAMPLES / max(n, 1)))
+    rng = np.random.default_rng([int(seed), 1])
+    rows = np.repeat(np.arange(n), copies)
+    return rows, np.exp(sd * rng.standard_normal(rows.size))
 
-    def fly_phase(self, phase, duration_s, until, state):
-        """Advance ``state`` (dict of q, t, alive, reason arrays) through one phase."""
-        q, t, alive = state["q"], state["t"], state["alive"]
-        if not alive.any():
-            return
-        if phase.value == 0:  # motors off: time passes, no charge drawn
-            t[alive] += duration_s
-            return
-        stop = self.stop_charge(phase)
-        if until is not None or duration_s is None:
-            target = stop if until != "reserve" else np.minimum(stop, self.q_reserve)
-            target = np.maximum(target, q)
-            dt = self.time_between(phase, q, target)
-            by_reserve = (until == "reserve") & (self.q_reserve < stop)
-            state["reason"][alive] = np.where(by_reserve, 3, 1)[alive]
-            t[alive] += dt[alive]
-            q[alive] = target[alive]
-            alive[:] = False
-            return
-        self._step(phase, state, stop, np.broadcast_to(float(duration_s), q.shape))
 
-    def _step(self, phase, state, stop, durations, reason=1):
-        """Advance the alive draws by ``durations``; those crossing ``stop`` end there.
+def _spread(samples: np.ndarray, nominal: float, level: float) -> dict:
+    lo, hi = interval(samples, level)
+    finite = samples[np.isfinite(samples)]
+    return {"nominal": float(nominal),
+            "median": float(np.median(finite)) if finite.size else float("nan"),
+            "low": lo, "high": hi,
+            "std": float(np.std(finite, ddof=1)) if finite.size > 1 else float("nan")}
 
-        ``reason`` (scalar or per draw) is recorded for the draws that end.
-        """
-        q, t, alive = state["q"], state["t"], state["alive"]
-        q_new = self.advance(phase, q, durations)
-        crossed = alive & ~(q_new < stop) & (durations > 0)
-        ok = alive & ~crossed
-        t[ok] += durations[ok]
-        q[ok] = q_new[ok]
-        if crossed.any():
-            target = np.maximum(stop, q)
-            dt = self.time_between(phase, q, target)
-            t[crossed] += dt[crossed]
-            q[crossed] = target[crossed]
-            alive[crossed] = False
-            state["reason"][crossed] = np.broadcast_to(reason, q.shape)[crossed]
 
-    def _new_state(self, q=None, t=None):
-        q = self.q_start.copy() if q is None else np.array(q, dtype=float)
-        return {"q": q, "t": np.zeros(self.n) if t is None else np.array(t, dtype=float),
-                "alive": np.ones(self.n, dtype=bool), "reason": np.zeros(self.n, dtype=int)}
+def _lognormal_spread(nominal: float, sd: float, level: float) -> dict:
+    z = _z_level(level)
+    return {"nominal": float(nominal), "median": float(nominal),
+            "low": float(nominal * math.exp(-z * sd)), "high": float(nominal * math.exp(z * sd)),
+            "std": float(abs(nominal) * math.sqrt(math.expm1(sd * sd)) * math.exp(sd * sd / 2))}
 
-    def _fly_items(self, items, state, stretch_s=None):
-        from .mission import RepeatBlock
 
-        for item in items:
-            if isinstance(item, RepeatBlock):
-                if item.count is not None:
-                    for _ in range(item.count):
-                        for ph in item.phases:
-                            self.fly_phase(ph, ph.duration_s, None, state)
-                else:
-                    self._fly_until_block(item, state)
-            else:
-                duration = stretch_s if item.stretch else item.duration_s
-                self.fly_phase(item, duration, item.until, state)
+# ---------------------------------------------------------------------------------------------
+# Predictions (predict, validate)
+# ---------------------------------------------------------------------------------------------
 
-    def _fly_until_block(self, block, state):
-        """Repeat the block until every draw reached the cutoff (or the reserve)."""
-        passes = 0
-        while state["alive"].any():
-            for ph in block.phases:
-                if block.until == "reserve":
-                    self._phase_with_reserve(ph, state)
-                else:
-                    self.fly_phase(ph, ph.duration_s, None, state)
-            passes += 1
-            if passes > 100000:  # pragma: no cover - finite capacity
-                raise DataError(f"repeat block {block.name!r} never ends")
+def _parameter_draws(battery: Battery, draws: int, seed: int):
+    """(params, info) of the battery's draws, or (None, reason) when it has none."""
+    if not has_parameter_draws(battery):
+        return None, ("the battery file holds no parameter draws or covariance (a preset or "
+                      "a hand-written file)")
+    try:
+        return sample_parameters(battery, draws, seed=seed)
+    except DataError as exc:
+        return None, str(exc)
 
-    def _phase_with_reserve(self, phase, state):
-        """A fixed-duration phase that also stops at the reserve."""
-        q, t, alive = state["q"], state["t"], state["alive"]
-        if not alive.any():
-            return
-        if phase.value == 0:
-            t[alive] += phase.duration_s
-            return
-        stop = self.stop_charge(phase)
-        self._step(phase, state, np.minimum(stop, self.q_reserve),
-                   np.broadcast_to(float(phase.duration_s), q.shape),
-                   reason=np.where(self.q_reserve < stop, 3, 1))
 
-    # -- whole mission -----------------------------------------------------------------------
-    def _suffix_feasible(self, items, q_end_stretch):
-        state = self._new_state(q=q_end_stretch)
-        self._fly_items(items, state)
-        return state["alive"] & (state["q"] <= self.q_reserve * (1 + 1e-12))
+def fly_draws(battery: Battery, params, steps, *, cutoff_pack_V: float,
+              initial_charge_Ah: float = 0.0, ambient_C: float | None = None,
+              steps_per_discharge: int = DRAW_STEPS_PER_DISCHARGE) -> dict:
+    """Time to cutoff, charge and energy of load steps for every parameter draw at once.
 
-    def evaluate(self) -> dict:
-        """Outcome arrays: endurance_s, flight_time_s, soc_end_pct, completed, max_stretch_s."""
-        m = self.mission
-        k = m.stretch_index
-        out = {}
-        if k is None:
-            state = self._new_state()
-            self._fly_items(m.items, state)
-            flight = state["t"]
-            endurance = flight.copy()
-            completed = state["alive"] | (state["reason"] == 3)
-        else:
-            stretch = m.items[k]
-            prefix, suffix = m.items[:k], m.items[k + 1:]
-            state = self._new_state()
-            self._fly_items(prefix, state)
-            q_s, t_s = state["q"].copy(), state["t"].copy()
-            alive = state["alive"].copy()
-            upper = np.minimum(self.stop_charge(stretch), self.q_reserve)
-            upper = np.maximum(upper, q_s)
-            feasible0 = alive & self._suffix_feasible(suffix, q_s)
-            lo, hi = q_s.copy(), upper.copy()
-            top_ok = self._suffix_feasible(suffix, hi) & (hi < self.stop_charge(stretch))
-            for _ in range(BISECTION_STEPS):
-                mid = 0.5 * (lo + hi)
-                ok = self._suffix_feasible(suffix, mid)
-                lo = np.where(ok, mid, lo)
-                hi = np.where(ok, hi, mid)
-            q_star = np.where(top_ok, upper, lo)
-            max_s = np.where(feasible0, self.time_between(stretch, q_s, q_star), 0.0)
-            out["max_stretch_s"] = max_s
-            flown = max_s if stretch.duration_s is None else \
-                np.full(self.n, float(stretch.duration_s))
-            # fly the stretch phase per draw duration (durations may differ per draw)
-            flight_state = {"q": q_s.copy(), "t": t_s.copy(), "alive": alive.copy(),
-                            "reason": state["reason"].copy()}
-            self._fly_stretch(stretch, flown, flight_state)
-            self._fly_items(suffix, flight_state)
-            flight = flight_state["t"]
-            completed = flight_state["alive"].copy()
-            endurance = np.where(feasible0, flight - flown + max_s, flight)
-            state = flight_state
-        out["flight_time_s"] = flight
-        out["endurance_s"] = endurance
-        out["completed"] = completed
-        out["soc_end_pct"] = 100.0 * (1.0 - state["q"] / self.capacity)
+    Parameters
+    ----------
+    battery : Battery
+    params : mapping
+        ``{name: array of draws}`` (e.g. from :func:`sample_parameters`).
+    steps : sequence of dischargelab.engine.Step
+    cutoff_pack_V : float
+        Pack cutoff [V].
+    initial_charge_Ah : float
+        Pack charge removed at the start [Ah].
+    ambient_C : float, optional
+        Ambient temperature [degC] (default the battery's).
+    steps_per_discharge : int
+        Engine time steps per step that runs to the cutoff.
+
+    Returns
+    -------
+    dict
+        Arrays per draw: ``time_to_cutoff_s`` (0 where the draw cannot start, NaN
+        where the steps ended first), ``capacity_Ah``, ``energy_Wh``, ``ended_by``
+        and ``not_reaching`` (bool).
+
+    Raises
+    ------
+    SimulationError
+        The engine's step limit (one clear line).
+    """
+    res = engine.run(battery.family, dict(params), list(steps), cutoff_pack_V=cutoff_pack_V,
+                     cells_series=battery.cells_series,
+                     strings_parallel=battery.strings_parallel,
+                     ambient_C=battery.ambient_C if ambient_C is None else float(ambient_C),
+                     initial_charge_Ah=initial_charge_Ah,
+                     steps_per_discharge=steps_per_discharge)
+    ended = np.asarray(res.ended_by)
+    time = np.where(ended == "end", np.nan, res.end_s)
+    return {"time_to_cutoff_s": time, "capacity_Ah": res.charge_end_Ah - initial_charge_Ah,
+            "energy_Wh": res.energy_Wh, "ended_by": ended,
+            "not_reaching": (ended == "end") | (res.end_s <= 0.0)}
+
+
+def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V: float,
+                        cell_current_A: float, initial_charge_Ah: float = 0.0,
+                        ambient_C: float | None = None, draws: int = DEFAULT_DRAWS,
+                        seed: int = 0, level: float = 0.95) -> dict:
+    """95 % interval of a simulated discharge: parameter draws times the model error.
+
+    Parameters
+    ----------
+    battery : Battery
+    steps : sequence of dischargelab.engine.Step
+        The load (the same steps as the point prediction).
+    nominal : dict
+        Point values ``time_to_cutoff_s`` [s], ``capacity_Ah`` [Ah], ``energy_Wh`` [Wh].
+    cutoff_pack_V : float
+        Pack cutoff [V].
+    cell_current_A : float
+        Mean cell current of the prediction [A] (sets the extrapolation ratio).
+    initial_charge_Ah, ambient_C
+        As for :func:`fly_draws`.
+    draws : int
+        Covariance draws when the battery has no bootstrap refits.
+    seed : int
+        Seed of the covariance draws and of the model-error samples.
+    level : float
+        Coverage of the central interval.
+
+    Returns
+    -------
+    dict
+        ``level``, ``time_to_cutoff_s`` / ``capacity_Ah`` / ``energy_Wh`` as
+        ``[low, high]``, ``interval_includes`` (list of str), ``model_error``
+        (``relative_sd``, ``source``, ``extrapolation_ratio``), ``draws``,
+        ``bootstrap_draws``, ``draws_not_reaching_cutoff``, ``method``, ``warnings``.
+        Draws that cannot reach the cutoff count with 0 s (see the module docstring).
+    """
+    error = _model_error_info(battery, battery.extrapolation_ratio(cell_current_A))
+    params, info = _parameter_draws(battery, draws, seed)
+    out = {"level": level, "model_error": {k: v for k, v in error.items() if k != "label"},
+           "draws": 0, "bootstrap_draws": 0, "draws_not_reaching_cutoff": 0, "warnings": []}
+    if params is None:
+        out.update(_model_error_only(nominal, error, level, info))
         return out
+    try:
+        flown = fly_draws(battery, params, steps, cutoff_pack_V=cutoff_pack_V,
+                          initial_charge_Ah=initial_charge_Ah, ambient_C=ambient_C)
+    except SimulationError as exc:
+        out.update(_model_error_only(nominal, error, level, f"the parameter draws could not "
+                                                            f"be flown: {exc}"))
+        return out
+    n = len(flown["time_to_cutoff_s"])
+    rows, factor = _error_factors(n, error["relative_sd"], seed)
+    for key in PREDICTION_KEYS:
+        out[key] = list(interval(flown[key][rows] * factor, level))
+    missing = int(np.count_nonzero(flown["not_reaching"]))
+    out.update({"draws": n, "bootstrap_draws": n if info["bootstrap"] else 0,
+                "draws_not_reaching_cutoff": missing, "method": info["method"],
+                "interval_includes": ["parameters", error["label"]],
+                "warnings": list(info["warnings"])})
+    if missing:
+        out["warnings"].append(f"{missing} of {n} parameter draws cannot reach the cutoff "
+                               f"under this load (they start at or below it, or cannot "
+                               f"deliver the power); they count as 0 s in the interval")
+    return out
 
-    def _fly_stretch(self, phase, durations, state):
-        """The stretch phase with a per-draw duration."""
-        self._step(phase, state, self.stop_charge(phase), durations)
+
+def _model_error_only(nominal: dict, error: dict, level: float, reason: str) -> dict:
+    z = _z_level(level)
+    sd = error["relative_sd"]
+    out = {key: [float(nominal[key]) * math.exp(-z * sd), float(nominal[key]) * math.exp(z * sd)]
+           for key in PREDICTION_KEYS if key in nominal}
+    out.update({"interval_includes": [error["label"]],
+                "method": f"model error only: {reason}"})
+    return out
+
+
+def simulation_interval(battery: Battery, simulate_one, *, level: float = 0.95,
+                        draws: int = DEFAULT_DRAWS, seed: int = 0) -> dict:
+    """Interval of a simulation's summary numbers (``predict``).
+
+    Parameters
+    ----------
+    battery : Battery
+    simulate_one : SimulationResult or callable
+        The point prediction, or ``simulate_one(battery) -> SimulationResult``
+        (called once, for the point prediction). Its steps, cutoff, initial
+        charge and ambient temperature are flown for every parameter draw at once.
+    level, draws, seed
+        See :func:`prediction_interval`.
+
+    Returns
+    -------
+    dict
+        See :func:`prediction_interval`.
+    """
+    sim = simulate_one(battery) if callable(simulate_one) else simulate_one
+    duration = sim.duration_s
+    mean_current = sim.capacity_Ah * 3600.0 / duration if duration > 0 else \
+        float(sim.current_A[0])
+    nominal = {"time_to_cutoff_s": sim.time_to_cutoff_s, "capacity_Ah": sim.capacity_Ah,
+               "energy_Wh": sim.energy_Wh_total}
+    return prediction_interval(
+        battery, sim.steps, nominal=nominal, cutoff_pack_V=sim.cutoff_pack_V,
+        cell_current_A=mean_current / battery.strings_parallel,
+        initial_charge_Ah=sim.initial_charge_Ah, ambient_C=sim.ambient_C, draws=draws,
+        seed=seed, level=level)
+
+
+# ---------------------------------------------------------------------------------------------
+# Missions
+# ---------------------------------------------------------------------------------------------
+
+def mission_extrapolation_ratio(battery: Battery, phase_rows: list[dict]) -> float:
+    """Effective extrapolation ratio of a mission: the charge-weighted geometric mean of
+    its phases' ratios (each phase at its mean cell current), so that
+    ``s0 (1 + 0.8 ln r_eff)`` is the charge-weighted mean of the phases' model error."""
+    weights, logs = [], []
+    for row in phase_rows:
+        charge = float(row.get("charge_Ah") or 0.0)
+        if charge > 0:
+            cell = row["mean_current_A"] / battery.strings_parallel
+            weights.append(charge)
+            logs.append(math.log(battery.extrapolation_ratio(cell)))
+    if not weights:
+        return 1.0
+    return float(math.exp(np.average(logs, weights=weights)))
+
+
+def _mission_samples(outcome: dict, rows: np.ndarray, factor: np.ndarray) -> dict:
+    """Outcome samples with the model error: endurance times the factor, the extra time
+    on the stretch phase, the charge used divided by it (the usable capacity scales)."""
+    endurance = outcome["endurance_s"][rows]
+    out = {"endurance_s": endurance * factor,
+           "soc_end_pct": 100.0 - (100.0 - outcome["soc_end_pct"][rows]) / factor}
+    if "max_stretch_s" in outcome:
+        out["max_stretch_s"] = np.maximum(outcome["max_stretch_s"][rows]
+                                          + endurance * (factor - 1.0), 0.0)
+    return out
 
 
 def mission_uncertainty(mission, *, draws: int = DEFAULT_DRAWS, seed: int = 0, level=0.95,
-                        progress=None, nominal=None) -> dict:
-    """Interval of the mission endurance from the fit covariance.
+                        progress=None, nominal=None, points_per_step: int | None = None) -> dict:
+    """95 % interval of a mission's endurance: parameter draws plus the model error.
+
+    The draws are flown all at once through the engine
+    (:func:`dischargelab.mission.mission_outcomes`, the longest stretch found per
+    draw). Each draw's endurance is multiplied by ``exp(sigma z)`` with ``sigma``
+    from :func:`model_error_sd` at the mission's effective extrapolation ratio
+    (:func:`mission_extrapolation_ratio`); the longest stretch takes the same extra
+    time, the state of charge at landing the same relative change of the usable
+    capacity. Without parameter draws the interval is the model error alone.
 
     Parameters
     ----------
     mission : dischargelab.mission.Mission
     draws : int
-        Accepted parameter draws (200-500 is plenty for a 95 % interval).
+        Covariance draws when the battery has no bootstrap refits (200-500 is plenty).
     seed : int
     level : float
         Coverage of the central interval.
     progress : callable, optional
         ``progress(done, total)``.
     nominal : MissionResult, optional
-        Nominal result (its values are reported as ``nominal``).
+        Nominal result (flown here when not given).
+    points_per_step : int, optional
+        Engine time steps per phase.
 
     Returns
     -------
     dict
-        ``available`` (False with ``reason`` when the battery has no covariance),
-        ``draws``, ``accepted``, ``rejected``, ``seed``, ``level``, and for
-        ``endurance_s``, ``soc_end_pct`` (and ``max_stretch_s``): ``nominal``,
-        ``median``, ``low``, ``high``, ``std``; ``completed_fraction``; ``warnings``.
+        ``available``, ``interval_includes``, ``model_error``, ``method``, ``draws``,
+        ``accepted``, ``tried``, ``rejected``, ``rejected_fraction``, ``seed``, ``level``;
+        for ``endurance_s``, ``soc_end_pct`` (and ``max_stretch_s``): ``nominal``,
+        ``median``, ``low``, ``high``, ``std``; the same without the model error in
+        ``parameters_only`` (with parameter draws); ``completed_fraction``,
+        ``draws_not_completed`` and ``warnings``.
     """
-    cov = mission.battery.covariance
-    has_boot = bootstrap_parameters(mission.battery) is not None
-    if not has_boot and (cov is None or not np.any(np.asarray(cov))):
-        return {"available": False, "level": level,
-                "reason": "the battery file holds no parameter covariance (a preset or a "
-                          "hand-written file); fit a measured discharge to get one",
-                "warnings": []}
-    params, info = sample_parameters(mission.battery, draws, seed=seed)
-    if progress is not None:
-        progress(0, draws)
-    outcome = DrawFlight(mission, params).evaluate()
-    if progress is not None:
-        progress(draws, draws)
-    if nominal is None:
-        from .mission import mission_summary
+    from .mission import mission_outcomes, run_mission
 
-        nom = mission_summary(mission)
-    else:
-        nom = {"endurance_s": nominal.endurance_s, "soc_end_pct": nominal.soc_end_pct}
-        if nominal.stretch is not None:
-            nom["max_stretch_s"] = nominal.stretch["max_s"]
-    out = {"available": True, "method": info["method"],
-           "draws": info["requested"], "accepted": info["accepted"], "tried": info["tried"],
-           "rejected": info["rejected"], "rejected_fraction": info["rejected_fraction"],
-           "seed": int(seed), "level": level}
-    keys = ["endurance_s", "soc_end_pct"] + (["max_stretch_s"] if "max_stretch_s" in outcome
-                                             else [])
-    for key in keys:
-        values = outcome[key]
-        lo, hi = interval(values, level)
-        out[key] = {"nominal": float(nom[key]), "median": float(np.median(values)),
-                    "low": lo, "high": hi, "std": float(np.std(values, ddof=1))}
-    out["completed_fraction"] = float(np.mean(outcome["completed"]))
+    battery = mission.battery
+    if nominal is None:
+        nominal = run_mission(mission) if points_per_step is None else \
+            run_mission(mission, points_per_step=points_per_step)
+    error = _model_error_info(battery, mission_extrapolation_ratio(battery, nominal.phases))
+    nom = {"endurance_s": nominal.endurance_s, "soc_end_pct": nominal.soc_end_pct}
+    if nominal.stretch is not None:
+        nom["max_stretch_s"] = nominal.stretch["max_s"]
+    out = {"available": True, "seed": int(seed), "level": level,
+           "model_error": {k: v for k, v in error.items() if k != "label"}}
+    params, info = _parameter_draws(battery, draws, seed)
+    outcome = None
+    if params is not None:
+        n = len(params["C_Ah"])
+        if progress is not None:
+            progress(0, n)
+        try:
+            outcome = mission_outcomes(mission, params, points_per_step=points_per_step)
+        except SimulationError as exc:
+            info = f"the parameter draws could not be flown: {exc}"
+        if progress is not None:
+            progress(n, n)
+    if outcome is None:
+        out.update(_mission_model_error_only(nom, nominal.completed, error, level, info))
+        return out
+    rows, factor = _error_factors(n, error["relative_sd"], seed)
+    samples = _mission_samples(outcome, rows, factor)
+    alone = _mission_samples(outcome, np.arange(n), np.ones(n))
+    not_completed = int(np.count_nonzero(~outcome["completed"]))
+    out.update({"method": info["method"], "interval_includes": ["parameters", error["label"]],
+                "draws": info["requested"], "accepted": info["accepted"], "tried": info["tried"],
+                "rejected": info["rejected"], "rejected_fraction": info["rejected_fraction"],
+                "completed_fraction": float(np.mean(outcome["completed"])),
+                "draws_not_completed": not_completed})
+    for key, values in samples.items():
+        out[key] = _spread(values, nom[key], level)
+    out["parameters_only"] = {key: _spread(values, nom[key], level)
+                              for key, values in alone.items()}
     warnings = list(info["warnings"])
-    if out["completed_fraction"] < 0.975 and out["completed_fraction"] > 0:
+    if 0 < not_completed < n and out["completed_fraction"] < 0.975:
         warnings.append(f"in {100 * (1 - out['completed_fraction']):.1f} % of the parameter "
                         f"draws the mission does not complete")
     out["warnings"] = warnings
     return out
 
 
-def simulation_interval(battery: Battery, simulate_one, *, level: float = 0.95) -> dict | None:
-    """Interval of a simulation's summary numbers over the stored bootstrap refits.
-
-    Parameters
-    ----------
-    battery : Battery
-        With ``extra["bootstrap"]`` (``fit --bootstrap N``); otherwise None is returned.
-    simulate_one : callable
-        ``simulate_one(battery) -> SimulationResult`` for one parameter set.
-
-    Returns
-    -------
-    dict or None
-        ``{"level", "draws", "failed", "time_to_cutoff_s": (low, high),
-        "capacity_Ah": (low, high), "energy_Wh": (low, high)}``; draws whose
-        simulation is impossible (e.g. the cutoff above their start voltage) are
-        counted in ``failed``.
-    """
-    samples = bootstrap_parameters(battery)
-    if samples is None:
-        return None
-    times, charges, energies, failed = [], [], [], 0
-    for row in samples:
-        try:
-            run = simulate_one(replace(battery, parameters=CellParameters.from_array(row)))
-        except DataError:
-            failed += 1
-            continue
-        times.append(run.time_to_cutoff_s)
-        charges.append(run.capacity_Ah)
-        energies.append(run.energy_Wh_total)
-    return {"level": level, "draws": int(len(samples)), "failed": failed,
-            "time_to_cutoff_s": interval(times, level), "capacity_Ah": interval(charges, level),
-            "energy_Wh": interval(energies, level)}
+def _mission_model_error_only(nom: dict, completed: bool, error: dict, level: float,
+                              reason: str) -> dict:
+    sd = error["relative_sd"]
+    out = {"method": f"model error only: {reason}", "interval_includes": [error["label"]],
+           "draws": 0, "accepted": 0, "tried": 0, "rejected": 0, "rejected_fraction": 0.0,
+           "completed_fraction": 1.0 if completed else 0.0, "draws_not_completed": 0,
+           "warnings": []}
+    out["endurance_s"] = _lognormal_spread(nom["endurance_s"], sd, level)
+    z = _z_level(level)
+    factors = np.array([math.exp(-z * sd), 1.0, math.exp(z * sd)])
+    used = 100.0 - nom["soc_end_pct"]
+    soc = 100.0 - used / factors
+    out["soc_end_pct"] = {"nominal": float(nom["soc_end_pct"]), "median": float(soc[1]),
+                          "low": float(soc[0]), "high": float(soc[2]),
+                          "std": float(used * sd)}
+    if "max_stretch_s" in nom:
+        stretch = np.maximum(nom["max_stretch_s"] + nom["endurance_s"] * (factors - 1.0), 0.0)
+        out["max_stretch_s"] = {"nominal": float(nom["max_stretch_s"]),
+                                "median": float(stretch[1]), "low": float(stretch[0]),
+                                "high": float(stretch[2]), "std": float(nom["endurance_s"] * sd)}
+    return out
 
 
-__all__ = ["sample_parameters", "bootstrap_parameters", "simulation_interval", "interval", "DrawFlight", "mission_uncertainty",
-           "DEFAULT_DRAWS"]
+__all__ = ["sample_parameters", "bootstrap_parameters", "has_parameter_draws", "interval",
+           "model_error_sd", "fly_draws", "prediction_interval", "simulation_interval",
+           "mission_extrapolation_ratio", "mission_uncertainty", "DEFAULT_DRAWS",
+           "PRIOR_RELATIVE_SD", "MIN_HELD_OUT_SD", "EXTRAPOLATION_GROWTH"]

@@ -1,19 +1,28 @@
 """Validate a battery model against measured discharges it was not fitted to.
 
 For each measured discharge the model is driven with the measured current
-(its mean when the current is constant, otherwise the measured profile as a
-sequence of load steps) through :func:`dischargelab.simulate.simulate`, and we
-report, as in the paper's section 4.4 (Figs 12-14):
+through the one engine (:func:`dischargelab.simulate.simulate`): its mean when
+the current is constant, otherwise the logged profile itself as one engine
+``Step("profile", ...)`` (each sample's current held over the interval ending
+at it), continued at the last measured current if the profile ends before the
+cutoff. Thermal families simulate the cell temperature from the run's ambient:
+its first logged temperature when there is one, else the battery's
+``ambient_C``. Every model family works. We report, as in the paper's section
+4.4 (Figs 12-14), and beyond it:
 
 * the measured and the predicted time to the cutoff voltage, and the endurance
   error in seconds and in percent of the measured time;
+* the 95 % interval of the predicted time (parameter draws and the model's own
+  error, :func:`dischargelab.uncertainty.prediction_interval`), whether it
+  covered the measured time, and the coverage over all runs (:func:`summarise`):
+  about 95 % of held-out runs should be covered if the intervals are honest;
 * the voltage error in percent of the measured voltage, RMS and maximum, over
   the whole curve and over its operational part (state of charge above 20 %,
   counted on the charge the measurement delivered to the cutoff).
 
 The measured time to cutoff is interpolated linearly at the first crossing of
 the cutoff voltage. A measurement that never reaches the cutoff has no
-endurance error (``None``) and a warning.
+endurance error and no coverage verdict (``None``) and a warning.
 
 References
 ----------
@@ -28,8 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import DataError
-from .model import charge_from_current, load_battery
-from .simulate import SimulationResult, Step, simulate, simulate_current
+from .model import Battery, charge_from_current, load_battery
+from .simulate import SimulationResult, Step, simulate
+from .uncertainty import DEFAULT_DRAWS, prediction_interval
 
 #: Relative spread of the current (std / mean) below which a discharge is treated as constant.
 CONSTANT_CURRENT_CV = 0.03
@@ -40,6 +50,13 @@ OPERATIONAL_SOC = 0.20
 #: Consecutive profile samples whose currents differ less than this fraction of the
 #: mean current are merged into one load step.
 PROFILE_MERGE_FRACTION = 0.01
+
+#: Logged profiles longer than this are flown merged (:func:`profile_steps`); shorter
+#: ones sample by sample (one engine step per sample).
+MAX_PROFILE_SAMPLES = 5000
+
+#: Engine time steps of a constant-current prediction to the cutoff.
+PREDICTION_STEPS = 200
 
 
 def measured_time_to_cutoff(time_s, voltage_V, cutoff_V: float) -> float:
@@ -146,7 +163,98 @@ def _same_file(a, b) -> bool:
         return False
 
 
-def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) -> ValidationCase:
+def _run_ambient_C(battery: Battery, data) -> float:
+    """Ambient of a run [degC]: its first logged temperature, else the battery's."""
+    if "temperature_C" in data:
+        temp = np.asarray(data["temperature_C"], dtype=float)
+        finite = temp[np.isfinite(temp)]
+        if finite.size:
+            return float(finite[0])
+    return battery.ambient_C
+
+
+def _increasing(t: np.ndarray) -> np.ndarray:
+    """Mask of the samples whose time is above every earlier one (duplicates dropped)."""
+    before = np.maximum.accumulate(np.r_[-np.inf, t[:-1]])
+    return t > before
+
+
+def logged_profile_step(time_s, current_A) -> Step:
+    """One engine step flying a logged current profile (time from 0 at the first sample).
+
+    Sample ``k``'s current is held over ``(t[k-1], t[k]]``; charging samples
+    (negative current) are flown as rest; repeated time stamps are dropped.
+    Profiles longer than :data:`MAX_PROFILE_SAMPLES` are merged first
+    (:func:`profile_steps`).
+    """
+    t = np.asarray(time_s, dtype=float)
+    i = np.asarray(current_A, dtype=float)
+    keep = _increasing(t)
+    t, i = t[keep], i[keep]
+    if t.size > MAX_PROFILE_SAMPLES:
+        steps, ends = profile_steps(t, i)
+        t = np.r_[0.0, ends]
+        i = np.r_[0.0, [st.value for st in steps]]
+    return Step("profile", name="measured profile", profile_time_s=tuple(t - t[0]),
+                profile_current_A=tuple(np.clip(i, 0.0, None)))
+
+
+def _constant_current_voltage(battery: Battery, prediction: SimulationResult, t, current_A):
+    """Model pack voltage [V] at times ``t`` [s] of a constant-current discharge from rest.
+
+    The states are exact for a constant current (charge linear in time, lowpass
+    states ``i (1 - exp(-t / tau))``); a thermal state is taken from the simulation.
+    """
+    fam, prm = battery.family, battery.parameters
+    cell = current_A / battery.strings_parallel
+    state = {}
+    for st in fam.states:
+        if st.kind == "charge":
+            state[st.name] = cell * t / 3600.0
+        elif st.kind == "lowpass":
+            tau = float(prm[st.tau])
+            state[st.name] = cell * (1.0 - np.exp(-t / tau)) if tau > 0 else np.full(t.size, cell)
+        else:
+            state[st.name] = np.interp(t, prediction.time_s, prediction.temperature_C)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return battery.cells_series * fam.voltage(prm, state, cell)
+
+
+def _predict_run(battery: Battery, t, i, inside, cutoff_pack: float, ambient: float):
+    """(steps, prediction, predicted voltage at the samples, profile label, mean current
+    [A], warnings) of one measured run."""
+    constant = _is_constant(i[inside])
+    mean_current = float(np.trapezoid(i[inside], t[inside]) / max(t[inside][-1], 1e-12)) \
+        if inside.sum() > 1 else float(i[0])
+    warnings = []
+    if constant:
+        steps = [Step("current", mean_current, None, "constant current")]
+        prediction = simulate(battery, steps, cutoff_pack_V=cutoff_pack, ambient_C=ambient,
+                              points_per_step=PREDICTION_STEPS)
+        return steps, prediction, _constant_current_voltage(battery, prediction, t,
+                                                            mean_current), \
+            "constant", mean_current, warnings
+    steps = [logged_profile_step(t, i)]
+    tail = t >= t[-1] - min(60.0, 0.1 * t[-1])
+    tail_current = float(np.mean(np.clip(i[tail], 0, None)))
+    if tail_current > 0:
+        steps.append(Step("current", tail_current, None, "extension"))
+    prediction = simulate(battery, steps, cutoff_pack_V=cutoff_pack, ambient_C=ambient,
+                          points_per_step=PREDICTION_STEPS)
+    if prediction.ended_by == "cutoff" and tail_current > 0 and \
+            prediction.step[-1] == len(steps) - 1:
+        warnings.append(f"the prediction reaches the cutoff after the measured profile "
+                        f"ends; it was extended at the last measured {tail_current:.3g} A")
+    # the engine stops at every logged sample: its voltage there is the model's, with the
+    # sample's own current and every state (charge, temperature, filters) as flown
+    first = np.r_[True, np.diff(prediction.time_s) > 0]
+    v_pred = np.interp(t, prediction.time_s[first], prediction.voltage_V[first])
+    return steps, prediction, v_pred, "measured", mean_current, warnings
+
+
+def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
+                      draws: int = DEFAULT_DRAWS, seed: int = 0,
+                      level: float = 0.95) -> ValidationCase:
     """Predict one measured discharge; see :func:`validate_discharge` for the numbers."""
     battery = load_battery(battery)
     meta = dict(meta or {})
@@ -164,7 +272,6 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) ->
         raise DataError(f"cutoff voltage must be > 0 V per cell, got {cutoff_cell_V}")
     t = t - t[0]
     cutoff_pack = cutoff_cell_V * battery.cells_series
-    warnings = []
     if v[0] <= cutoff_pack:
         raise DataError(f"{Path(name).name}: the measurement starts at {v[0]:.3f} V, at or "
                         f"below the cutoff {cutoff_pack:.3f} V; check --cutoff and the pack's "
@@ -172,35 +279,17 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) ->
     t_meas = measured_time_to_cutoff(t, v, cutoff_pack)
     reached = np.isfinite(t_meas)
     t_end = t_meas if reached else float(t[-1])
+    warnings = []
     if not reached:
         warnings.append(f"the measurement ends at {v[-1]:.3f} V without reaching the cutoff "
                         f"{cutoff_pack:.3f} V; no endurance error")
     inside = t <= t_end
     q_meas = charge_from_current(t, i)
     q_total = float(np.interp(t_end, t, q_meas))
-    constant = _is_constant(i[inside])
-    mean_current = float(np.trapezoid(i[inside], t[inside]) / max(t[inside][-1], 1e-12)) \
-        if inside.sum() > 1 else float(i[0])
-    if constant:
-        prediction = simulate_current(battery, mean_current, cutoff_pack_V=cutoff_pack)
-        q_pred_at_t = mean_current * t / 3600.0
-        v_pred = battery.voltage(mean_current, q_pred_at_t)
-        profile = "constant"
-    else:
-        steps, _ = profile_steps(t, i)
-        tail = t >= t[-1] - min(60.0, 0.1 * t[-1])
-        tail_current = float(np.mean(np.clip(i[tail], 0, None)))
-        if tail_current > 0:
-            steps.append(Step("current", tail_current, None, "extension"))
-        prediction = simulate(battery, steps, cutoff_pack_V=cutoff_pack, points_per_step=2)
-        if prediction.ended_by == "cutoff" and tail_current > 0 and \
-                prediction.step[-1] == len(steps) - 1:
-            warnings.append(f"the prediction reaches the cutoff after the measured profile "
-                            f"ends; it was extended at the last measured {tail_current:.3g} A")
-        # voltage at each sample: simulated charge, the sample's own measured current
-        q_at = np.interp(t, prediction.time_s, prediction.charge_Ah)
-        v_pred = battery.voltage(np.clip(i, 0.0, None), q_at)
-        profile = "measured"
+    ambient = _run_ambient_C(battery, data)
+    steps, prediction, v_pred, profile, mean_current, more = _predict_run(
+        battery, t, i, inside, cutoff_pack, ambient)
+    warnings += more
     t_pred = prediction.time_to_cutoff_s
     v_pred = np.where(t <= (t_pred if np.isfinite(t_pred) else np.inf), v_pred, np.nan)
     compare = inside & np.isfinite(v_pred) & (v > 0)
@@ -208,6 +297,14 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) ->
     soc = 1.0 - q_meas / q_total if q_total > 0 else np.ones_like(q_meas)
     operational = compare & (soc > OPERATIONAL_SOC)
     rel_op = (v_pred[operational] - v[operational]) / v[operational] * 100.0
+    spread = prediction_interval(
+        battery, steps, nominal={"time_to_cutoff_s": t_pred, "capacity_Ah":
+                                 prediction.capacity_Ah, "energy_Wh": prediction.energy_Wh_total},
+        cutoff_pack_V=cutoff_pack, cell_current_A=mean_current / battery.strings_parallel,
+        ambient_C=ambient, draws=draws, seed=seed, level=level)
+    warnings += spread["warnings"]
+    lo, hi = spread["time_to_cutoff_s"]
+    covered = bool(lo <= t_meas <= hi) if reached and np.isfinite(lo) else None
 
     def rms(x):
         return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
@@ -218,6 +315,7 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) ->
     error_s = t_pred - t_meas if reached else float("nan")
     summary = {
         "file": name,
+        "model": battery.model,
         "current_A": mean_current,
         "cell_current_A": mean_current / battery.strings_parallel,
         "profile": profile,
@@ -228,6 +326,11 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) ->
         "endurance_error_s": error_s if np.isfinite(error_s) else None,
         "endurance_error_pct": 100.0 * error_s / t_meas if reached and t_meas > 0 and
         np.isfinite(error_s) else None,
+        "interval_s": [lo, hi] if np.isfinite(lo) else None,
+        "interval_level": level,
+        "covered": covered,
+        "interval_includes": spread["interval_includes"],
+        "draws_not_reaching_cutoff": spread["draws_not_reaching_cutoff"],
         "capacity_measured_Ah": q_total if reached else None,
         "capacity_predicted_Ah": prediction.capacity_Ah,
         "voltage_rmse_pct": rms(rel),
@@ -242,6 +345,9 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) ->
         "extrapolation": None,
         "warnings": warnings,
     }
+    if battery.family.thermal:
+        summary["ambient_C"] = ambient
+        summary["peak_temperature_C"] = prediction.peak_temperature_C
     sources = battery.extra.get("source")
     if isinstance(sources, list) and meta.get("source"):
         summary["in_fit"] = any(isinstance(s, dict) and _same_file(s.get("source"),
@@ -260,7 +366,8 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) ->
                           voltage_predicted_V=v_pred, prediction=prediction, current_A=i)
 
 
-def validate_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) -> dict:
+def validate_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
+                       draws: int = DEFAULT_DRAWS, seed: int = 0) -> dict:
     """Endurance and voltage errors of the model on one measured discharge.
 
     Parameters
@@ -269,29 +376,38 @@ def validate_discharge(battery, data, meta: dict | None, cutoff_cell_V: float) -
         The pack the measurement was made on (cells in series / parallel).
     data : pandas.DataFrame or mapping
         Canonical columns ``time_s`` (from load start), ``voltage_V`` (pack),
-        ``current_A`` (pack, discharge positive), e.g. from
+        ``current_A`` (pack, discharge positive), optionally ``temperature_C``
+        (its first value is the run's ambient for thermal families), e.g. from
         :func:`dischargelab.io.read_discharge`.
     meta : dict
         Reader metadata (``source`` names the file).
     cutoff_cell_V : float
         Cutoff voltage per cell [V].
+    draws, seed : int
+        Covariance draws (when the battery has no bootstrap refits) and seed of
+        the 95 % interval.
 
     Returns
     -------
     dict
         ``file``, ``current_A`` (mean), ``endurance_measured_s``,
         ``endurance_predicted_s``, ``endurance_error_pct`` (100 (pred - meas) / meas),
-        ``voltage_rmse_pct``, ``voltage_max_error_pct`` (over the compared curve),
-        plus ``endurance_error_s``, ``voltage_*_operational_pct`` (SOC > 20 %),
+        ``interval_s`` (95 % interval of the predicted time [s]), ``covered``
+        (measured time inside it), ``interval_includes``, ``voltage_rmse_pct``,
+        ``voltage_max_error_pct`` (over the compared curve), plus
+        ``endurance_error_s``, ``voltage_*_operational_pct`` (SOC > 20 %),
         ``capacity_measured_Ah``, ``capacity_predicted_Ah``, ``profile``
-        ("constant" | "measured"), ``in_fit``, ``extrapolation``, ``warnings``.
-        Endurance keys are None when the measurement never reaches the cutoff.
+        ("constant" | "measured"), ``in_fit``, ``extrapolation``, ``warnings``
+        (and ``ambient_C``, ``peak_temperature_C`` for thermal families).
+        Endurance keys and ``covered`` are None when the measurement never reaches
+        the cutoff.
     """
-    return compare_discharge(battery, data, meta, cutoff_cell_V).summary
+    return compare_discharge(battery, data, meta, cutoff_cell_V, draws=draws, seed=seed).summary
 
 
 def compare_files(battery, paths, *, cutoff_cell_V: float, columns=None, current_A=None,
-                  progress=None, **read_options) -> list[ValidationCase]:
+                  progress=None, draws: int = DEFAULT_DRAWS, seed: int = 0,
+                  **read_options) -> list[ValidationCase]:
     """Read each file with :func:`dischargelab.io.read_discharge` and compare it."""
     from .io import read_discharge
 
@@ -302,22 +418,39 @@ def compare_files(battery, paths, *, cutoff_cell_V: float, columns=None, current
     cases = []
     for k, path in enumerate(paths):
         data, meta = read_discharge(path, columns=columns, current_A=current_A, **read_options)
-        cases.append(compare_discharge(battery, data, meta, cutoff_cell_V))
+        cases.append(compare_discharge(battery, data, meta, cutoff_cell_V, draws=draws,
+                                       seed=seed))
         if progress is not None:
             progress(k + 1, len(paths))
     return cases
 
 
 def validate_files(battery, paths, *, cutoff_cell_V: float, columns=None, current_A=None,
-                   **read_options) -> list[dict]:
+                   draws: int = DEFAULT_DRAWS, seed: int = 0, **read_options) -> list[dict]:
     """:func:`validate_discharge` for each file (read with ``read_discharge``)."""
     return [c.summary for c in compare_files(battery, paths, cutoff_cell_V=cutoff_cell_V,
                                              columns=columns, current_A=current_A,
-                                             **read_options)]
+                                             draws=draws, seed=seed, **read_options)]
+
+
+def coverage(rows: list[dict]) -> dict:
+    """How many measured times to cutoff fell inside their predicted interval.
+
+    Returns
+    -------
+    dict
+        ``covered`` (count), ``runs`` (runs with a measured time and an interval),
+        ``fraction`` (None without runs) and ``level`` (nominal coverage).
+    """
+    judged = [r["covered"] for r in rows if r.get("covered") is not None]
+    levels = {r.get("interval_level") for r in rows if r.get("covered") is not None}
+    return {"covered": int(sum(judged)), "runs": len(judged),
+            "fraction": sum(judged) / len(judged) if judged else None,
+            "level": levels.pop() if len(levels) == 1 else None}
 
 
 def summarise(rows: list[dict]) -> dict:
-    """Mean absolute endurance error [%] and worst voltage errors over validation rows."""
+    """Mean absolute endurance error [%], worst voltage errors and interval coverage."""
     errors = [abs(r["endurance_error_pct"]) for r in rows if r["endurance_error_pct"] is not None]
     rmse = [r["voltage_rmse_pct"] for r in rows if np.isfinite(r["voltage_rmse_pct"])]
     peak_op = [r["voltage_max_error_operational_pct"] for r in rows
@@ -328,8 +461,10 @@ def summarise(rows: list[dict]) -> dict:
         "max_abs_endurance_error_pct": float(np.max(errors)) if errors else None,
         "max_voltage_rmse_pct": float(np.max(rmse)) if rmse else None,
         "max_voltage_error_operational_pct": float(np.max(peak_op)) if peak_op else None,
+        "coverage": coverage(rows),
     }
 
 
 __all__ = ["validate_discharge", "validate_files", "compare_discharge", "compare_files",
-           "ValidationCase", "measured_time_to_cutoff", "profile_steps", "summarise"]
+           "ValidationCase", "measured_time_to_cutoff", "profile_steps", "logged_profile_step",
+           "summarise", "coverage"]

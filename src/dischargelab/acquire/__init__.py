@@ -5,8 +5,15 @@ Importing this package imports neither pyserial nor matplotlib; they are loaded
 when a port is opened or a plot window is requested.
 """
 
-from .pipeline import (EXIT_STATUS, Consumer, Pipeline, ReconnectPolicy, Sample, SampleSource,
-                       SourceDisconnected)
+from .pipeline import (
+    EXIT_STATUS,
+    Consumer,
+    Pipeline,
+    ReconnectPolicy,
+    Sample,
+    SampleSource,
+    SourceDisconnected,
+)
 from .sources import SOURCE_KINDS, open_source, register_source
 
 __all__ = [

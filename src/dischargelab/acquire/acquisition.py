@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..atomic import check_outputs
 from ..errors import DataError, DischargelabError
 from .pipeline import EXIT_STATUS, Pipeline, ReconnectPolicy, SourceDisconnected
 from .safety import SafetyLimits, SafetyMonitor, infer_cells
@@ -52,7 +53,13 @@ class AcquireSettings:
 
 @dataclass
 class AcquireResult:
-    """How a run ended and what it measured."""
+    """How a run ended and what it measured.
+
+    ``load_switched_off`` is True when the source drove the load (relay or
+    electronic load) and switched it off at the end, False when it drove the
+    load but could not switch it off, None when it drove no load (the load,
+    if any, is still on).
+    """
 
     ended_by: str
     message: str
@@ -62,11 +69,20 @@ class AcquireResult:
     stats: dict
     limits: dict
     error: str | None = None
+    load_switched_off: bool | None = None
+
+    @property
+    def load_state(self) -> str:
+        """What happened to the load: ``"switched off"``, ``"not switched off"`` (the source
+        drives it but could not switch it off) or ``"not driven"`` (no relay or load control)."""
+        return {True: "switched off", False: "not switched off",
+                None: "not driven"}[self.load_switched_off]
 
     def to_dict(self) -> dict:
         return {"ended_by": self.ended_by, "message": self.message,
                 "exit_status": self.exit_status, "out": str(self.out), "summary": self.summary,
-                "stats": self.stats, "limits": self.limits, "error": self.error}
+                "stats": self.stats, "limits": self.limits, "error": self.error,
+                "load": self.load_state}
 
 
 class Acquisition:
@@ -150,7 +166,7 @@ class Acquisition:
         summary["rows_written"] = self.writer.rows_written
         return AcquireResult(ended, pipe.end_message, EXIT_STATUS.get(ended, 6),
                              self.settings.out, summary, pipe.stats, self.limits.to_dict(),
-                             error)
+                             error, pipe.load_switched_off)
 
     def _watch(self, view, console, every_s, plotter, on_tick) -> None:
         pipe = self.pipeline
@@ -215,7 +231,9 @@ def prepare_acquisition(settings: AcquireSettings) -> Acquisition:
     Raises
     ------
     DataError
-        Bad settings, or ``out`` exists without ``force``.
+        Bad settings.
+    OutputError
+        ``out`` exists without ``force``, or is a folder.
     SourceDisconnected
         The instrument cannot be reached.
     """
@@ -223,11 +241,7 @@ def prepare_acquisition(settings: AcquireSettings) -> Acquisition:
     from .sources import open_source
 
     out = Path(settings.out)
-    if out.exists() and not settings.force:
-        raise DataError(f"{out} already exists; choose another --out or pass --force to "
-                        "overwrite it")
-    if out.is_dir():
-        raise DataError(f"--out {out} is a directory; give a file name such as run.csv")
+    check_outputs([out], force=settings.force)
     chemistry = settings.chemistry.lower()
     provisional = None
     if settings.cells is not None:
@@ -273,6 +287,6 @@ def prepare_acquisition(settings: AcquireSettings) -> Acquisition:
     except BaseException:
         try:
             source.close()
-        except Exception:  # noqa: BLE001
+        except Exception:
             pass
         raise

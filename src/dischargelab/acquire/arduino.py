@@ -22,8 +22,15 @@ import time
 from ..errors import DataError
 from . import protocol as proto
 from .pipeline import Sample, SourceDisconnected
-from .sensors import (CURRENT_CHANNEL, TEMPERATURE_CHANNEL, VOLTAGE_CHANNEL, CurrentSensor,
-                      Thermistor, adc_to_volts, finite_or_none)
+from .sensors import (
+    CURRENT_CHANNEL,
+    TEMPERATURE_CHANNEL,
+    VOLTAGE_CHANNEL,
+    CurrentSensor,
+    Thermistor,
+    adc_to_volts,
+    finite_or_none,
+)
 from .transport import SerialTransport
 
 
@@ -141,7 +148,7 @@ class ArduinoSource:
                 "bytes_skipped": self._parser.bytes_skipped}
 
     # ------------------------------------------------------------------ link
-    def open(self) -> "ArduinoSource":
+    def open(self) -> ArduinoSource:
         """Open the port, identify the firmware, configure and start streaming."""
         try:
             self._transport.open()
@@ -286,6 +293,11 @@ class ArduinoSource:
         self._transport.close()
         self.open()
         self._reconnects += 1
+
+    @property
+    def controls_load(self) -> bool:
+        """True when the logger drives the load relay (``switch_load``)."""
+        return self.switch_load
 
     def stop_load(self) -> None:
         """Open the load relay (SET_LOAD 0); harmless when no relay is wired."""

@@ -42,13 +42,13 @@ from __future__ import annotations
 import csv
 import math
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from ..jsonfile import read_json, write_json
 from ..errors import DataError
+from ..jsonfile import read_json, write_json
 
 #: Arduino Uno ADC: 10 bits over a 5 V reference (paper 3.3).
 DEFAULT_ADC_BITS = 10
@@ -167,7 +167,7 @@ class Calibration:
         return out
 
     @classmethod
-    def from_dict(cls, data: dict, source: str = "calibration") -> "Calibration":
+    def from_dict(cls, data: dict, source: str = "calibration") -> Calibration:
         """Inverse of :meth:`to_dict`; raises :class:`DataError` on a malformed file."""
         if not isinstance(data, dict) or "gain" not in data:
             raise DataError(f"{source}: not a calibration file (no 'gain'); create one with "
@@ -322,7 +322,8 @@ class CalibrationFit:
         if t is not None:
             lines.append(
                 f"offset test (V = a*x + b vs V = Ke*x, n = {t.n_points}): "
-                f"F = {t.f_statistic:.3g}, p = {t.f_p_value:.3g}; chi2 with the meter's stated accuracy = "
+                f"F = {t.f_statistic:.3g}, p = {t.f_p_value:.3g}; "
+                f"chi2 with the meter's stated accuracy = "
                 f"{t.chi2_statistic:.3g}, p = {t.chi2_p_value:.3g} -> "
                 f"{'offset adopted' if t.adopted else 'no offset'} ({t.reason})")
         bad = self.nonlinear_points
@@ -557,7 +558,7 @@ def fit_calibration(real_V, measured_V, *, divider: str = "", meter: MeterAccura
             clip = float(gain * np.min(measured[top]) + offset_V)
     valid = (float(real[included[0]]), linear_up_to)
     if created is None:
-        created = datetime.now(timezone.utc).replace(microsecond=0).isoformat()
+        created = datetime.now(UTC).replace(microsecond=0).isoformat()
     calibration = Calibration(
         gain=float(gain), offset_V=float(offset_V), divider=str(divider), created=created,
         valid_range_V=valid, adc_step_V=step,
@@ -603,8 +604,8 @@ def read_points_csv(path, divider: str | None = None) -> tuple[list[float], list
     if not path.is_file():
         raise DataError(f"calibration CSV {str(path)!r} not found")
     with path.open(newline="", encoding="utf-8-sig") as fh:
-        rows = [row for row in csv.reader(line for line in fh
-                                          if line.strip() and not line.lstrip().startswith("#"))]
+        rows = list(csv.reader(line for line in fh
+                               if line.strip() and not line.lstrip().startswith("#")))
     if not rows:
         raise DataError(f"{path}: no calibration points")
 

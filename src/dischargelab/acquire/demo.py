@@ -20,9 +20,32 @@ from ..model import CUTOFF_CELL_VOLTAGE_V, PARAMETER_NAMES, load_battery
 DEMO_BATTERY = "zippy-1100-2s"
 
 
+#: Files :func:`run_acquire_demo` writes into its folder.
+ACQUIRE_DEMO_OUTPUTS = ("demo-acquire.csv", "device-record.csv", "demo-acquire-fit.png")
+
+
+def check_acquire_demo(out_dir, force: bool = False) -> None:
+    """Extras and output files of :func:`run_acquire_demo`, checked before any work.
+
+    Raises
+    ------
+    MissingExtraError
+        pyserial (extra ``acquire``) or matplotlib (extra ``plot``) is missing.
+    OutputError
+        A demo file exists and ``force`` is false.
+    """
+    from ..atomic import check_outputs
+    from ..errors import require
+
+    require("serial", "acquire")
+    require("matplotlib", "plot")
+    check_outputs([Path(out_dir) / name for name in ACQUIRE_DEMO_OUTPUTS], force=force)
+
+
 def run_acquire_demo(out_dir, *, battery=DEMO_BATTERY, wall_seconds: float = 45.0,
                      rate_Hz: float = 1.0, noise_mV: float = 2.0, divider_gain: float = 4.38,
-                     seed: int = 1, view: str = "live", console=None) -> dict:
+                     seed: int = 1, view: str = "live", console=None,
+                     force: bool = False) -> dict:
     """Simulated test -> log file -> fit; returns a summary dict (also printed by the CLI).
 
     Parameters
@@ -35,15 +58,18 @@ def run_acquire_demo(out_dir, *, battery=DEMO_BATTERY, wall_seconds: float = 45.
     wall_seconds : float
         Target wall-clock length of the discharge [s]; sets the time compression.
     view : {"live", "lines", "none"}
+    force : bool
+        Replace the demo's files if they exist (see :func:`check_acquire_demo`).
     """
     from ..fit import Curve, fit_battery
     from ..io.logfile import read_log
     from ..simulate import simulate_current
-    from .calibration import Calibration
     from .acquisition import AcquireSettings, prepare_acquisition
+    from .calibration import Calibration
     from .virtual_device import VirtualDevice
 
     out_dir = Path(out_dir)
+    check_acquire_demo(out_dir, force)
     out_dir.mkdir(parents=True, exist_ok=True)
     bat = load_battery(battery)
     chemistry = bat.chemistry or "lipo"
@@ -99,9 +125,6 @@ def run_acquire_demo(out_dir, *, battery=DEMO_BATTERY, wall_seconds: float = 45.
 
 
 def _save_fit_plot(fit, path: Path) -> None:
-    import matplotlib.pyplot as plt
+    from ..plot import save
 
-    ax = fit.plot()                      # measured vs fitted, residual panel below
-    fig = ax.figure
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fit.plot(), path, dpi=110)      # measured vs fitted, residual panel below

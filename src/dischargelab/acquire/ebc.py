@@ -422,6 +422,8 @@ class EbcSource:
     """
 
     name = "ebc"
+    #: The electronic load is the load: the host starts and stops it.
+    controls_load = True
 
     def __init__(self, port: str, *, current_A: float, cutoff_V: float, time_limit_min: int = 0,
                  safety_cutoff_V: float | None = None, calibration=None,

@@ -88,7 +88,7 @@ class LiveDisplay:
         self.cells_series = max(1, int(cells_series))
         self.cutoff_pack_V = cutoff_pack_V
         self.current_given_A = current_given_A
-        self._stats = stats or (lambda: {})
+        self._stats = stats or (dict)
         self.safety = safety
         self.title = title
         self._clock = clock
@@ -288,7 +288,7 @@ class LivePlot:
                     try:
                         matplotlib.use(candidate, force=True)
                         break
-                    except Exception:  # noqa: BLE001 - try the next GUI toolkit
+                    except Exception:
                         continue
                 else:
                     raise DischargelabError("--plot needs an interactive matplotlib backend "
@@ -338,7 +338,10 @@ class LivePlot:
             self.figure.canvas.draw()
 
     def save(self, path) -> None:
-        self.figure.savefig(path, dpi=100)
+        """Save the live figure atomically (:func:`dischargelab.atomic.save_figure`)."""
+        from ..atomic import save_figure
+
+        save_figure(self.figure, path, dpi=100)
 
     def close(self) -> None:
         if self.interactive:

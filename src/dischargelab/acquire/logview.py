@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from functools import reduce
 from pathlib import Path
 
+from ..atomic import write_text
 from ..errors import DataError
 
 #: Data items written after channel, state and time: (key, name, unit, symbol).
@@ -192,6 +193,11 @@ def device_ini(columns=DEFAULT_COLUMNS, *, name: str = "dischargelab", baudrate:
     return "\r\n".join(lines)
 
 
+def is_serial_target(target) -> bool:
+    """True when ``target`` names a serial port (COM3, /dev/ttyUSB0...), not a file."""
+    return bool(_DEVICE_PATH.match(str(target)))
+
+
 class LogViewWriter:
     """Consumer writing every sample as an OpenFormat line to a file or serial port.
 
@@ -225,11 +231,11 @@ class LogViewWriter:
         self._t0: float | None = None
         self._last = None
         self.charge_Ah = 0.0
-        is_serial = bool(_DEVICE_PATH.match(self.target)) if serial is None else serial
+        is_serial = is_serial_target(self.target) if serial is None else serial
         self.is_serial = is_serial
         if ini_path is not None:
-            Path(ini_path).write_text(device_ini(baudrate=baudrate, checksum=checksum,
-                                                 channel=channel), encoding="utf-8")
+            write_text(ini_path, device_ini(baudrate=baudrate, checksum=checksum,
+                                            channel=channel))
         if is_serial:
             from .transport import open_serial
 
@@ -285,4 +291,4 @@ def read_openformat(path, *, checksum: bool = True) -> list[OpenFormatLine]:
 
 
 __all__ = ["DEFAULT_COLUMNS", "STATES", "LogViewWriter", "OpenFormatLine", "device_ini",
-           "format_line", "parse_line", "read_openformat", "xor_checksum"]
+           "format_line", "is_serial_target", "parse_line", "read_openformat", "xor_checksum"]

@@ -19,8 +19,9 @@ from __future__ import annotations
 import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 from ..errors import DischargelabError
 
@@ -56,7 +57,12 @@ class SourceDisconnected(DischargelabError, ConnectionError):
 
 @runtime_checkable
 class SampleSource(Protocol):
-    """Anything that produces :class:`Sample` objects: an Arduino logger, an electronic load..."""
+    """Anything that produces :class:`Sample` objects: an Arduino logger, an electronic load...
+
+    A source that switches the load on and off (a relay, an electronic load)
+    also has ``controls_load = True``; without it the pipeline takes the load as
+    not driven by the host, and never claims to have switched it off.
+    """
 
     name: str
     info: dict
@@ -66,7 +72,7 @@ class SampleSource(Protocol):
         """Samples that arrived within ``timeout_s``; raises :class:`SourceDisconnected`."""
 
     def reconnect(self) -> None:
-        """Open the link again and resume; raises :class:`SourceDisconnected` if not yet possible."""
+        """Open the link again and resume; raises :class:`SourceDisconnected` if not possible."""
 
     def stop_load(self) -> None:
         """Switch the load off (no-op for a source without a controllable load)."""
@@ -164,6 +170,9 @@ class Pipeline:
         self.connected = True
         self.last_sample: Sample | None = None
         self.started_at: float | None = None
+        #: True: the source drives the load and switched it off at the end; False: it drives
+        #: the load and could not switch it off; None: the source drives no load.
+        self.load_switched_off: bool | None = None
         if prefill:
             self._queue.put(list(prefill))
             self.last_sample = prefill[-1]
@@ -175,7 +184,7 @@ class Pipeline:
             raise DischargelabError("add consumers before starting the pipeline")
         self.consumers.append(consumer)
 
-    def start(self) -> "Pipeline":
+    def start(self) -> Pipeline:
         """Start the producer and consumer threads."""
         self.started_at = self._clock()
         self._consumer.start()
@@ -282,7 +291,7 @@ class Pipeline:
                     self.last_sample = last
                     if self.duration_s is not None and last.time_s >= self.duration_s:
                         self.request_stop("duration", f"duration of {self.duration_s:g} s reached")
-        except BaseException as exc:  # noqa: BLE001 - reported, never silent
+        except BaseException as exc:
             self.error = exc
             self.request_stop("error", f"{type(exc).__name__}: {exc}", kind="error")
         finally:
@@ -290,13 +299,18 @@ class Pipeline:
             self._queue.put(_SENTINEL)
 
     def _finish_source(self) -> None:
+        controls = bool(getattr(self.source, "controls_load", False))
         try:
             self.source.stop_load()
-        except Exception as exc:  # noqa: BLE001 - the link may be gone; say so in the file
-            self._queue.put(("event", "alarm", {"message": f"could not switch the load off: {exc}"}))
+            self.load_switched_off = True if controls else None
+        except Exception as exc:
+            if controls:
+                self.load_switched_off = False
+                self._queue.put(("event", "alarm",
+                                 {"message": f"could not switch the load off: {exc}"}))
         try:
             self.source.close()
-        except Exception:  # noqa: BLE001 - closing a dead port must not hide the real end
+        except Exception:
             pass
 
     def _recover(self, exc: Exception) -> None:
@@ -350,7 +364,7 @@ class Pipeline:
                     if kind == "reconnect":
                         gap_from = fields.get("last_time_s")
                     self._dispatch_event(kind, fields)
-        except BaseException as exc:  # noqa: BLE001
+        except BaseException as exc:
             self.error = exc
             self.request_stop("error", f"{type(exc).__name__}: {exc}")
             _drain(self._queue)
@@ -359,12 +373,12 @@ class Pipeline:
                 self._dispatch_event("stop", {
                     "ended_by": self.ended_by or "user", "message": self.end_message,
                     **{k: v for k, v in self.stats.items() if isinstance(v, (int, float, str))}})
-            except Exception:  # noqa: BLE001
+            except Exception:
                 pass
             for consumer in consumers:
                 try:
                     consumer.close()
-                except BaseException as exc:  # noqa: BLE001
+                except BaseException as exc:
                     if self.error is None:
                         self.error = exc
             self._done.set()

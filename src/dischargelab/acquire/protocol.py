@@ -55,6 +55,8 @@ import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+from ..errors import DataError
+
 #: Version byte of every frame; bump on any incompatible change of the layout.
 PROTOCOL_VERSION = 1
 
@@ -397,12 +399,14 @@ def quantize_period_us(period_us: int) -> int:
 
     Raises
     ------
-    ValueError
+    DataError
         Outside ``MIN_PERIOD_US .. MAX_PERIOD_US`` (the firmware answers BAD_ARGUMENT).
     """
     p = int(period_us)
     if not MIN_PERIOD_US <= p <= MAX_PERIOD_US:
-        raise ValueError(f"sample period {p} us outside {MIN_PERIOD_US}..{MAX_PERIOD_US} us")
+        raise DataError(f"sample period {p} us is outside what the logger can do "
+                        f"({MIN_PERIOD_US}..{MAX_PERIOD_US} us, i.e. "
+                        f"{1e6 / MAX_PERIOD_US:.3g} to {1e6 / MIN_PERIOD_US:.4g} Hz)")
     span = TIMER_TICK_US * TIMER_MAX_TICKS
     n = (p + span - 1) // span
     ticks = (p + 2 * n) // (TIMER_TICK_US * n)

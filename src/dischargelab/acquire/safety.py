@@ -11,8 +11,8 @@ pipeline then records the event, switches the load off and stops).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from ..errors import DataError
 from ..model import CUTOFF_CELL_VOLTAGE_V
@@ -63,7 +63,7 @@ class SafetyLimits:
     def for_chemistry(cls, chemistry: str, cells_series: int, *,
                       cutoff_cell_V: float | None = None,
                       max_temperature_C: float | None = DEFAULT_MAX_TEMPERATURE_C,
-                      debounce_samples: int = 3) -> "SafetyLimits":
+                      debounce_samples: int = 3) -> SafetyLimits:
         """Limits from a chemistry preset (:data:`dischargelab.model.CUTOFF_CELL_VOLTAGE_V`),
         with an optional per-cell cutoff override."""
         key = chemistry.lower()

@@ -73,7 +73,8 @@ def open_arduino(port: str, *, rate_Hz: float = 1.0, calibration=None, current_s
 def open_ebc(port: str, *, current_A: float | None = None, cutoff_pack_V: float | None = None,
              calibration=None, baudrate: int | None = None, parity: str | None = None,
              **_ignored):
-    """A ZKETECH EBC-A load running a CC discharge (:class:`~dischargelab.acquire.ebc.EbcSource`)."""
+    """A ZKETECH EBC-A load running a CC discharge
+    (:class:`~dischargelab.acquire.ebc.EbcSource`)."""
     from .ebc import BAUDRATE, EbcSource
 
     if current_A is None:

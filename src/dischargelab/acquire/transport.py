@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 
-from ..errors import require
+from ..errors import DataError, require
 from .pipeline import SourceDisconnected
 
 _PARITY_NAMES = {"N": "PARITY_NONE", "E": "PARITY_EVEN", "O": "PARITY_ODD"}
@@ -30,7 +30,7 @@ def list_serial_ports() -> list[tuple[str, str]]:
 def _port_hint() -> str:
     try:
         ports = list_serial_ports()
-    except Exception:  # noqa: BLE001 - only a hint
+    except Exception:
         return ""
     if not ports:
         return " (no serial ports found; is the board plugged in?)"
@@ -49,7 +49,7 @@ def open_serial(port: str, *, baudrate: int = 115200, parity: str = "N",
     """
     serial = _serial()
     if parity not in _PARITY_NAMES:
-        raise ValueError(f"parity must be one of {sorted(_PARITY_NAMES)}, got {parity!r}")
+        raise DataError(f"parity must be one of {sorted(_PARITY_NAMES)}, got {parity!r}")
     try:
         return serial.Serial(port, baudrate=int(baudrate), bytesize=serial.EIGHTBITS,
                              parity=getattr(serial, _PARITY_NAMES[parity]),
@@ -87,7 +87,7 @@ class SerialTransport:
     def is_open(self) -> bool:
         return self._ser is not None
 
-    def open(self) -> "SerialTransport":
+    def open(self) -> SerialTransport:
         self.close()
         self._ser = open_serial(self.port, baudrate=self.baudrate, timeout_s=0.05)
         self._timeout = 0.05
@@ -152,5 +152,5 @@ class SerialTransport:
         if ser is not None:
             try:
                 ser.close()
-            except Exception:  # noqa: BLE001 - closing a vanished device
+            except Exception:
                 pass

@@ -91,6 +91,14 @@ class SentFrame:
     status: str
 
 
+def _check_link(link: Path) -> None:
+    """The port symlink may replace only a stale symlink, never a file or a folder."""
+    if link.is_symlink() or not link.exists():
+        return
+    raise DataError(f"cannot create the port link {link}: a file or folder of that name exists "
+                    "(the link would replace it); choose another link path")
+
+
 class VirtualDevice:
     """A simulated Arduino logger on a pseudo-terminal.
 
@@ -189,6 +197,7 @@ class VirtualDevice:
         if link is None:
             self._tmpdir = tempfile.mkdtemp(prefix="dischargelab-vdev-")
             link = Path(self._tmpdir) / "ttyDLAB0"
+        _check_link(Path(link))
         self.port = str(link)
         # counters
         self.counts = {"produced": 0, "sent": 0, "corrupted": 0, "bytes-dropped": 0,
@@ -237,7 +246,7 @@ class VirtualDevice:
         if self._tmpdir is not None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
 
-    def __enter__(self) -> "VirtualDevice":
+    def __enter__(self) -> VirtualDevice:
         self.start()
         return self
 
@@ -247,6 +256,23 @@ class VirtualDevice:
     @property
     def load_on(self) -> bool:
         return self._relay_on if self.relay else self._discharging
+
+    def summary(self) -> dict:
+        """What the device did: frames by fate, disconnects, battery time and charge.
+
+        Returns
+        -------
+        dict
+            ``port``, ``battery``, ``cells_series``, ``current_A``, ``speed``,
+            ``frames`` (produced, sent, corrupted, bytes-dropped, overflow, silent,
+            unread), ``disconnects``, ``battery_time_s``, ``charge_Ah``,
+            ``commands`` (number received).
+        """
+        return {"port": self.port, "battery": self.battery.name,
+                "cells_series": self.battery.cells_series, "current_A": self.current_A,
+                "speed": self.speed, "frames": dict(self.counts),
+                "disconnects": self.disconnects, "battery_time_s": self.battery_time_s,
+                "charge_Ah": self.charge_Ah, "commands": len(self.commands)}
 
     def truth(self) -> dict:
         """The model that drives the device (for comparing a fit with the truth)."""
@@ -510,7 +536,7 @@ class VirtualDevice:
         self.reconnected.set()
 
 
-def read_record(path) -> "pandas.DataFrame":  # noqa: F821 - pandas imported lazily
+def read_record(path) -> pandas.DataFrame:  # noqa: F821 - pandas imported lazily
     """Read a device record CSV (:data:`RECORD_COLUMNS`)."""
     import pandas as pd
 

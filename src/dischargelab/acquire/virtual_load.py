@@ -109,7 +109,7 @@ class VirtualEbcLoad:
         self.port: str | None = None
 
     # ------------------------------------------------------------------ lifecycle
-    def start(self) -> "VirtualEbcLoad":
+    def start(self) -> VirtualEbcLoad:
         self._master, self._slave, self.port = open_raw_pty()
         self._thread = threading.Thread(target=self._run, name="virtual-ebc", daemon=True)
         self._thread.start()
@@ -122,7 +122,7 @@ class VirtualEbcLoad:
         close_fds(self._master, self._slave)
         self._master = self._slave = None
 
-    def __enter__(self) -> "VirtualEbcLoad":
+    def __enter__(self) -> VirtualEbcLoad:
         return self.start()
 
     def __exit__(self, *exc) -> None:

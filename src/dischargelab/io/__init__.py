@@ -8,7 +8,10 @@ One entry point, :func:`read_discharge`, for every supported source:
 * DJI ground-station app logs with ``Battery updated`` records, and the CSV
   derived from them (:mod:`.dji`);
 * dischargelab's own logger files (first line ``# dischargelab-log v1``,
-  :mod:`.logfile`).
+  :mod:`.logfile`);
+* flight logs: ArduPilot DataFlash, PX4 ULog, Betaflight/INAV blackbox and
+  in-flight logger CSV with per-cell columns (:mod:`.flightlog`; one flight of
+  one battery is returned).
 
 Every reader returns ``(DataFrame, meta)``; the frame has ``time_s`` (0 at load
 start), ``voltage_V``, ``current_A`` (discharge positive) and, when present,
@@ -22,9 +25,18 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
-from .columns import (CANONICAL_COLUMNS, COLUMN_KEYS, CanonicalTable, map_columns, parse_columns,
-                      parse_units, validate_columns, validate_units)
-from .dji import BATTERY_MARK, is_dji_raw, read_dji_raw
+from .columns import (
+    CANONICAL_COLUMNS,
+    COLUMN_KEYS,
+    CanonicalTable,
+    map_columns,
+    parse_columns,
+    parse_units,
+    validate_columns,
+    validate_units,
+)
+from .dji import BATTERY_MARK, flight_breaks, is_dji_raw, mode_events, read_dji_raw
+from .flightlog import detect_flight_log, read_flight_discharge
 from .lvm import is_lvm, read_lvm
 from .prepare import check_current_option, check_segment_option, describe, prepare
 from .text import load_text, read_delimited
@@ -51,7 +63,7 @@ def detect_format(text: str) -> str:
 
 def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=None,
                    segment="auto", delimiter=None, header="auto", fmt="auto",
-                   rest_sample="auto"):
+                   rest_sample="auto", flight=None, battery=None):
     """Read one discharge from a file.
 
     Parameters
@@ -86,6 +98,13 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
         File format; detected from the content by default.
     rest_sample : {"auto", "none"}
         Keep the rest sample before the load step in ``meta["rest_sample"]``.
+    flight : int, optional
+        Flight logs (ArduPilot, PX4 ULog, blackbox, in-flight logger CSV; found
+        from the content): the flight to keep, counting from 1 (``--flight``);
+        default the longest (:mod:`.flightlog`).
+    battery : int, optional
+        Flight logs: the battery instance (``--battery``); default the first
+        with samples, the others named in ``meta["notes"]``.
 
     Returns
     -------
@@ -122,6 +141,14 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
     check_segment_option(segment)
     given = check_current_option(current_A)
 
+    flight_log = detect_flight_log(path) if fmt == "auto" else None
+    if flight_log is not None:
+        return read_flight_discharge(path, flight=flight, battery=battery, current_A=given,
+                                     sign=sign, segment=segment, rest_sample=rest_sample)
+    if flight is not None or battery is not None:
+        raise DataError(f"{name} is not a flight log (ArduPilot, PX4 ULog, blackbox, in-flight "
+                        "logger CSV): --flight and --battery apply only to those; use "
+                        "--segment N to choose a discharge")
     text, encoding = load_text(path)
     kind = detect_format(text) if fmt == "auto" else fmt
     if kind == "dischargelab-log":
@@ -144,6 +171,9 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
             if source.names and "flight_mode_last_event" in source.names:
                 source.meta["format"] = "dji-derived-csv"
         table = map_columns(source, name, columns=columns, units=units)
+        if table.meta.get("format") == "dji-derived-csv" and "flight_mode" in table.frame:
+            table.breaks_s = flight_breaks(mode_events(table.frame["time_s"],
+                                                       table.frame["flight_mode"]))
     table.meta.setdefault("format", kind)
     table.meta["source"] = str(path)
     table.meta["encoding"] = encoding["encoding"] + (" with BOM" if encoding.get("bom") else "")

@@ -24,12 +24,13 @@ import json
 import math
 import os
 import threading
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..atomic import OutputError, OutputExistsError
 from ..errors import DataError
 
 #: First line of every log file.
@@ -99,7 +100,7 @@ class LogWriter:
                  overwrite: bool = False):
         self.path = Path(path)
         self.meta = dict(meta or {})
-        self.meta.setdefault("start_time", datetime.now(timezone.utc).isoformat(timespec="seconds"))
+        self.meta.setdefault("start_time", datetime.now(UTC).isoformat(timespec="seconds"))
         self.fsync_interval_s = float(fsync_interval_s)
         if self.path.parent and not self.path.parent.exists():
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -107,8 +108,9 @@ class LogWriter:
             self._file = open(self.path, "w" if overwrite else "x", encoding="utf-8",
                               newline="\n")
         except FileExistsError:
-            raise DataError(f"{self.path} already exists; choose another file or pass --force "
-                            "to overwrite it") from None
+            raise OutputExistsError(self.path) from None
+        except OSError as exc:
+            raise OutputError(f"cannot write {self.path}: {exc.strerror or exc}") from None
         self.rows_written = 0
         self.events_written = 0
         self._lock = threading.Lock()
@@ -139,7 +141,7 @@ class LogWriter:
 
     def event(self, kind: str, **fields) -> None:
         """Append an event line ``# event: {"kind": ..., "at": ISO time, ...}``; synced at once."""
-        record = {"kind": kind, "at": datetime.now(timezone.utc).isoformat(timespec="milliseconds")}
+        record = {"kind": kind, "at": datetime.now(UTC).isoformat(timespec="milliseconds")}
         record.update(fields)
         with self._lock:
             if self._closed:
@@ -164,7 +166,7 @@ class LogWriter:
             self._closed = True
         self._wake.set()
 
-    def __enter__(self) -> "LogWriter":
+    def __enter__(self) -> LogWriter:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -190,7 +192,7 @@ class LogWriter:
 def is_log_file(path) -> bool:
     """True if ``path`` starts with the log magic line."""
     try:
-        with open(path, "r", encoding="utf-8", errors="replace") as fh:
+        with open(path, encoding="utf-8", errors="replace") as fh:
             return fh.readline().rstrip("\r\n") == LOG_MAGIC
     except OSError:
         return False

@@ -11,9 +11,15 @@ import pandas as pd
 
 from ..errors import DataError
 from .columns import CANONICAL_COLUMNS, COLUMN_KEYS, CanonicalTable
-from .segment import (MIN_SEGMENT_ROWS, SENTINEL_ABS, SOC_JUMP_PCT, choose_segment, detect_sign,
-                      find_segments,
-                      voltage_step_rest)
+from .segment import (
+    MIN_SEGMENT_ROWS,
+    SENTINEL_ABS,
+    SOC_JUMP_PCT,
+    choose_segment,
+    detect_sign,
+    find_segments,
+    voltage_step_rest,
+)
 
 #: A required column with more missing values than this share of rows is an error.
 MAX_MISSING_SHARE = 0.10
@@ -231,7 +237,8 @@ def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto
             raise DataError(_no_discharge(path_name, str(exc), frame, has_current, sign)) from None
         if not search.segments:
             raise DataError(_no_discharge(
-                path_name, f"no run of {MIN_SEGMENT_ROWS} or more rows with discharge current above "
+                path_name, f"no run of {MIN_SEGMENT_ROWS} or more rows with discharge current "
+                           "above "
                 f"{search.threshold_A:.3g} A", frame, has_current, sign))
         chosen = choose_segment(search, frame, segment)
         state = search.state

@@ -13,9 +13,11 @@ Works on canonical columns (``time_s``, ``voltage_V``, ``current_A``; optional
   pack swap (state of charge up by ``SOC_JUMP_PCT`` or more, or voltage up by
   more than ``VOLTAGE_JUMP_FRACTION`` without the current falling), at a
   take-off or landing event supplied by the reader, and, for variable current
-  (flight logs), at a gap in the samples longer than ``GAP_FACTOR`` times the
-  usual sampling interval. Runs shorter than ``MIN_SEGMENT_ROWS`` rows are not
-  segments.
+  without flight modes, at a gap in the samples longer than ``GAP_FACTOR``
+  times the usual sampling interval. When the frame has a ``flight_mode``
+  column the flight events decide and gaps do not split (a flight log pauses
+  while the app reconnects, even in flight). Runs shorter than
+  ``MIN_SEGMENT_ROWS`` rows are not segments.
 * **Choice.** By default the longest segment (in time); an integer picks the
   N-th (counting from 1).
 * **Rest sample.** The idle row just before the chosen segment is its rest
@@ -222,7 +224,7 @@ def find_segments(frame: pd.DataFrame, *, breaks_s=(), threshold_A: float | None
             has_break = (after < breaks.size) & (next_break <= t[1:])
             step[has_break & (step == 0)] = 3
         both = load[1:] & load[:-1]
-        if variable and both.any():
+        if variable and both.any() and "flight_mode" not in frame:
             gap_limit = GAP_FACTOR * float(np.median(np.diff(t)[both]))
             step[(np.diff(t) > gap_limit) & (step == 0)] = 4
 

@@ -49,7 +49,10 @@ def load_text(path) -> tuple[str, dict]:
         raise DataError(f"file not found: {path}")
     if path.is_dir():
         raise DataError(f"{path} is a folder; give a data file")
-    raw = path.read_bytes()
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DataError(f"cannot read {path}: {exc.strerror or exc}") from None
     if not raw.strip():
         raise DataError(f"{path.name} is empty")
     info: dict = {}

@@ -1,0 +1,184 @@
+"""The public Python API: read, fit, load, predict, endurance, validate.
+
+::
+
+    import dischargelab as dl
+    runs = [dl.read(p, columns="time_s=0,current_A=1,voltage_V=2,temperature_C=4")
+            for p in ("c10.csv", "1c.csv", "4c.csv")]
+    fit = dl.fit(runs)                       # model picked by evidence
+    fit.predict(current=6.0, cutoff=2.5).to_dict()["time_to_cutoff_s"]
+    fit.save("cell.json"); cell = dl.load("cell.json")
+    dl.endurance(dl.load("hacker-4100-4s-lifepo4"), "paper-table5").plot()
+
+The command line is this API plus printing; both use the same defaults.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from .discharge import Discharge
+from .errors import DataError
+from .model import Battery, load_battery
+
+#: Bootstrap refits stored by :func:`fit` (the draws of every later interval).
+DEFAULT_BOOTSTRAP = 100
+
+
+def read(path: str | Path, **options: Any) -> Discharge:
+    """Read one discharge from a file; the format is detected from the content.
+
+    Parameters
+    ----------
+    path : str or path-like
+        CSV/TSV/LabVIEW/DJI/dischargelab log, or a flight log where supported.
+    **options
+        Reader options of :func:`dischargelab.io.read_discharge` (``columns``,
+        ``current_A`` [A] for files without a current, ``sign``, ``units``,
+        ``segment``, ...).
+
+    Returns
+    -------
+    Discharge
+    """
+    from .io import read_discharge
+
+    frame, meta = read_discharge(path, **options)
+    return Discharge.from_frame(frame, meta, name=Path(path).name)
+
+
+def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *,
+        model: str = "auto", cells: int = 1, parallel: int = 1,
+        bootstrap: int = DEFAULT_BOOTSTRAP, fixed: dict | None = None,
+        bounds: dict | None = None, e0: float | None = None, paper_mode: bool = False,
+        use_rest: bool = True, seed: int = 0):
+    """Fit a battery model to one or several discharges (shared parameters).
+
+    Parameters
+    ----------
+    discharges : Discharge, path, or a sequence of them
+        Measurements of the same cell or pack at one or several currents.
+    model : str
+        ``"auto"`` (by evidence), ``"shepherd"``, ``"shepherd-thermal"`` or ``"ecm"``.
+    cells, parallel : int
+        Cells in series and strings in parallel of the measured pack.
+    bootstrap : int
+        Moving-block bootstrap refits kept for intervals (0: covariance only).
+    fixed : dict, optional
+        Parameters held fixed ``{name: value}`` (per cell, SI units in the name).
+    bounds : dict, optional
+        ``{name: (low, high)}`` bounds.
+    e0 : float, optional
+        Known E0 per cell [V] (shorthand for ``fixed={"E0_V": e0}``).
+    paper_mode : bool
+        Reproduce the paper's fit (``shepherd``, E0 given, current scale fitted).
+    use_rest : bool
+        Use the rest voltage before the load as a data point.
+    seed : int
+        Seed of the bootstrap.
+
+    Returns
+    -------
+    dischargelab.fit.FitResult
+        ``.parameters``, ``.ci95``, ``.warnings``, ``.predict(...)``, ``.save(path)``,
+        ``.report()``, ``.to_dict()``, ``.plot()``.
+    """
+    from .fit import fit_battery
+
+    items = discharges if isinstance(discharges, (list, tuple)) else [discharges]
+    if not items:
+        raise DataError("no discharges to fit")
+    curves = [(_as_discharge(d)).to_curve() for d in items]
+    fixed = dict(fixed or {})
+    if e0 is not None:
+        fixed["E0_V"] = float(e0)
+    return fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
+                       bounds=bounds, paper_mode=paper_mode, use_rest=use_rest,
+                       bootstrap=bootstrap, seed=seed, model=model)
+
+
+def load(source: str | Path | Battery) -> Battery:
+    """A battery from a battery file or a preset name.
+
+    Parameters
+    ----------
+    source : str, path-like or Battery
+        Battery file written by :func:`fit` / ``dischargelab fit -o``, or a preset
+        name (``dischargelab presets``).
+
+    Returns
+    -------
+    Battery
+        Immutable: ``with_pack(...)`` and ``dataclasses.replace`` return copies, so a
+        preset is never changed by its users.
+    """
+    return load_battery(source)
+
+
+def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int | None = None,
+              seed: int = 0, **options: Any):
+    """Fly a mission (TOML file or bundled mission name) and return its result.
+
+    Parameters
+    ----------
+    battery : Battery, preset name or battery-file path
+    mission : str or path-like
+        Mission file, or a bundled mission's name (``"paper-table5"``, ...).
+    draws : int, optional
+        Parameter draws for the 95 % interval (default: every stored bootstrap refit).
+    seed : int
+        Seed of the draws.
+    **options
+        ``cutoff_cell_V``, ``reserve_pct`` ... as :func:`dischargelab.mission.load_mission`.
+
+    Returns
+    -------
+    dischargelab.mission.MissionResult
+    """
+    from .mission import load_mission, run_mission
+
+    bat = load_battery(battery)
+    mis = load_mission(mission, battery=bat, **options)
+    if draws is None:
+        boot = bat.extra.get("bootstrap") or {}
+        draws = len(boot.get("samples", [])) or (100 if bat.covariance is not None else 0)
+    return run_mission(mis, draws=draws, seed=seed)
+
+
+def validate(battery: Battery | str | Path,
+             discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *,
+             cutoff: float | None = None):
+    """Compare predictions with measured discharges (endurance, voltage, interval coverage).
+
+    Parameters
+    ----------
+    battery : Battery, preset name or battery-file path
+    discharges : Discharge, path, or a sequence of them
+    cutoff : float, optional
+        Cutoff per cell [V]; default the chemistry's usual cutoff.
+
+    Returns
+    -------
+    list of dischargelab.validate.ValidationCase
+    """
+    from .predict import default_cutoff
+    from .validate import compare_discharge
+
+    bat = load_battery(battery)
+    cut = default_cutoff(bat, cutoff)["cutoff_cell_V"]
+    items = discharges if isinstance(discharges, (list, tuple)) else [discharges]
+    out = []
+    for d in items:
+        dis = _as_discharge(d)
+        out.append(compare_discharge(bat, dis.to_pandas(), dict(dis.meta), cut))
+    return out
+
+
+def _as_discharge(item) -> Discharge:
+    if isinstance(item, Discharge):
+        return item
+    if isinstance(item, (str, Path)):
+        return read(item)
+    raise DataError(f"expected a Discharge or a file path, got {type(item).__name__}")

@@ -1,0 +1,210 @@
+"""Battery settings for ArduPilot and PX4 derived from a fitted battery model.
+
+:func:`autopilot_params` flies the model at a stated load (the pack current the
+vehicle draws in normal flight, e.g. hover) and reads off the voltages at which
+a given reserve of flight time remains; every value carries a comment saying
+how it was derived. :meth:`AutopilotParams.write` writes the firmware's own
+parameter-file format: ArduPilot ``.param`` (``NAME,VALUE`` lines, ``#``
+comments, as Mission Planner and MAVProxy load them) or PX4/QGroundControl
+``.params`` (tab-separated ``vehicle component name value type`` lines, type 6
+for INT32 and 9 for REAL32).
+
+Voltages that the firmware compares with a *resting* (load-compensated)
+voltage are model rest voltages (zero current, every other state at rest):
+ArduPilot with ``BATT_FS_VOLTSRC = 1`` (sag compensated) and PX4 with
+``BAT1_R_INTERNAL`` set (the voltage plus internal resistance times current).
+
+References
+----------
+.. [1] ArduPilot parameter reference: BATT_CAPACITY [mAh], BATT_LOW_VOLT,
+   BATT_CRT_VOLT, BATT_ARM_VOLT [V], BATT_FS_VOLTSRC, MOT_BAT_VOLT_MAX,
+   MOT_BAT_VOLT_MIN [V] ("recommend 4.2 x cells" / "3.3 x cells").
+.. [2] PX4 parameter reference: BAT1_N_CELLS, BAT1_V_EMPTY, BAT1_V_CHARGED
+   [V per cell], BAT1_R_INTERNAL [ohm per cell], BAT1_CAPACITY [mAh].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SimulationError
+from .model import Battery, load_battery
+
+FIRMWARES = ("ardupilot", "px4")
+
+#: Default flight-time reserve at the low-voltage warning [s].
+DEFAULT_RESERVE_S = 120.0
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One parameter: name, value, unit, firmware type and how it was derived."""
+
+    name: str
+    value: float
+    unit: str
+    comment: str
+    integer: bool = False
+
+    def text(self) -> str:
+        """The value as the parameter file shows it."""
+        return str(int(round(self.value))) if self.integer else f"{self.value:.3f}".rstrip(
+            "0").rstrip(".")
+
+
+@dataclass
+class AutopilotParams:
+    """Derived settings for one firmware; ``write(path)`` writes its parameter file."""
+
+    firmware: str
+    settings: list[Setting]
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"firmware": self.firmware,
+                "parameters": {s.name: (int(round(s.value)) if s.integer else s.value)
+                               for s in self.settings},
+                "units": {s.name: s.unit for s in self.settings},
+                "derivation": {s.name: s.comment for s in self.settings},
+                "notes": list(self.notes)}
+
+    def to_pandas(self):
+        import pandas as pd
+
+        return pd.DataFrame([{"name": s.name, "value": s.value, "unit": s.unit,
+                              "derivation": s.comment} for s in self.settings])
+
+    def text(self) -> str:
+        """The parameter file's content."""
+        lines = [f"# Battery settings for {self.firmware} derived by dischargelab"]
+        lines += [f"# {n}" for n in self.notes]
+        if self.firmware == "px4":
+            lines += ["#", "# Vehicle-Id Component-Id Name Value Type"]
+            for s in self.settings:
+                lines.append(f"# {s.name}: {s.comment}")
+                lines.append(f"1\t1\t{s.name}\t{s.text()}\t{6 if s.integer else 9}")
+        else:
+            for s in self.settings:
+                lines.append(f"# {s.name} [{s.unit}]: {s.comment}")
+                lines.append(f"{s.name},{s.text()}")
+        return "\n".join(lines) + "\n"
+
+    def write(self, path, *, force: bool = False) -> Path:
+        """Write the parameter file atomically; refuses to replace a file unless ``force``."""
+        from .atomic import check_outputs, write_text
+
+        check_outputs([path], force=force)
+        return write_text(path, self.text())
+
+
+def autopilot_params(battery, *, firmware: str, cells: int, parallel: int | None = None,
+                     load_current_A: float | None = None, reserve_s: float = DEFAULT_RESERVE_S,
+                     critical_reserve_s: float | None = None, cutoff: float | None = None,
+                     ambient: float | None = None) -> AutopilotParams:
+    """Battery settings for ``firmware`` from the battery model.
+
+    Parameters
+    ----------
+    battery : Battery, preset name or battery-file path
+        The cell model (its pack configuration is replaced by ``cells``/``parallel``).
+    firmware : {"ardupilot", "px4"}
+    cells : int
+        Cells in series of the flight pack.
+    parallel : int, optional
+        Strings in parallel (default: as in the battery file).
+    load_current_A : float, optional
+        Pack current [A] of normal flight (hover/cruise) at which the reserve is
+        computed; default 1C of the pack's rated capacity.
+    reserve_s : float
+        Flight time [s] left at that load when the low-voltage warning fires.
+    critical_reserve_s : float, optional
+        Flight time [s] left at the critical level (default a third of ``reserve_s``).
+    cutoff : float, optional
+        Loaded cell voltage [V] at which the pack counts as empty (default by chemistry).
+    ambient : float, optional
+        Ambient temperature [degC] for thermal models.
+
+    Returns
+    -------
+    AutopilotParams
+    """
+    from .predict import default_cutoff
+    from .simulate import simulate_current
+
+    if firmware not in FIRMWARES:
+        raise SimulationError(f"firmware must be one of {', '.join(FIRMWARES)}, got {firmware!r}")
+    if cells < 1:
+        raise SimulationError(f"cells must be at least 1, got {cells}")
+    if not reserve_s > 0:
+        raise SimulationError(f"reserve_s must be a positive time [s], got {reserve_s}")
+    critical = reserve_s / 3.0 if critical_reserve_s is None else float(critical_reserve_s)
+    if not 0 < critical < reserve_s:
+        raise SimulationError("critical_reserve_s must be between 0 and reserve_s")
+    bat: Battery = load_battery(battery).with_pack(cells, parallel)
+    cut = default_cutoff(bat, cutoff)["cutoff_cell_V"]
+    capacity_mAh = bat.rated_capacity_Ah * 1000.0
+    load = bat.rated_capacity_Ah if load_current_A is None else float(load_current_A)
+    if not load > 0:
+        raise SimulationError(f"load_current_A must be a positive pack current, got {load}")
+    sim = simulate_current(bat, load, cutoff_cell_V=cut, ambient_C=ambient)
+    total = sim.time_to_cutoff_s
+    if not total > reserve_s:
+        raise SimulationError(f"at {load:g} A the pack reaches {cut:g} V/cell after {total:.0f} s, "
+                              f"less than the {reserve_s:g} s reserve; lower the load or reserve")
+
+    def rest_at(t_s):
+        q = float(np.interp(t_s, sim.time_s, sim.charge_Ah))
+        return float(bat.voltage(0.0, q, temperature_C=ambient))
+
+    def loaded_at(t_s):
+        return float(np.interp(t_s, sim.time_s, sim.voltage_V))
+
+    full_rest = float(bat.voltage(0.0, 0.0, temperature_C=ambient))
+    empty_rest = rest_at(total)
+    low_rest, crit_rest = rest_at(total - reserve_s), rest_at(total - critical)
+    # resistance per series element at half charge: DC drop at the load / load
+    q_half = 0.5 * float(sim.charge_Ah[-1])
+    r_pack = (float(bat.voltage(0.0, q_half, temperature_C=ambient))
+              - float(bat.voltage(load, q_half, temperature_C=ambient))) / load
+    r_cell = r_pack / cells
+    how = (f"{bat.model} model, {cells}S{bat.strings_parallel}P, at {load:g} A "
+           f"({load / bat.rated_capacity_Ah:.2g}C): {total / 60:.1f} min to {cut:g} V/cell")
+    notes = [how, f"reserve {reserve_s:g} s at the low level, {critical:g} s at the critical level"]
+    if firmware == "ardupilot":
+        settings = [
+            Setting("BATT_CAPACITY", capacity_mAh, "mAh", "rated pack capacity", True),
+            Setting("BATT_FS_VOLTSRC", 1, "", "compare failsafe voltages with the sag-compensated "
+                    "(resting) voltage, so load peaks do not trigger false failsafes", True),
+            Setting("BATT_LOW_VOLT", low_rest, "V", f"resting pack voltage when {reserve_s:g} s "
+                    f"of flight at {load:g} A remain"),
+            Setting("BATT_CRT_VOLT", crit_rest, "V", f"resting pack voltage when {critical:g} s "
+                    f"of flight at {load:g} A remain"),
+            Setting("BATT_ARM_VOLT", rest_at(max(total - 3.0 * reserve_s, 0.0)), "V",
+                    f"resting pack voltage with three reserves ({3 * reserve_s:g} s) of flight "
+                    "left: refuse to arm below it"),
+            Setting("MOT_BAT_VOLT_MAX", full_rest, "V", "resting pack voltage when full (thrust "
+                    "scaling upper limit)"),
+            Setting("MOT_BAT_VOLT_MIN", cut * cells, "V", f"loaded pack voltage when empty "
+                    f"({cut:g} V/cell x {cells}; thrust scaling lower limit)"),
+        ]
+    else:
+        settings = [
+            Setting("BAT1_N_CELLS", cells, "", "cells in series", True),
+            Setting("BAT1_CAPACITY", capacity_mAh, "mAh", "rated pack capacity"),
+            Setting("BAT1_V_CHARGED", full_rest / cells, "V", "resting cell voltage when full"),
+            Setting("BAT1_V_EMPTY", empty_rest / cells, "V", f"resting cell voltage when the "
+                    f"pack reaches {cut:g} V/cell under {load:g} A (load-compensated with "
+                    "BAT1_R_INTERNAL)"),
+            Setting("BAT1_R_INTERNAL", r_cell, "ohm", f"DC resistance per series cell at half "
+                    f"charge and {load:g} A ({r_pack * 1000:.1f} mOhm for the pack)"),
+        ]
+        notes.append(f"low/critical thresholds (BAT_LOW_THR/BAT_CRIT_THR) as charge fractions: "
+                     f"{reserve_s * load / 3600 / (bat.rated_capacity_Ah):.3f} / "
+                     f"{critical * load / 3600 / (bat.rated_capacity_Ah):.3f}")
+    return AutopilotParams(firmware, settings, notes)
+
+
+__all__ = ["autopilot_params", "AutopilotParams", "Setting", "FIRMWARES"]

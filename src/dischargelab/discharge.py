@@ -1,0 +1,123 @@
+"""The one type for a measured discharge: :class:`Discharge`.
+
+Every reader's output becomes a ``Discharge`` (time, voltage, current,
+temperature, per-cell voltages, the rest voltage before the load, where it came
+from); fitting and validation take it directly.
+
+Sign convention: discharge current positive; times from the load start [s].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import DataError
+
+
+@dataclass(frozen=True, eq=False)
+class Discharge:
+    """One measured discharge at pack level.
+
+    Attributes
+    ----------
+    time_s, voltage_V, current_A : numpy.ndarray
+        Samples [s] (0 at load start), pack voltage [V], pack current [A]
+        (discharge positive).
+    temperature_C : numpy.ndarray or None
+        Logged cell temperature [degC], when the source has one.
+    rest_voltage_V : float or None
+        Pack voltage at rest just before the load step [V].
+    name : str
+        Label for tables and plots (file name by default).
+    meta : dict
+        What the reader found and inferred (``source``, ``format``, ``notes``,
+        ``summary``, ...).
+    extra : dict
+        Other logged columns by canonical name (``cell1_V``, ``soc_pct``, ...).
+    """
+
+    time_s: np.ndarray
+    voltage_V: np.ndarray
+    current_A: np.ndarray
+    temperature_C: np.ndarray | None = None
+    rest_voltage_V: float | None = None
+    name: str = ""
+    meta: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_frame(cls, frame, meta: dict | None = None, name: str = "") -> Discharge:
+        """Build from a reader's canonical DataFrame and meta dict."""
+        meta = dict(meta or {})
+        missing = [c for c in ("time_s", "voltage_V", "current_A") if c not in frame]
+        if missing:
+            raise DataError(f"data has no {', '.join(missing)} column; files without a current "
+                            "column need a constant current (current_A=...)")
+        rest = (meta.get("rest_sample") or {}).get("voltage_V")
+        temp = frame["temperature_C"].to_numpy(float) if "temperature_C" in frame else None
+        if temp is not None and not np.all(np.isfinite(temp)):
+            temp = None
+        known = {"time_s", "voltage_V", "current_A", "temperature_C"}
+        extra = {c: frame[c].to_numpy() for c in frame.columns if c not in known}
+        label = name or str(meta.get("name") or "")
+        if not label and meta.get("source"):
+            from pathlib import Path
+
+            label = Path(str(meta["source"])).name
+        return cls(frame["time_s"].to_numpy(float), frame["voltage_V"].to_numpy(float),
+                   frame["current_A"].to_numpy(float), temp,
+                   None if rest is None else float(rest), label, meta, extra)
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the load start to the last sample [s]."""
+        return float(self.time_s[-1] - self.time_s[0]) if self.time_s.size else 0.0
+
+    @property
+    def charge_Ah(self) -> float:
+        """Charge delivered [Ah] (trapezoid over the samples)."""
+        if self.time_s.size < 2:
+            return 0.0
+        return float(np.sum(0.5 * (self.current_A[1:] + self.current_A[:-1])
+                            * np.diff(self.time_s)) / 3600.0)
+
+    @property
+    def mean_current_A(self) -> float:
+        """Time-averaged current [A]."""
+        return self.charge_Ah * 3600.0 / self.duration_s if self.duration_s > 0 else 0.0
+
+    def to_curve(self):
+        """The fitter's input (:class:`dischargelab.fit.Curve`)."""
+        from .fit import Curve
+
+        return Curve(self.time_s, self.voltage_V, self.current_A, name=self.name,
+                     rest_voltage_V=self.rest_voltage_V, meta=dict(self.meta),
+                     temperature_C=self.temperature_C)
+
+    def to_pandas(self):
+        """Samples as a DataFrame with canonical column names."""
+        import pandas as pd
+
+        cols = {"time_s": self.time_s, "voltage_V": self.voltage_V, "current_A": self.current_A}
+        if self.temperature_C is not None:
+            cols["temperature_C"] = self.temperature_C
+        cols.update(self.extra)
+        return pd.DataFrame(cols)
+
+    def to_dict(self) -> dict:
+        """Summary: name, source, samples, duration, charge, mean current, notes."""
+        return {"name": self.name, "source": self.meta.get("source"),
+                "format": self.meta.get("format"), "samples": int(self.time_s.size),
+                "duration_s": self.duration_s, "charge_Ah": self.charge_Ah,
+                "mean_current_A": self.mean_current_A,
+                "rest_voltage_V": self.rest_voltage_V,
+                "has_temperature": self.temperature_C is not None,
+                "summary": self.meta.get("summary"), "notes": list(self.meta.get("notes", []))}
+
+    def plot(self, ax=None):
+        """Voltage (and current on a second axis) against time; returns the Axes."""
+        from .plot import plot_discharge
+
+        return plot_discharge(self, ax=ax)

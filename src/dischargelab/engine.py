@@ -1,0 +1,516 @@
+"""The one time-stepping engine: flies load steps through any model family.
+
+Every simulation in dischargelab (constant current or power, missions, logged
+load profiles, parameter draws for intervals) goes through :func:`run`. It
+advances the family's states step by step, for all parameter draws at once
+(vectorised), until each draw reaches the cutoff voltage, a charge reserve, a
+power it cannot deliver, or the end of the profile. Every loop is bounded: a
+step limit raises :class:`~dischargelab.errors.SimulationError` rather than
+hanging.
+
+Stepping
+--------
+Over one time step the load is held: a current step at its current; a power
+step at the current that delivers the power (Heun's method: the mean of the
+currents at the start and at the predicted end). Charge and lowpass states are
+advanced exactly for that current, the thermal state with Heun's method. The
+instant a stop condition is crossed is then located by bisection on the length
+of the last step (exact to ~1e-9 of the step for charge/lowpass states), so the
+time to cutoff does not depend on the step size for the paper's model.
+
+Constant power: every family's terminal voltage is affine in the instantaneous
+current for a given state, ``V = a - b i``; the low-current root of
+``(a - b i) i = P`` is ``i = 2P / (a + sqrt(a^2 - 4bP))``; where
+``a^2 < 4bP`` the battery cannot deliver the power ("power limit").
+
+Sign convention: current and power positive on discharge; the pack carries
+``I`` and each of its ``p`` strings ``I/p``; ``V_pack = s V_cell``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import SimulationError
+
+STEP_KINDS = ("current", "power", "rest", "profile")
+
+#: Engine time steps per step that runs until the cutoff (the answer does not
+#: depend on it for charge/lowpass states; it sets the thermal integration error).
+STEPS_PER_DISCHARGE = 100
+
+#: Longest engine time step [s] (thermal and RC dynamics are slower than this).
+MAX_DT_S = 60.0
+
+#: Hard bound on engine time steps in one run (memory and time stay bounded).
+MAX_ENGINE_STEPS = 200_000
+
+#: Bisection iterations that locate a stop inside a time step (2^-34 of the step).
+BISECTION_ITERATIONS = 34
+
+#: Default ambient temperature [degC] when neither the battery nor the call gives one.
+DEFAULT_AMBIENT_C = 25.0
+
+ENDED = ("cutoff", "power limit", "reserve", "end")
+
+
+@dataclass(frozen=True)
+class Step:
+    """One load step (PyBaMM-experiment style).
+
+    Parameters
+    ----------
+    kind : {"current", "power", "rest", "profile"}
+    value : float
+        Pack current [A] or pack electric power [W] (discharge positive); ignored
+        for rest and profile.
+    duration_s : float or None
+        Duration [s]; None runs until the cutoff (not allowed for rest).
+    name : str
+        Label (flight phase name, ...).
+    profile_time_s, profile_current_A : tuple of float
+        For ``kind="profile"``: sample times [s from the step start] and pack
+        currents [A]; each current is held until the next sample time.
+    """
+
+    kind: str
+    value: float = 0.0
+    duration_s: float | None = None
+    name: str = ""
+    profile_time_s: tuple = ()
+    profile_current_A: tuple = ()
+
+    def __post_init__(self):
+        if self.kind not in STEP_KINDS:
+            raise SimulationError(f"step kind must be one of {', '.join(STEP_KINDS)}, "
+                                  f"got {self.kind!r}")
+        label = self.name or self.kind
+        if not np.isfinite(self.value) or (self.kind in ("current", "power") and self.value < 0):
+            raise SimulationError(f"step {label!r}: load must be a finite value >= 0 "
+                                  f"(discharge positive), got {self.value}")
+        if self.duration_s is None and self.kind == "rest":
+            raise SimulationError("a rest step needs a duration")
+        if self.duration_s is not None and not (self.duration_s >= 0 and
+                                                np.isfinite(self.duration_s)):
+            raise SimulationError(f"step {label!r}: duration must be >= 0 s, "
+                                  f"got {self.duration_s}")
+        if self.kind == "profile":
+            t = np.asarray(self.profile_time_s, dtype=float)
+            i = np.asarray(self.profile_current_A, dtype=float)
+            if t.size < 1 or t.shape != i.shape or not np.all(np.isfinite(t)) or \
+                    not np.all(np.isfinite(i)) or np.any(np.diff(t) <= 0) or t[0] < 0:
+                raise SimulationError(f"step {label!r}: a profile needs increasing times >= 0 "
+                                      "and finite currents of the same length")
+
+    def describe(self) -> str:
+        """Human-readable step, e.g. 'discharge at 20 A for 60 s'."""
+        if self.kind == "rest":
+            load = "rest"
+        elif self.kind == "current":
+            load = f"discharge at {self.value:g} A"
+        elif self.kind == "power":
+            load = f"hold {self.value:g} W"
+        else:
+            load = f"logged profile of {len(self.profile_time_s)} samples"
+        until = "until cutoff" if self.duration_s is None else f"for {self.duration_s:g} s"
+        return f"{load} {until}"
+
+    @property
+    def end_s(self) -> float | None:
+        """Duration [s]: the given one, or the last profile time for a profile."""
+        if self.duration_s is not None:
+            return float(self.duration_s)
+        if self.kind == "profile":
+            return float(self.profile_time_s[-1])
+        return None
+
+
+@dataclass
+class StepSummary:
+    """Per-draw outcome of one step: arrays of shape (draws,)."""
+
+    start_s: np.ndarray
+    end_s: np.ndarray
+    charge_end_Ah: np.ndarray  # pack
+    min_voltage_V: np.ndarray  # pack
+    peak_temperature_C: np.ndarray
+    energy_Wh: np.ndarray
+
+
+@dataclass
+class EngineResult:
+    """Outcome of :func:`run`.
+
+    Per draw (arrays of shape (draws,)): ``end_s``, ``ended_by`` (str array of
+    :data:`ENDED`), ``charge_end_Ah`` (pack), ``peak_temperature_C``,
+    ``energy_Wh``; ``steps`` per-step summaries. With ``record=True`` (one draw)
+    also the time series ``time_s``, ``current_A``, ``voltage_V``, ``charge_Ah``,
+    ``temperature_C`` and ``step`` (pack level).
+    """
+
+    end_s: np.ndarray
+    ended_by: np.ndarray
+    charge_end_Ah: np.ndarray
+    peak_temperature_C: np.ndarray
+    energy_Wh: np.ndarray
+    steps: list[StepSummary]
+    series: dict = field(default_factory=dict)
+    final_state: dict = field(default_factory=dict)
+
+
+class _Pack:
+    """Cell family + parameters (arrays over draws) + pack configuration."""
+
+    def __init__(self, family, params: dict, series: int, parallel: int, ambient_C):
+        self.family = family
+        self.p = params
+        self.s = float(series)
+        self.par = float(parallel)
+        self.ambient = ambient_C
+        self.kinds = {st.name: st for st in family.states}
+
+    def voltage(self, state, current_pack):
+        return self.s * self.family.voltage(self.p, state, current_pack / self.par)
+
+    def affine(self, state):
+        """(a, b): pack voltage = a - b I for the pack current I at this state."""
+        v0 = self.family.voltage(self.p, state, 0.0)
+        v1 = self.family.voltage(self.p, state, 1.0)
+        with np.errstate(invalid="ignore"):  # -inf - -inf beyond the capacity: NaN (no power)
+            return self.s * v0, self.s * (v0 - v1) / self.par
+
+    def power_current(self, state, power):
+        """Pack current delivering ``power`` [W]; NaN where it cannot be delivered."""
+        a, b = self.affine(state)
+        disc = a * a - 4.0 * b * power
+        with np.errstate(invalid="ignore", divide="ignore"):
+            root = np.sqrt(np.where(disc >= 0, disc, np.nan))
+            i = 2.0 * power / (a + root)
+        return np.where(np.isfinite(a) & (a > 0), i, np.nan)
+
+    def advance(self, state, current_pack, dt):
+        """States after ``dt`` [s] (scalar or per draw) at constant pack current."""
+        i = current_pack / self.par
+        new = {}
+        for name, st in self.kinds.items():
+            x = state[name]
+            if st.kind == "charge":
+                new[name] = x + i * dt / 3600.0
+            elif st.kind == "lowpass":
+                tau = np.asarray(self.p[st.tau], dtype=float)
+                with np.errstate(divide="ignore", over="ignore", under="ignore"):
+                    decay = np.where(tau > 0, np.exp(-dt / np.where(tau > 0, tau, 1.0)), 0.0)
+                new[name] = i + (x - i) * decay
+        if any(st.kind == "thermal" for st in self.kinds.values()):
+            for name, st in self.kinds.items():
+                if st.kind == "thermal":
+                    t0 = state[name]
+                    d0 = self._dtemp(state, i, t0)
+                    pred = dict(new)
+                    pred[name] = t0 + dt * d0
+                    d1 = self._dtemp(pred, i, pred[name])
+                    new[name] = t0 + 0.5 * dt * (d0 + d1)
+        return new
+
+    def _dtemp(self, state, i, temperature):
+        heat = self.family.heat_W(self.p, state, i)
+        heat = np.where(np.isfinite(heat), heat, 0.0)
+        return (heat - (temperature - self.ambient) / self.p["Rth_K_per_W"]) / self.p["Cth_J_per_K"]
+
+    def temperature(self, state):
+        return self.family.temperature_C(state, self.ambient)
+
+
+def run(family, params: dict, steps, *, cutoff_pack_V: float, cells_series: int = 1,
+        strings_parallel: int = 1, ambient_C: float = DEFAULT_AMBIENT_C,
+        initial_charge_Ah=0.0, initial_temperature_C=None, reserve_charge_Ah=None,
+        record: bool = False, steps_per_discharge: int = STEPS_PER_DISCHARGE,
+        max_engine_steps: int = MAX_ENGINE_STEPS, initial_state=None) -> EngineResult:
+    """Fly ``steps`` for every parameter draw until each stops.
+
+    Parameters
+    ----------
+    family : models.Family
+    params : dict
+        ``{name: value or array of draws}`` per cell.
+    steps : sequence of Step
+    cutoff_pack_V : float
+        Pack cutoff voltage [V].
+    cells_series, strings_parallel : int
+        Pack configuration.
+    ambient_C : float
+        Ambient temperature [degC] (thermal families).
+    initial_charge_Ah : float or array
+        Pack charge already removed at the start [Ah].
+    initial_temperature_C : float or None
+        Cell temperature at the start [degC]; default the ambient.
+    reserve_charge_Ah : float, array or None
+        Stop ("reserve") when the pack charge removed reaches this [Ah].
+    record : bool
+        Keep the time series (first draw only).
+    steps_per_discharge : int
+        Engine steps for a step that runs until the cutoff.
+    max_engine_steps : int
+        Bound on the total number of engine steps (SimulationError beyond it).
+    initial_state : dict or None
+        Cell states per draw to start from (e.g. ``final_state`` of an earlier
+        run, to continue a flight); replaces ``initial_charge_Ah`` and
+        ``initial_temperature_C``.
+
+    Returns
+    -------
+    EngineResult
+    """
+    params = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in params.items()}
+    m = int(np.broadcast(*params.values()).size) if params else 1
+    params = {k: np.broadcast_to(v, (m,)) for k, v in params.items()}
+    pack = _Pack(family, params, cells_series, strings_parallel, float(ambient_C))
+    temp0 = float(ambient_C if initial_temperature_C is None else initial_temperature_C)
+    q0 = np.broadcast_to(np.asarray(initial_charge_Ah, dtype=float), (m,)) / pack.par
+    state = family.initial_state(params, charge_Ah=q0.copy(), temperature_C=temp0)
+    if initial_state is not None:
+        state = {name: np.broadcast_to(np.asarray(initial_state[name], dtype=float),
+                                       (m,)).copy() for name in state}
+    reserve = None if reserve_charge_Ah is None else \
+        np.broadcast_to(np.asarray(reserve_charge_Ah, dtype=float), (m,))
+    active = np.ones(m, bool)
+    ended = np.full(m, "end", dtype=object)
+    t_now = np.zeros(m)
+    energy = np.zeros(m)
+    peak_t = np.asarray(pack.temperature(state), dtype=float) * np.ones(m)
+    summaries: list[StepSummary] = []
+    rec = _Recorder(record)
+    budget = [int(max_engine_steps)]
+    for k, st in enumerate(steps):
+        start = t_now.copy()
+        vmin = np.full(m, np.inf)
+        e_start = energy.copy()
+        if active.any():
+            state = _run_step(pack, st, k, state, active, ended, t_now, energy, vmin, peak_t,
+                              cutoff_pack_V, reserve, steps_per_discharge, rec, budget)
+        summaries.append(StepSummary(
+            start_s=start, end_s=t_now.copy(), charge_end_Ah=state["charge_Ah"] * pack.par,
+            min_voltage_V=vmin, peak_temperature_C=peak_t.copy(), energy_Wh=energy - e_start))
+    return EngineResult(end_s=t_now, ended_by=ended.astype(str),
+                        charge_end_Ah=state["charge_Ah"] * pack.par, peak_temperature_C=peak_t,
+                        energy_Wh=energy, steps=summaries, series=rec.arrays(),
+                        final_state=state)
+
+
+class _Recorder:
+    def __init__(self, on: bool):
+        self.on = on
+        self.rows = {key: [] for key in ("time_s", "current_A", "voltage_V", "charge_Ah",
+                                          "temperature_C", "step")}
+
+    def add(self, t, i, v, q, temp, k):
+        if self.on:
+            for key, val in zip(self.rows, (t, i, v, q, temp, k)):
+                self.rows[key].append(float(np.asarray(val).ravel()[0]))
+
+    def arrays(self):
+        if not self.on:
+            return {}
+        out = {k: np.asarray(v, dtype=float) for k, v in self.rows.items()}
+        out["step"] = out["step"].astype(int)
+        return out
+
+
+def _current_at(pack, st, state, t_in_step):
+    """Pack current for step ``st`` at ``state`` (NaN where a power cannot be delivered)."""
+    if st.kind == "rest":
+        return np.zeros_like(state["charge_Ah"])
+    if st.kind == "current":
+        return np.full_like(state["charge_Ah"], float(st.value))
+    if st.kind == "power":
+        return pack.power_current(state, float(st.value))
+    t = np.asarray(st.profile_time_s, dtype=float)
+    idx = np.clip(np.searchsorted(t, t_in_step, side="right"), 0, t.size - 1)
+    return np.asarray(st.profile_current_A, dtype=float)[idx] * np.ones_like(state["charge_Ah"])
+
+
+def _advance_step(pack, st, state, i0, dt):
+    """States and current after ``dt``; power steps use the Heun mean current."""
+    if st.kind != "power":
+        return pack.advance(state, i0, dt), i0
+    pred = pack.advance(state, i0, dt)
+    i1 = pack.power_current(pred, float(st.value))
+    i_mean = np.where(np.isfinite(i1), 0.5 * (i0 + i1), i0)
+    new = pack.advance(state, i_mean, dt)
+    return new, pack.power_current(new, float(st.value))
+
+
+def _take(state, mask):
+    return {k: v[mask] for k, v in state.items()}
+
+
+def _put(state, mask, sub):
+    for k in state:
+        state[k] = state[k].copy()
+        state[k][mask] = sub[k]
+
+
+def _dt_for(pack, st, state, steps_per_discharge):
+    """Engine step [s] per draw (each draw's own, so batching does not change results)."""
+    m = state["charge_Ah"].size
+    end = st.end_s
+    if st.kind == "profile":
+        t = np.asarray(st.profile_time_s, dtype=float)
+        gaps = np.diff(np.r_[0.0, t])
+        typical = float(np.median(gaps[gaps > 0])) if (gaps > 0).any() else 1.0
+        return np.full(m, min(MAX_DT_S, max(typical, 1e-3)))
+    if st.kind == "rest":
+        return np.full(m, min(MAX_DT_S, max(end / 50.0, 1e-3)))
+    cap = np.asarray(pack.family.capacity_Ah(pack.p, state), dtype=float) * pack.par
+    left = np.maximum(cap - state["charge_Ah"] * pack.par, cap * 1e-3)
+    if st.kind == "current":
+        i = np.full(m, max(float(st.value), 1e-9))
+    else:
+        a, _ = pack.affine(state)
+        i = float(st.value) / np.maximum(np.where(np.isfinite(a), a, 1.0), 1e-9)
+        i = np.maximum(i, 1e-9)
+    horizon = left * 3600.0 / i
+    if end is not None:
+        horizon = np.minimum(horizon, end)
+    return np.clip(horizon / steps_per_discharge, 1e-3, MAX_DT_S)
+
+
+def _run_step(pack, st, k, state, active, ended, t_now, energy, vmin, peak_t, cutoff, reserve,
+              steps_per_discharge, rec, budget):
+    """Advance the active draws through one step, in place; returns the new state."""
+    end = st.end_s
+    t_in = np.zeros(t_now.size)
+    dt = _dt_for(pack, st, state, steps_per_discharge)
+    running = active.copy()
+    if end is not None and end <= 0:
+        return state
+    i_now = _current_at(pack, st, state, t_in)
+    v_now = pack.voltage(state, i_now)
+    # stop at once where the step cannot start (power limit / below cutoff / reserve reached)
+    _check_start(st, running, active, ended, i_now, v_now, state, pack, cutoff, reserve)
+    vmin[running] = np.minimum(vmin[running], v_now[running])
+    rec.add(t_now, i_now, v_now, state["charge_Ah"] * pack.par, pack.temperature(state), k)
+    while running.any():
+        budget[0] -= 1
+        if budget[0] < 0:
+            raise SimulationError(
+                "the simulation did not end within its step limit: the model never reaches "
+                "the cutoff under this load (check the cutoff voltage and the battery's "
+                "capacity parameter)")
+        idx = running
+        h = dt.copy()
+        if st.kind == "profile":
+            t = np.asarray(st.profile_time_s, dtype=float)
+            nxt = t[np.clip(np.searchsorted(t, t_in, side="right"), 0, t.size - 1)]
+            h = np.where(nxt > t_in, np.minimum(nxt - t_in, dt), dt)
+        if end is not None:
+            h = np.minimum(h, end - t_in)
+        sub = _take(state, idx)
+        p_sub = {kk: v[idx] for kk, v in pack.p.items()}
+        sub_pack = _SubPack(pack, p_sub)
+        i0 = _current_at(sub_pack, st, sub, t_in[idx])
+        new, i1 = _advance_step(sub_pack, st, sub, i0, h[idx])
+        v1 = sub_pack.voltage(new, i1)
+        stop = _stop_reason(st, sub_pack, new, i1, v1, cutoff,
+                            None if reserve is None else reserve[idx])
+        crossed = stop != ""
+        if crossed.any():
+            frac = _bisect(sub_pack, st, sub, i0, h[idx], crossed, cutoff,
+                           None if reserve is None else reserve[idx])
+            h_idx = h[idx].copy()
+            h_idx[crossed] = frac[crossed] * h_idx[crossed]
+            cross_pack = _SubPack(pack, {kk: v[crossed] for kk, v in p_sub.items()})
+            new_c, i1_c = _advance_step(cross_pack, st, _take(sub, crossed), i0[crossed],
+                                        h_idx[crossed])
+            _put(new, crossed, new_c)
+            i1 = i1.copy()
+            i1[crossed] = np.where(np.isfinite(i1_c), i1_c, i0[crossed])
+            v1 = sub_pack.voltage(new, i1)
+            v1 = np.where(crossed & (stop == "cutoff"), cutoff, v1)
+            h[idx] = h_idx
+        # bookkeeping
+        v0 = sub_pack.voltage(sub, i0)
+        p0 = np.where(np.isfinite(i0) & np.isfinite(v0), i0 * v0, 0.0)
+        p1 = np.where(np.isfinite(i1) & np.isfinite(v1), i1 * v1, 0.0)
+        energy[idx] += 0.5 * (p0 + p1) * h[idx] / 3600.0
+        t_now[idx] += h[idx]
+        t_in[idx] += h[idx]
+        _put(state, idx, new)
+        vmin_idx = vmin[idx]
+        vmin[idx] = np.minimum(vmin_idx, np.where(np.isfinite(v1), v1, cutoff))
+        peak_t[idx] = np.maximum(peak_t[idx], sub_pack.temperature(new))
+        rec.add(t_now, i1, v1, state["charge_Ah"] * pack.par, pack.temperature(state), k)
+        done = np.zeros(t_now.size, bool)
+        done_idx = np.flatnonzero(idx)
+        stopped = done_idx[crossed]
+        ended[stopped] = stop[crossed]
+        active[stopped] = False
+        done[stopped] = True
+        if end is not None:
+            finished = done_idx[(t_in[idx] >= end - 1e-9 * max(end, 1.0)) & ~crossed]
+            done[finished] = True
+        running &= ~done
+    return state
+
+
+class _SubPack(_Pack):
+    """The same pack restricted to a subset of draws."""
+
+    def __init__(self, pack: _Pack, params: dict):
+        self.family, self.p, self.s, self.par = pack.family, params, pack.s, pack.par
+        self.ambient, self.kinds = pack.ambient, pack.kinds
+
+
+def _check_start(st, running, active, ended, i_now, v_now, state, pack, cutoff, reserve):
+    if st.kind == "power":
+        bad = running & ~np.isfinite(i_now)
+        ended[bad] = "power limit"
+        active[bad] = False
+        running &= ~bad
+    if st.kind != "rest":
+        low = running & ~(v_now > cutoff)
+        ended[low] = "cutoff"
+        active[low] = False
+        running &= ~low
+    if reserve is not None and st.kind != "rest":
+        out = running & (state["charge_Ah"] * pack.par >= reserve)
+        ended[out] = "reserve"
+        active[out] = False
+        running &= ~out
+
+
+def _stop_reason(st, pack, state, current, voltage, cutoff, reserve):
+    """'' / 'cutoff' / 'power limit' / 'reserve' per draw after a step."""
+    out = np.full(voltage.shape, "", dtype=object)
+    if st.kind == "rest":
+        return out
+    if reserve is not None:
+        out[state["charge_Ah"] * pack.par >= reserve] = "reserve"
+    out[~(voltage > cutoff)] = "cutoff"
+    if st.kind == "power":
+        out[~np.isfinite(current)] = "power limit"
+    return out
+
+
+def _bisect(pack, st, state, i0, h, crossed, cutoff, reserve):
+    """Fraction of the step at which each crossed draw stops (bisection, bounded)."""
+    lo = np.zeros(h.size)
+    hi = np.ones(h.size)
+    sel = crossed
+    sub = _take(state, sel)
+    i_sub = i0[sel]
+    res = None if reserve is None else reserve[sel]
+    sub_pack = _SubPack(pack, {k: v[sel] for k, v in pack.p.items()})
+    lo_s, hi_s = lo[sel], hi[sel]
+    for _ in range(BISECTION_ITERATIONS):
+        mid = 0.5 * (lo_s + hi_s)
+        new, i1 = _advance_step(sub_pack, st, sub, i_sub, mid * h[sel])
+        v1 = sub_pack.voltage(new, i1)
+        gone = _stop_reason(st, sub_pack, new, i1, v1, cutoff, res) != ""
+        hi_s = np.where(gone, mid, hi_s)
+        lo_s = np.where(gone, lo_s, mid)
+    out = np.ones(h.size)
+    out[sel] = hi_s
+    return out

@@ -1,0 +1,141 @@
+"""Predict a constant-current or constant-power discharge with its 95 % interval.
+
+:func:`predict` is what ``dischargelab predict`` and ``Battery.predict`` run: the
+simulation (any model family, one engine), the interval from the stored
+parameter draws plus the model's own error (:mod:`dischargelab.uncertainty`), and
+the extrapolation warning — the same everywhere.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .errors import SimulationError
+from .model import Battery, load_battery
+
+
+@dataclass
+class Prediction:
+    """A predicted discharge: the simulation, its interval and warnings.
+
+    ``to_dict()`` is exactly the ``predict --json`` document (``time_to_cutoff_s``,
+    ``capacity_Ah``, ``energy_Wh``, ``interval95``, ``warnings``, ...).
+    """
+
+    simulation: object
+    interval: dict | None
+    warnings: list = field(default_factory=list)
+
+    @property
+    def time_to_cutoff_s(self) -> float:
+        """Time to the cutoff [s]."""
+        return self.simulation.time_to_cutoff_s
+
+    def to_dict(self) -> dict:
+        out = self.simulation.to_dict()
+        if self.interval is not None:
+            out["interval95"] = {key: list(self.interval[key]) for key in
+                                 ("time_to_cutoff_s", "capacity_Ah", "energy_Wh")
+                                 if key in self.interval}
+            for key, value in self.interval.items():
+                if key not in ("time_to_cutoff_s", "capacity_Ah", "energy_Wh"):
+                    out["interval95"][key] = value
+            if "draws" in self.interval and "failed" in self.interval:
+                out["interval95"]["bootstrap_draws"] = (self.interval["draws"]
+                                                        - self.interval["failed"])
+        out["warnings"] = list(self.warnings)
+        return out
+
+    def to_pandas(self):
+        """Time series of the predicted discharge."""
+        return self.simulation.to_pandas()
+
+    def plot(self, ax=None, **kwargs):
+        """Voltage against time with the cutoff line; returns the Axes."""
+        ax = self.simulation.plot(ax=ax, **kwargs)
+        sim = self.simulation
+        ax.axhline(sim.cutoff_pack_V, color="0.4", ls="--", lw=0.8)
+        ax.set_title(f"{sim.steps[0].describe()}: {sim.time_to_cutoff_s / 60:.1f} min to "
+                     f"{sim.cutoff_pack_V:.2f} V", fontsize=10)
+        return ax
+
+
+def predict(battery: Battery | str, *, current: float | None = None, c_rate: float | None = None,
+            power: float | None = None, cutoff: float | None = None,
+            cutoff_pack: float | None = None, soc: float = 100.0, ambient: float | None = None,
+            interval: bool = True) -> Prediction:
+    """Constant-current or constant-power discharge until the cutoff.
+
+    Parameters
+    ----------
+    battery : Battery, preset name or battery-file path
+    current : float, optional
+        Constant pack current [A].
+    c_rate : float, optional
+        Current as a multiple of the rated pack capacity [1/h].
+    power : float, optional
+        Constant pack power [W]. Give exactly one of current, c_rate, power.
+    cutoff, cutoff_pack : float, optional
+        Cutoff per cell or per pack [V]; default the chemistry's usual cutoff.
+    soc : float
+        State of charge at the start [%] (100 = full).
+    ambient : float, optional
+        Ambient temperature [degC] (thermal families; default the fitted data's).
+    interval : bool
+        Add the 95 % interval (parameter draws plus model error).
+
+    Returns
+    -------
+    Prediction
+    """
+    from .simulate import simulate_current, simulate_power
+    from .uncertainty import simulation_interval
+
+    bat: Battery = load_battery(battery)
+    chosen = [x is not None for x in (current, c_rate, power)]
+    if sum(chosen) != 1:
+        raise SimulationError("give exactly one load: current (A), c_rate or power (W)")
+    cut = default_cutoff(bat, cutoff, cutoff_pack)
+    if not 0 < soc <= 100:
+        raise SimulationError(f"soc must be in (0, 100] %, got {soc}")
+    q0 = (1.0 - soc / 100.0) * bat.capacity_Ah
+    if power is not None:
+        def run(b):
+            return simulate_power(b, power, initial_charge_Ah=q0, ambient_C=ambient, **cut)
+    else:
+        amps = current if current is not None else c_rate * bat.rated_capacity_Ah
+
+        def run(b):
+            return simulate_current(b, amps, initial_charge_Ah=q0, ambient_C=ambient, **cut)
+    sim = run(bat)
+    spread = simulation_interval(bat, run) if interval else None
+    warnings = []
+    cell_current = float(sim.current_A[0]) / bat.strings_parallel
+    side = bat.extrapolation(cell_current)
+    if side:
+        warnings.append(extrapolation_warning(bat, cell_current, side))
+    return Prediction(sim, spread, warnings)
+
+
+def extrapolation_warning(battery: Battery, cell_current_A: float, side: str) -> str:
+    """The one wording of the extrapolation warning (predict, curves, endurance)."""
+    fitted = ", ".join(f"{x:.3g}" for x in battery.fit_currents_A)
+    return (f"extrapolation: {cell_current_A:.3g} A per cell is far {side} the fitted currents "
+            f"({fitted} A); the interval widens with the extrapolation ratio "
+            f"(x{battery.extrapolation_ratio(cell_current_A):.1f}); check with validate")
+
+
+def default_cutoff(battery: Battery, cutoff=None, cutoff_pack=None) -> dict:
+    """Cutoff keywords for the simulators: the given one, else the chemistry's usual one."""
+    from .model import CUTOFF_CELL_VOLTAGE_V
+
+    if cutoff is not None and cutoff_pack is not None:
+        raise SimulationError("give one cutoff: per cell (cutoff) or per pack (cutoff_pack)")
+    if cutoff_pack is not None:
+        return {"cutoff_pack_V": float(cutoff_pack)}
+    if cutoff is not None:
+        return {"cutoff_cell_V": float(cutoff)}
+    if battery.chemistry in CUTOFF_CELL_VOLTAGE_V:
+        return {"cutoff_cell_V": CUTOFF_CELL_VOLTAGE_V[battery.chemistry]}
+    raise SimulationError("give a cutoff voltage (per cell, e.g. 3.0 for LiPo, 2.5 for Li-ion); "
+                          "the battery's chemistry is not known")

@@ -1,0 +1,273 @@
+"""Intervals: the model error, parameter draws flown through the engine for every family,
+draws that cannot reach the cutoff, bounded simulations and the mission ambient."""
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dischargelab import engine
+from dischargelab import mission as mission_module
+from dischargelab.cli import main as cli_main
+from dischargelab.errors import DataError, SimulationError
+from dischargelab.mission import Mission, Phase, RepeatBlock, load_mission, run_mission
+from dischargelab.model import PRESETS, Battery, CellParameters
+from dischargelab.models import FAMILIES
+from dischargelab.simulate import simulate_current
+from dischargelab.uncertainty import (
+    MIN_HELD_OUT_SD,
+    PRIOR_RELATIVE_SD,
+    bootstrap_parameters,
+    model_error_sd,
+    prediction_interval,
+    simulation_interval,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+MISSIONS = REPO / "src" / "dischargelab" / "data" / "missions"
+HACKER = PRESETS["hacker-4100-4s-lifepo4"]
+SAMSUNG_COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
+Z95 = 1.959963984540054
+
+CELL = CellParameters(E0_V=3.75, R_ohm=0.03, K_V_per_Ah=0.008, A_V=0.35, B_per_Ah=2.0,
+                      C_Ah=3.1)
+ONE_RATE = Battery(CELL, fit_currents_A=(3.0,), name="fitted at 3 A")
+
+
+def run_cli(capsys, *args):
+    with pytest.raises(SystemExit) as exc:
+        cli_main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return exc.value.code, captured.out, captured.err
+
+
+def thermal_hacker(**changes) -> Battery:
+    """The paper's LiFePO4 pack as a shepherd-thermal battery (thermal defaults)."""
+    fam = FAMILIES["shepherd-thermal"]
+    values = fam.defaults()
+    values.update(HACKER.parameters.as_dict())
+    values.update({"Cth_J_per_K": 60.0, "Rth_K_per_W": 15.0})
+    values.update(changes)
+    return replace(HACKER, parameters=CellParameters(values), model="shepherd-thermal")
+
+
+# ---------------------------------------------------------------------------------------------
+# The model error
+# ---------------------------------------------------------------------------------------------
+
+def test_model_error_prior_grows_with_the_extrapolation_ratio():
+    assert model_error_sd(ONE_RATE, 3.0) == pytest.approx(PRIOR_RELATIVE_SD)
+    four = PRIOR_RELATIVE_SD * (1 + 0.8 * math.log(4.0))
+    assert model_error_sd(ONE_RATE, 12.0) == pytest.approx(four, rel=1e-12)
+    assert model_error_sd(ONE_RATE, 0.75) == pytest.approx(four, rel=1e-12)   # 4x below
+    assert model_error_sd(Battery(CELL), 50.0) == pytest.approx(PRIOR_RELATIVE_SD)  # no currents
+
+
+def test_model_error_from_held_out_curves():
+    def held_out(value, source="held-out"):
+        return replace(ONE_RATE, extra={"model_error": {"relative_sd": value, "source": source}})
+
+    assert model_error_sd(held_out(0.03), 3.0) == pytest.approx(0.03)
+    assert model_error_sd(held_out(0.03), 6.0) == pytest.approx(0.03 * (1 + 0.8 * math.log(2)))
+    assert model_error_sd(held_out(0.0001), 3.0) == pytest.approx(MIN_HELD_OUT_SD)   # floor
+    assert model_error_sd(held_out(0.2, source="guess"), 3.0) == \
+        pytest.approx(PRIOR_RELATIVE_SD)                                    # not held-out
+    with pytest.raises(DataError, match="relative_sd must be a number"):
+        model_error_sd(held_out("big"), 3.0)
+
+
+def test_prediction_without_draws_is_the_model_error_alone():
+    sim = simulate_current(HACKER, 20.0, cutoff_cell_V=2.5)
+    spread = simulation_interval(HACKER, sim)
+    sd = model_error_sd(HACKER, 20.0)
+    assert spread["interval_includes"] == ["model error (prior, extrapolation x2.5)"]
+    assert spread["draws"] == 0 and spread["draws_not_reaching_cutoff"] == 0
+    lo, hi = spread["time_to_cutoff_s"]
+    assert lo == pytest.approx(sim.time_to_cutoff_s * math.exp(-Z95 * sd), rel=1e-12)
+    assert hi == pytest.approx(sim.time_to_cutoff_s * math.exp(Z95 * sd), rel=1e-12)
+    # a callable (one simulation per battery) gives the same answer
+    again = simulation_interval(HACKER, lambda b: simulate_current(b, 20.0, cutoff_cell_V=2.5))
+    assert again["time_to_cutoff_s"] == spread["time_to_cutoff_s"]
+
+
+def test_parameter_draws_and_model_error_add_up():
+    sd = 0.01 * HACKER.parameters.as_array()
+    battery = replace(HACKER, covariance=np.diag(sd**2), fit_currents_A=(20.0,))
+    sim = simulate_current(battery, 20.0, cutoff_cell_V=2.5)
+    spread = simulation_interval(battery, sim, draws=400, seed=4)
+    assert spread["interval_includes"] == ["parameters", "model error (prior, extrapolation x1.0)"]
+    assert spread["draws"] == 400 and spread["bootstrap_draws"] == 0
+    lo, hi = spread["time_to_cutoff_s"]
+    assert lo < sim.time_to_cutoff_s < hi
+    alone = math.exp(Z95 * PRIOR_RELATIVE_SD) - math.exp(-Z95 * PRIOR_RELATIVE_SD)
+    assert (hi - lo) / sim.time_to_cutoff_s > 1.05 * alone        # the parameters widen it
+    assert simulation_interval(battery, sim, draws=400, seed=4) == spread     # seeded
+
+
+# ---------------------------------------------------------------------------------------------
+# Draws that cannot reach the cutoff are results (the predict --cutoff defect)
+# ---------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def bootstrap_battery(tmp_path_factory, bundled_data):
+    path = tmp_path_factory.mktemp("boot") / "q30.json"
+    with pytest.raises(SystemExit) as exc:
+        cli_main(["fit", str(bundled_data / "Q30_S001_1C.csv"), "--columns", SAMSUNG_COLUMNS,
+                  "--bootstrap", "20", "-o", str(path)])
+    assert exc.value.code == 0
+    return path
+
+
+def high_cutoff(path, current_A):
+    """A cutoff below the fitted cell's starting voltage but above some draws' ones."""
+    from dischargelab.model import load_battery
+
+    battery = load_battery(path)
+    fam = battery.family
+    draws = bootstrap_parameters(battery)
+    state = fam.initial_state(draws, charge_Ah=0.0, temperature_C=battery.ambient_C)
+    starts = fam.voltage(draws, state, current_A)
+    point = fam.initial_state(dict(battery.parameters), temperature_C=battery.ambient_C)
+    nominal = float(fam.voltage(battery.parameters, point, current_A))
+    assert starts.min() < nominal
+    return 0.5 * (starts.min() + nominal), int(np.sum(starts <= 0.5 * (starts.min() + nominal)))
+
+
+def test_predict_counts_bootstrap_draws_that_cannot_reach_the_cutoff(bootstrap_battery, capsys):
+    cutoff, below = high_cutoff(bootstrap_battery, 3.0)
+    code, out, err = run_cli(capsys, "predict", bootstrap_battery, "--current", "3",
+                             "--cutoff", f"{cutoff:.6f}", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    spread = doc["interval95"]
+    assert spread["draws"] == 20 and spread["bootstrap_draws"] == 20
+    assert spread["draws_not_reaching_cutoff"] == below >= 1
+    assert spread["interval_includes"][0] == "parameters"
+    lo, hi = spread["time_to_cutoff_s"]
+    assert lo <= doc["time_to_cutoff_s"] <= hi
+    assert any("cannot reach the cutoff" in w for w in spread["warnings"])
+    code, out, _ = run_cli(capsys, "predict", bootstrap_battery, "--current", "3",
+                           "--cutoff", f"{cutoff:.6f}")
+    assert code == 0 and f"{below} of 20 parameter draws cannot reach the cutoff" in out
+
+
+def test_a_draw_that_cannot_deliver_the_power_is_counted():
+    sd = 0.3 * HACKER.parameters.as_array() * np.array([0, 1, 0, 0, 0, 0])   # R spread
+    battery = replace(HACKER, covariance=np.diag(sd**2))
+    fam, prm = HACKER.family, HACKER.parameters
+    state = fam.initial_state(dict(prm))
+    v0 = 4 * fam.voltage(prm, state, 0.0)
+    b = 4 * (fam.voltage(prm, state, 0.0) - fam.voltage(prm, state, 1.0))
+    power = 0.9 * v0**2 / (4 * b)                  # 90 % of the maximum power at the start
+    from dischargelab.engine import Step
+
+    nominal = {"time_to_cutoff_s": 10.0, "capacity_Ah": 1.0, "energy_Wh": 1.0}
+    spread = prediction_interval(battery, [Step("power", power)], nominal=nominal,
+                                 cutoff_pack_V=4.0, cell_current_A=50.0, draws=200, seed=1)
+    assert spread["draws"] == 200
+    assert 10 < spread["draws_not_reaching_cutoff"] < 190          # R above nominal: no power
+    assert spread["time_to_cutoff_s"][0] == 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Any family: missions, draws, ambient
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", sorted(FAMILIES))
+def test_every_family_flies_a_mission_with_draws(name):
+    fam = FAMILIES[name]
+    values = fam.defaults()
+    cell = CellParameters(values)
+    sd = 0.01 * np.abs(cell.as_array(fam.names))
+    battery = Battery(cell, model=name, fit_currents_A=(3.0,), covariance=np.diag(sd**2))
+    mission = Mission(items=(Phase("climb", "current", 6.0, 60.0),
+                             Phase("cruise", "power", 8.0, 600.0, stretch=True),
+                             Phase("land", "current", 2.0, 60.0)),
+                      battery=battery, cutoff_cell_V=3.0, reserve_pct=20.0, name=name)
+    result = run_mission(mission, draws=40, seed=2)
+    assert result.completed and result.stretch["binding"] == "reserve"
+    assert result.soc_end_pct > mission.reserve_pct          # the planned cruise fits
+    unc = result.uncertainty
+    e = unc["endurance_s"]
+    assert unc["accepted"] == 40 and e["low"] < result.endurance_s < e["high"]
+    if fam.thermal:
+        assert result.to_dict()["peak_temperature_C"] > result.mission.resolved_ambient_C
+
+
+def test_mission_ambient_changes_a_thermal_flight(tmp_path):
+    battery = thermal_hacker()
+    mission = load_mission(MISSIONS / "paper-table5.toml", battery=battery)
+    assert mission.ambient_C is None and mission.resolved_ambient_C == battery.ambient_C
+    cold = run_mission(replace(mission, ambient_C=0.0, reserve_pct=0.0))
+    warm = run_mission(replace(mission, ambient_C=40.0, reserve_pct=0.0))
+    assert warm.endurance_s > cold.endurance_s          # lower resistance when warm
+    assert warm.to_dict()["ambient_C"] == 40.0
+    assert warm.simulation.temperature_C[0] == pytest.approx(40.0)
+    # the isothermal preset does not care
+    iso = load_mission(MISSIONS / "paper-table5.toml")
+    assert run_mission(replace(iso, ambient_C=0.0)).endurance_s == \
+        pytest.approx(run_mission(iso).endurance_s, rel=1e-12)
+    # the TOML key and the command-line override
+    text = (MISSIONS / "paper-table5.toml").read_text(encoding="utf-8")
+    path = tmp_path / "hot.toml"
+    path.write_text("ambient_C = 35\n" + text, encoding="utf-8")
+    assert load_mission(path).ambient_C == 35.0
+    assert load_mission(path, ambient_C=10.0).ambient_C == 10.0
+    bad = tmp_path / "bad.toml"
+    bad.write_text("ambient_C = 300\n" + text, encoding="utf-8")
+    with pytest.raises(DataError, match="ambient_C must be <= 90"):
+        load_mission(bad)
+
+
+def test_cli_endurance_ambient_option(tmp_path, capsys):
+    path = thermal_hacker().save(tmp_path / "thermal.json")
+    code, out, err = run_cli(capsys, "endurance", path, "paper-table5", "--ambient", "35",
+                             "--json", "--draws", "0")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["ambient_C"] == 35.0 and doc["model"] == "shepherd-thermal"
+    assert doc["peak_temperature_C"] > 35.0 and doc["uncertainty"] is None
+
+
+# ---------------------------------------------------------------------------------------------
+# Bounded simulations: one clear line
+# ---------------------------------------------------------------------------------------------
+
+def test_a_repeat_block_that_never_ends_is_one_clear_error(monkeypatch):
+    monkeypatch.setattr(mission_module, "MAX_REPEAT_RUNS", 2)
+    monkeypatch.setattr(mission_module, "MAX_PASSES_PER_RUN", 3)
+    block = RepeatBlock("orbit", (Phase("leg", "current", 0.5, 60.0),), until="reserve")
+    mission = Mission(items=(block,), battery=ONE_RATE, cutoff_cell_V=3.0, name="slow")
+    with pytest.raises(SimulationError) as info:
+        run_mission(mission)
+    text = str(info.value)
+    assert "\n" not in text and "did not reach the reserve within 6 passes" in text
+
+
+def test_the_engine_step_limit_becomes_one_line_and_no_crash_for_draws(monkeypatch):
+    real = engine.run
+
+    def short(*args, **kwargs):
+        kwargs["max_engine_steps"] = 3
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(engine, "run", short)
+    mission = load_mission(MISSIONS / "paper-table5.toml")
+    with pytest.raises(SimulationError) as info:
+        run_mission(mission)
+    text = str(info.value)
+    assert "\n" not in text and text.startswith("mission 'Paper Table 5")
+    assert "never reaches the cutoff" in text
+    # draws that cannot be flown: the interval falls back to the model error, with the reason
+    sd = 0.01 * HACKER.parameters.as_array()
+    battery = replace(HACKER, covariance=np.diag(sd**2))
+    nominal = {"time_to_cutoff_s": 600.0, "capacity_Ah": 3.0, "energy_Wh": 40.0}
+    from dischargelab.engine import Step
+
+    spread = prediction_interval(battery, [Step("current", 20.0)], nominal=nominal,
+                                 cutoff_pack_V=10.0, cell_current_A=20.0)
+    assert spread["interval_includes"] == ["model error (prior, extrapolation x2.5)"]
+    assert "could not be flown" in spread["method"]
