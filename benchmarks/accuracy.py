@@ -40,24 +40,24 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-import traceback  # noqa: E402
-from dataclasses import dataclass  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import json
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _machine import machine_line  # noqa: E402
-
 import dischargelab as dl  # noqa: E402
+from _machine import machine_line  # noqa: E402
 from dischargelab.models import FAMILIES  # noqa: E402
 from dischargelab.predict import predict as predict_no_interval  # noqa: E402
+from dischargelab.validate import measured_time_to_cutoff  # noqa: E402
 
 VIRTUAL = HERE.parent / "tests" / "data" / "virtual"
 SAMSUNG_COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
@@ -93,23 +93,12 @@ def default_data_dir() -> Path:
     return HERE.parents[1] / "shared" / "data"
 
 
-def time_to_cutoff(time_s, voltage_V, cutoff_V) -> float:
-    """Time of the first sample at or below the cutoff, interpolated from the one before [s]."""
-    t = np.asarray(time_s, dtype=float)
-    v = np.asarray(voltage_V, dtype=float)
-    below = np.flatnonzero(v <= cutoff_V)
-    if below.size == 0:
-        return float("nan")
-    k = int(below[0])
-    if k == 0:
-        return float(t[0])
-    t0, t1, v0, v1 = t[k - 1], t[k], v[k - 1], v[k]
-    return float(t0 + (v0 - cutoff_V) / (v0 - v1) * (t1 - t0))
 
 
 def make_run(label, discharge, cutoff_V, ambient_C) -> Run:
     return Run(label, discharge, float(discharge.mean_current_A), float(cutoff_V),
-               float(ambient_C), time_to_cutoff(discharge.time_s, discharge.voltage_V, cutoff_V))
+               float(ambient_C), measured_time_to_cutoff(discharge.time_s, discharge.voltage_V,
+                                                       cutoff_V))
 
 
 def rest_temperature(d) -> float:

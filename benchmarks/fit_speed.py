@@ -34,30 +34,29 @@ import os
 # to both methods alike.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import shlex  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import json
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
-from scipy.optimize import least_squares  # noqa: E402
+import numpy as np
+from scipy.optimize import least_squares
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 
 from _machine import machine_line  # noqa: E402
-from synthetic import TRUE, adc_step, synthetic_curve  # noqa: E402
-
 from dischargelab.fit import Curve, _resolve_e0_r, _spec, _stack, fit_battery  # noqa: E402
 from dischargelab.io import read_discharge  # noqa: E402
 from dischargelab.model import cell_voltage  # noqa: E402
 from dischargelab.models import FAMILIES, get_family  # noqa: E402
 from dischargelab.simulate import simulate_current  # noqa: E402
+from synthetic import TRUE, adc_step, synthetic_curve  # noqa: E402
 
 BUNDLED = HERE.parent / "src" / "dischargelab" / "data" / "samsung30q"
 SAMSUNG_COLUMNS = {"time_s": 0, "current_A": 1, "voltage_V": 2, "temperature_C": 4}
@@ -228,7 +227,7 @@ def main(argv=None):
         for label, curve in cases:
             try:
                 fit_battery(curve, model=fam)  # warm-up (imports, caches)
-                ours_ms, ours_cpu, res = median_ms(lambda: fit_battery(curve, model=fam),
+                ours_ms, ours_cpu, res = median_ms(lambda c=curve, f=fam: fit_battery(c, model=f),
                                                    args.repeats)
             except Exception as exc:  # report, do not hide: library failures are results
                 print(f"| {fam} | {label} | {curve.time_s.size} | | fit failed: "
@@ -237,7 +236,7 @@ def main(argv=None):
             try:
                 baseline_fit(curve, fam)
                 base_ms, base_cpu, (base_rmse, nfev, n_free) = median_ms(
-                    lambda: baseline_fit(curve, fam), args.baseline_repeats)
+                    lambda c=curve, f=fam: baseline_fit(c, f), args.baseline_repeats)
                 base = (f"{base_ms:.1f} ({base_cpu:.1f}) | {base_ms / ours_ms:.1f}x | "
                         f"{res.rmse_V * 1000:.2f} | {base_rmse * 1000:.2f}")
             except Exception as exc:

@@ -46,20 +46,16 @@ import os
 
 os.environ.setdefault("PYBAMM_DISABLE_TELEMETRY", "true")
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import math  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-try:
-    import pybamm  # noqa: E402
-except ImportError:  # pragma: no cover - depends on the environment
-    sys.exit("virtual_cells.py needs PyBaMM: pip install 'dischargelab[virtual]' "
-             "(best in a separate virtual environment)")
+pybamm = None  # imported in main(), after the options are parsed (so --help works without it)
 
 #: Heat transfer coefficient [W/(m^2 K)]: natural convection plus radiation
 #: from a bare cell in still air.
@@ -281,6 +277,12 @@ def main(argv=None) -> int:
     parser.add_argument("--only", default=None,
                         help="run only cases whose file name contains this text")
     args = parser.parse_args(argv)
+    global pybamm
+    try:
+        import pybamm
+    except ImportError:  # pragma: no cover - depends on the environment
+        sys.exit("virtual_cells.py needs PyBaMM: pip install 'dischargelab[virtual]' "
+                 "(best in a separate virtual environment)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     version = pybamm.__version__

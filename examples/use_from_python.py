@@ -30,7 +30,8 @@ def main() -> None:
         print(f"{amps:g} A: {p['time_to_cutoff_s'] / 60:.2f} min to 2.5 V, 95 % "
               f"{[round(x / 60, 2) for x in p['interval95']['time_to_cutoff_s']]} min")
     cell = dl.load(fit.save(out / "cell.json", chemistry="li-ion"))
-    print(f"Table 5: {dl.endurance('hacker-4100-4s-lifepo4', 'paper-table5').to_dict()}")
+    table5 = dl.endurance("hacker-4100-4s-lifepo4", "paper-table5").to_dict()
+    print(f"Table 5: {table5['endurance_s'] / 60:.2f} min landing at the reserve")
     pack = cell.with_pack(4, 2)
     survey = dl.endurance(pack, "fixed-wing-survey", cutoff_cell_V=3.0)
     print(f"survey: {survey.to_dict()['endurance_s'] / 60:.1f} min")

@@ -516,6 +516,10 @@ class FitResult:
         lowest = int(np.argmin([abs(x) for x in self.fit_currents_A]))
         extra["measured_capacity_Ah"] = capacities[lowest]
         extra["ambient_C"] = self.ambient_C
+        rises = [float(np.max(c.temperature_C) - c.temperature_C[0]) for c in self.curves
+                 if c.temperature_C is not None]
+        if rises:
+            extra["fit_temperature_rise_K"] = max(rises)
         if self.bootstrap is not None:
             extra["bootstrap"] = {"names": list(self.family.names),
                                   "samples": np.round(self.bootstrap, 12).tolist()}
@@ -1115,8 +1119,18 @@ def _polish(model: _Model, values: dict, bounds: dict) -> dict:
     def jac(x):
         return model.jacobian(dict(zip(model.free, x)), model.free) * w[:, None]
 
-    sol = least_squares(resid, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
-                        ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=500)
+    if not np.all(np.isfinite(resid(x0))):
+        # clipping moved the model where it is undefined (e.g. an empty cell before the
+        # last sample): keep the projected solution, clipped, if that is defined
+        clipped = dict(values)
+        clipped.update(zip(model.free, np.clip([values[n] for n in model.free], lo, hi)))
+        if np.all(np.isfinite(model.voltage(clipped))):
+            return clipped
+        raise FitError("the fit cannot stay inside the parameter bounds on these data; check "
+                       "the data (units, current sign) or widen the bounds")
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        sol = least_squares(resid, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+                            ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=500)
     if not np.isfinite(sol.cost):
         raise FitError("bounded least squares did not converge; check the data and bounds")
     out = dict(values)

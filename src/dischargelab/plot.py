@@ -108,14 +108,33 @@ def plot_fit(result, ax=None, x: str = "charge"):
     res_ax.set_xlabel(_xlabel(x))
     ax.tick_params(labelbottom=False)
     ax.set_ylabel(f"pack voltage [V] ({result.cells_series}S{result.strings_parallel}P)")
-    p = result.parameters
-    ax.set_title(f"fit: E0={p.E0_V:.3f} V  R={p.R_ohm * 1000:.1f} mohm  K={p.K_V_per_Ah:.4f} "
-                 f"V/Ah  A={p.A_V:.3f} V  B={p.B_per_Ah:.3g} /Ah  C={p.C_Ah:.3f} Ah   "
-                 f"RMSE {result.rmse_V * 1000:.1f} mV/cell", fontsize=9)
+    ax.set_title(f"{_fit_title(result)}   RMSE {result.rmse_V * 1000:.1f} mV/cell", fontsize=9)
     ax.grid(alpha=0.3)
     res_ax.grid(alpha=0.3)
     ax.legend(fontsize=8, ncol=2 if len(result.curves) > 2 else 1)
     return ax
+
+
+#: Parameters shown in a fit plot's title, per model family (name, label, scale, unit).
+_TITLE_PARAMETERS = {
+    "shepherd": (("E0_V", "E0", 1, "V"), ("R_ohm", "R", 1000, "mohm"),
+                 ("K_V_per_Ah", "K", 1, "V/Ah"), ("A_V", "A", 1, "V"), ("B_per_Ah", "B", 1, "/Ah"),
+                 ("C_Ah", "C", 1, "Ah")),
+    "ecm": (("U_full_V", "U_full", 1, "V"), ("R0_ohm", "R0", 1000, "mohm"),
+            ("R1_ohm", "R1", 1000, "mohm"), ("R2_ohm", "R2", 1000, "mohm"),
+            ("tau_d_s", "tau_d", 1, "s"), ("C_Ah", "C", 1, "Ah")),
+}
+_TITLE_PARAMETERS["shepherd-thermal"] = _TITLE_PARAMETERS["shepherd"] + (
+    ("beta_K", "beta", 1, "K"),)
+
+
+def _fit_title(result) -> str:
+    """``model: E0=... R=...`` with the main parameters of the fitted family."""
+    model = getattr(result, "model", "shepherd")
+    p = result.parameters
+    shown = [f"{label}={float(p[name]) * scale:.4g} {unit}"
+             for name, label, scale, unit in _TITLE_PARAMETERS.get(model, ()) if name in p]
+    return f"{model}: " + "  ".join(shown)
 
 
 def plot_simulation(result, ax=None, x: str = "time", label: str | None = None, **kwargs):

@@ -21,17 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import DataError, DischargelabError
-from .model import CUTOFF_CELL_VOLTAGE_V, PARAMETER_NAMES, Battery, load_battery
-
-#: Units and plain-language meaning of each model coefficient.
-PARAMETER_INFO = {
-    "E0_V": ("V", "battery constant voltage"),
-    "R_ohm": ("ohm", "internal resistance"),
-    "K_V_per_Ah": ("V/Ah", "polarisation constant"),
-    "A_V": ("V", "exponential zone amplitude"),
-    "B_per_Ah": ("1/Ah", "exponential zone time constant inverse"),
-    "C_Ah": ("Ah", "maximum capacity"),
-}
+from .model import CUTOFF_CELL_VOLTAGE_V, Battery, load_battery
 
 CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#1d2430;
@@ -125,13 +115,13 @@ def _intervals(battery: Battery) -> dict:
     """95 % interval per parameter: from the fit file, else +/- 1.96 sigma of the covariance."""
     ci = battery.extra.get("ci95")
     out = {}
-    for k, name in enumerate(PARAMETER_NAMES):
+    for k, name in enumerate(battery.parameter_names):
         if isinstance(ci, dict) and name in ci and ci[name] is not None:
             lo, hi = ci[name]
             out[name] = (lo, hi)
         elif battery.covariance is not None:
             sd = float(np.sqrt(max(battery.covariance[k, k], 0.0)))
-            value = float(getattr(battery.parameters, name))
+            value = float(battery.parameters[name])
             out[name] = (value - 1.96 * sd, value + 1.96 * sd)
         else:
             out[name] = (None, None)
@@ -144,9 +134,9 @@ def _battery_section(battery: Battery) -> str:
     fixed = extra.get("fixed") if isinstance(extra.get("fixed"), dict) else {}
     intervals = _intervals(battery)
     rows = []
-    for k, name in enumerate(PARAMETER_NAMES):
-        unit, meaning = PARAMETER_INFO[name]
-        value = float(getattr(battery.parameters, name))
+    for k, par in enumerate(battery.family.parameters):
+        name, unit, meaning = par.name, par.unit, par.description
+        value = float(battery.parameters[name])
         if name in fixed:
             err, lo, hi, status = "fixed", "-", "-", "fixed"
         else:
@@ -158,7 +148,8 @@ def _battery_section(battery: Battery) -> str:
             status = "fitted" if battery.covariance is not None else "given"
         rows.append([name, meaning, unit, _fmt(value, ".6g"), err, lo, hi, status])
     parts = ["<h2>Battery model</h2>",
-             f'<p class="sub">Modified Shepherd (Tremblay) model per cell, pack '
+             f'<p class="sub">{_e(battery.family.title)} (model '
+             f"<code>{_e(battery.model)}</code>) per cell, pack "
              f"{battery.cells_series}S{battery.strings_parallel}P"
              f"{', ' + _e(battery.chemistry) if battery.chemistry else ''}; model capacity "
              f"{battery.capacity_Ah:.3f} Ah per pack.</p>",
@@ -167,6 +158,15 @@ def _battery_section(battery: Battery) -> str:
     facts = []
     if extra.get("rmse_V") is not None:
         facts.append(["fit RMSE", f"{1000 * float(extra['rmse_V']):.2f} mV per cell"])
+    error = extra.get("model_error")
+    if isinstance(error, dict) and isinstance(error.get("relative_sd"), (int, float)):
+        facts.append(["held-out error (leave one curve out)",
+                      f"{100 * float(error['relative_sd']):.2f} % RMS time to cutoff"])
+    thermal = extra.get("thermal")
+    if isinstance(thermal, dict) and thermal.get("Cth_J_per_K") is not None:
+        facts.append(["thermal model", f"heat capacity {float(thermal['Cth_J_per_K']):.3g} J/K, "
+                      f"thermal resistance {float(thermal['Rth_K_per_W']):.3g} K/W "
+                      f"({_e(thermal.get('source', ''))})"])
     if battery.fit_currents_A:
         facts.append(["fitted at (cell current)",
                       ", ".join(f"{x:.3g} A" for x in battery.fit_currents_A)])
@@ -198,14 +198,18 @@ class _StoredFit:
     strings_parallel: int
     rmse_V: float
     current_scale: float = 1.0
+    model: str = "shepherd"
 
     def predicted_voltage(self, curve):
-        from .model import cell_voltage
+        from .fit import _stack
+        from .models import get_family
 
-        p = self.strings_parallel
-        i = curve.current_A / p * self.current_scale
-        return self.cells_series * cell_voltage(self.parameters, i,
-                                                curve.charge_Ah / p * self.current_scale)
+        data = _stack([curve], self.cells_series, self.strings_parallel, use_rest=False,
+                      weighting="samples", max_samples=curve.time_s.size)
+        data.current = data.current * self.current_scale
+        data.charge = data.charge * self.current_scale
+        with np.errstate(invalid="ignore", over="ignore"):
+            return self.cells_series * get_family(self.model).fit_voltage(self.parameters, data)
 
 
 def _read_options(entry: dict) -> dict:
@@ -267,7 +271,7 @@ def _fit_section(battery: Battery, base_dir: Path | None = None) -> str:
                                          "reachable"], "note")
     stored = _StoredFit(curves, battery.parameters, battery.cells_series, p,
                         float(battery.extra.get("rmse_V") or np.nan),
-                        float((paper or {}).get("current_scale", 1.0)))
+                        float((paper or {}).get("current_scale", 1.0)), battery.model)
     ax = plot_fit(stored, x="charge")
     return head + _figure(ax, "Measured pack voltage (dots) and the fitted model (lines); "
                               "residuals below.", "fit of the model to the measured discharge") \

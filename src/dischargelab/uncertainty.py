@@ -58,6 +58,16 @@ MIN_HELD_OUT_SD = 0.005
 #: Growth of the model error with the logarithm of the extrapolation ratio [-].
 EXTRAPOLATION_GROWTH = 0.8
 
+#: Growth of the prior (one fitted rate) with ln(extrapolation ratio): one rate
+#: cannot show how the capacity and the overpotentials change with rate.
+PRIOR_EXTRAPOLATION_GROWTH = 2.0
+
+#: Growth of the prior for an isothermal family fitted to data that logged a
+#: self-heating rise of at least :data:`SELF_HEATING_K`: the model ignores heat
+#: that the data show, and the error grows with the rate (I^2 R heating).
+ISOTHERMAL_EXTRAPOLATION_GROWTH = 4.0
+SELF_HEATING_K = 5.0
+
 #: Model-error samples per interval (shared out over the parameter draws).
 MODEL_ERROR_SAMPLES = 4000
 
@@ -249,14 +259,18 @@ def _model_error_base(battery: Battery) -> tuple[float, str]:
 def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     """Relative standard deviation of a time to cutoff or endurance from the model's error.
 
-    ``sigma = s0 (1 + 0.8 ln r)`` with ``r = battery.extrapolation_ratio(cell_current_A)``
+    ``sigma = s0 (1 + g ln r)`` with ``r = battery.extrapolation_ratio(cell_current_A)``
     (>= 1; 1 inside the fitted currents) and
 
-    * ``s0 = max(s_held_out, 0.005)`` when the battery file holds
+    * ``s0 = max(s_held_out, 0.005)``, ``g = 0.8`` when the battery file holds
       ``model_error = {"relative_sd": s_held_out, "source": "held-out"}`` (stored by
-      the fit from leave-one-curve-out predictions when >= 2 rates were fitted);
+      the fit from leave-one-curve-out predictions when >= 2 rates were fitted: the
+      held-out errors are themselves extrapolations, so they already carry the
+      rate dependence);
     * ``s0 = 0.015`` otherwise (prior: the paper's endurance errors on unseen rates
-      were 1-6 %).
+      were 1-6 %), ``g = 2`` (one rate cannot show how capacity and overpotentials
+      change with rate), or ``g = 4`` for an isothermal family fitted to data that
+      logged 5 K or more of self-heating (heat the model ignores grows as I^2 R).
 
     Parameters
     ----------
@@ -269,15 +283,26 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     float
         Relative standard deviation [-] (e.g. 0.015 = 1.5 %).
     """
-    base, _ = _model_error_base(battery)
+    base, source = _model_error_base(battery)
     ratio = battery.extrapolation_ratio(cell_current_A)
-    return base * (1.0 + EXTRAPOLATION_GROWTH * math.log(ratio))
+    return base * (1.0 + _growth(battery, source) * math.log(ratio))
+
+
+def _growth(battery: Battery, source: str) -> float:
+    """How fast the model error grows with ln(extrapolation ratio) (see model_error_sd)."""
+    if source == "held-out":
+        return EXTRAPOLATION_GROWTH
+    rise = battery.extra.get("fit_temperature_rise_K") if isinstance(battery.extra, dict) \
+        else None
+    if not battery.family.thermal and isinstance(rise, (int, float)) and rise >= SELF_HEATING_K:
+        return ISOTHERMAL_EXTRAPOLATION_GROWTH
+    return PRIOR_EXTRAPOLATION_GROWTH
 
 
 def _model_error_info(battery: Battery, ratio: float) -> dict:
     """Model error for an (effective) extrapolation ratio: sd, source, label."""
     base, source = _model_error_base(battery)
-    sd = base * (1.0 + EXTRAPOLATION_GROWTH * math.log(max(ratio, 1.0)))
+    sd = base * (1.0 + _growth(battery, source) * math.log(max(ratio, 1.0)))
     return {"relative_sd": sd, "base_relative_sd": base, "source": source,
             "extrapolation_ratio": float(ratio),
             "label": f"model error ({source}, extrapolation x{ratio:.1f})"}

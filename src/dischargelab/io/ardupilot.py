@@ -37,6 +37,7 @@ from .flightlog import (
     FlightLog,
     build_flight_log,
     detect_flight_log,
+    drop_unmeasured_temperature,
     quiet,
     quiet_native,
 )
@@ -288,7 +289,7 @@ def _assemble(path: Path, kind: str, collector: _Collector) -> FlightLog:
         if series.label.startswith("CURR"):
             series.notes.append("old CURR message: time from the last GPS record before each "
                                 "record (CURR has no time field)")
-        _temperature(series)
+        drop_unmeasured_temperature(series, "Temp")
         _merge_cells(series, collector.cells.get(instance, []))
         capacity = collector.params.get("BATT_CAPACITY" if instance == 0
                                         else f"BATT{instance + 1}_CAPACITY")
@@ -305,15 +306,6 @@ def _assemble(path: Path, kind: str, collector: _Collector) -> FlightLog:
                   if e["time_s"] is None] + events
     return build_flight_log(path, kind, batteries, start_s=start, events=events, notes=notes)
 
-
-def _temperature(series: BatterySeries) -> None:
-    if "temperature_C" not in series.frame:
-        return
-    values = series.frame["temperature_C"].to_numpy(dtype=float)
-    if not np.any(np.isfinite(values) & (values != 0.0)):
-        series.frame = series.frame.drop(columns="temperature_C")
-        series.notes.append("battery temperature not measured (Temp is 0 or NaN in every "
-                            "record)")
 
 
 def _merge_cells(series: BatterySeries, rows: list[tuple]) -> None:

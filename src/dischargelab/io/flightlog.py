@@ -1098,3 +1098,14 @@ def _rounded(frame: pd.DataFrame) -> pd.DataFrame:
 __all__ = ["FlightLog", "BatterySeries", "FlightSpan", "detect_flight_log", "read_flight_log",
            "convert_flight_log", "build_flight_log", "current_intervals", "FLIGHT_LOG_FORMATS",
            "LOG_COLUMNS", "DROP_REASONS"]
+
+
+def drop_unmeasured_temperature(series: BatterySeries, field: str) -> None:
+    """Drop ``temperature_C`` when every record is 0 or NaN (not measured), with a note."""
+    if "temperature_C" not in series.frame:
+        return
+    values = series.frame["temperature_C"].to_numpy(dtype=float)
+    if not np.any(np.isfinite(values) & (values != 0.0)):
+        series.frame = series.frame.drop(columns="temperature_C")
+        series.notes.append(f"battery temperature not measured ({field} is 0 or NaN in every "
+                            "record)")

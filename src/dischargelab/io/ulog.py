@@ -25,7 +25,15 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataError, require
-from .flightlog import BatterySeries, FlightLog, _first_line, build_flight_log, drop_rows, quiet
+from .flightlog import (
+    BatterySeries,
+    FlightLog,
+    _first_line,
+    build_flight_log,
+    drop_rows,
+    drop_unmeasured_temperature,
+    quiet,
+)
 
 BATTERY_TOPIC = "battery_status"
 
@@ -142,22 +150,13 @@ def _battery(dataset, mapping: dict, topic: str, *, custom: bool) -> BatterySeri
     _add_cells(series, data)
     series.frame = drop_rows(series.frame, series.frame["current_A"].to_numpy() == -1.0,
                              "current_not_measured", series.dropped)
-    _temperature(series)
+    drop_unmeasured_temperature(series, "temperature")
     _check_cells(series)
     capacity = data.get("capacity")
     if capacity is not None and capacity.size and float(np.nanmax(capacity)) > 0:
         series.capacity_mAh = float(np.nanmax(capacity))
     return series
 
-
-def _temperature(series: BatterySeries) -> None:
-    if "temperature_C" not in series.frame:
-        return
-    values = series.frame["temperature_C"].to_numpy(dtype=float)
-    if not np.any(np.isfinite(values) & (values != 0.0)):
-        series.frame = series.frame.drop(columns="temperature_C")
-        series.notes.append("battery temperature not measured (temperature is 0 or NaN in "
-                            "every record)")
 
 
 def _add_cells(series: BatterySeries, data: dict) -> None:
