@@ -504,7 +504,7 @@ def test_no_covariance_gives_the_model_error_alone():
     ratio = unc["model_error"]["extrapolation_ratio"]
     assert ratio > 1.5                                  # fitted at 50 A, flown at 4-46 A
     assert unc["interval_includes"] == [f"model error (prior, extrapolation x{ratio:.1f})"]
-    sd = 0.015 * (1 + 0.8 * math.log(ratio))
+    sd = 0.015 * (1 + 2.0 * math.log(ratio))            # prior of a one-rate fit
     assert unc["model_error"]["relative_sd"] == pytest.approx(sd, rel=1e-12)
     e = unc["endurance_s"]
     assert e["low"] == pytest.approx(result.endurance_s * math.exp(-1.959964 * sd), rel=1e-6)

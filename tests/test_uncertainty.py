@@ -60,10 +60,16 @@ def thermal_hacker(**changes) -> Battery:
 
 def test_model_error_prior_grows_with_the_extrapolation_ratio():
     assert model_error_sd(ONE_RATE, 3.0) == pytest.approx(PRIOR_RELATIVE_SD)
-    four = PRIOR_RELATIVE_SD * (1 + 0.8 * math.log(4.0))
+    four = PRIOR_RELATIVE_SD * (1 + 2.0 * math.log(4.0))     # one rate: g = 2
     assert model_error_sd(ONE_RATE, 12.0) == pytest.approx(four, rel=1e-12)
     assert model_error_sd(ONE_RATE, 0.75) == pytest.approx(four, rel=1e-12)   # 4x below
     assert model_error_sd(Battery(CELL), 50.0) == pytest.approx(PRIOR_RELATIVE_SD)  # no currents
+    # an isothermal model fitted to data that logged self-heating: g = 4
+    heated = replace(ONE_RATE, extra={"fit_temperature_rise_K": 11.0})
+    assert model_error_sd(heated, 12.0) == pytest.approx(
+        PRIOR_RELATIVE_SD * (1 + 4.0 * math.log(4.0)), rel=1e-12)
+    assert model_error_sd(replace(heated, extra={"fit_temperature_rise_K": 2.0}), 12.0) == \
+        pytest.approx(four, rel=1e-12)
 
 
 def test_model_error_from_held_out_curves():

@@ -50,7 +50,7 @@ def read(path: str | Path, **options: Any) -> Discharge:
 
 
 def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *,
-        model: str = "auto", cells: int = 1, parallel: int = 1,
+        model: str = "auto", cells: int | None = None, parallel: int = 1,
         bootstrap: int = DEFAULT_BOOTSTRAP, fixed: dict | None = None,
         bounds: dict | None = None, e0: float | None = None, paper_mode: bool = False,
         use_rest: bool = True, seed: int = 0):
@@ -58,12 +58,18 @@ def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *
 
     Parameters
     ----------
-    discharges : Discharge, path, or a sequence of them
-        Measurements of the same cell or pack at one or several currents.
+    discharges : Discharge, path, or a sequence of them, or FlightCurves
+        Measurements of the same cell or pack at one or several currents, or the
+        flights of one pack from :func:`dischargelab.flight.flight_curves` (fitted by
+        :func:`dischargelab.flight.fit_flights`: each flight from its own initial
+        charge, the capacity held near the label when the flights do not reach the knee).
     model : str
-        ``"auto"`` (by evidence), ``"shepherd"``, ``"shepherd-thermal"`` or ``"ecm"``.
-    cells, parallel : int
-        Cells in series and strings in parallel of the measured pack.
+        ``"auto"`` (by evidence; ``"ecm"`` for flights), ``"shepherd"``,
+        ``"shepherd-thermal"`` or ``"ecm"``.
+    cells : int, optional
+        Cells in series of the measured pack (default 1; for flights the log's count).
+    parallel : int
+        Strings in parallel of the measured pack.
     bootstrap : int
         Moving-block bootstrap refits kept for intervals (0: covariance only).
     fixed : dict, optional
@@ -86,17 +92,32 @@ def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *
         ``.report()``, ``.to_dict()``, ``.plot()``.
     """
     from .fit import fit_battery
+    from .flight import FlightCurves
 
+    fixed = dict(fixed or {})
+    if e0 is not None:
+        fixed["E0_V"] = float(e0)
+    if isinstance(discharges, FlightCurves):
+        return _fit_flights(discharges, model=model, cells=cells, parallel=parallel,
+                            bootstrap=bootstrap, fixed=fixed, bounds=bounds, use_rest=use_rest,
+                            seed=seed)
     items = discharges if isinstance(discharges, (list, tuple)) else [discharges]
     if not items:
         raise DataError("no discharges to fit")
     curves = [(_as_discharge(d)).to_curve() for d in items]
-    fixed = dict(fixed or {})
-    if e0 is not None:
-        fixed["E0_V"] = float(e0)
+    cells = 1 if cells is None else cells
     return fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
                        bounds=bounds, paper_mode=paper_mode, use_rest=use_rest,
                        bootstrap=bootstrap, seed=seed, model=model)
+
+
+def _fit_flights(flights, *, model, cells, parallel, bootstrap, fixed, bounds, use_rest, seed):
+    """``fit`` for :class:`dischargelab.flight.FlightCurves` (flights of one pack)."""
+    from .flight import fit_flights
+
+    return fit_flights(flights, model=model, strings_parallel=parallel, cells=cells,
+                       fixed=fixed, bounds=bounds, bootstrap=bootstrap, seed=seed,
+                       use_rest=use_rest)
 
 
 def load(source: str | Path | Battery) -> Battery:

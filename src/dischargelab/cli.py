@@ -206,7 +206,7 @@ def write_csv(frame, path) -> Path:
 
 
 def read_data_files(paths, columns=None, current=None, sign="auto", segment="auto", units=None,
-                    status=None, verb="reading"):
+                    status=None, verb="reading", flight_options=None):
     """Read measured files with the shared data options; returns [(data, meta), ...].
 
     Raises DischargelabError with one line on bad options or input.
@@ -239,7 +239,7 @@ def read_data_files(paths, columns=None, current=None, sign="auto", segment="aut
         if status is not None:
             status.update(f"{verb} {Path(path).name} ({k + 1}/{len(paths)})")
         loaded.append(read_discharge(path, columns=column_map, current_A=amps, sign=sign,
-                                     segment=segment, units=unit_map))
+                                     segment=segment, units=unit_map, **(flight_options or {})))
     return loaded
 
 
@@ -261,7 +261,7 @@ def print_data_warnings(warnings) -> None:
 
 
 def load_curves(paths, columns=None, current=None, sign="auto", segment="auto", units=None,
-                pack=None, strict=False):
+                pack=None, strict=False, status=None):
     """Read files into fit curves after the plausibility checks.
 
     ``pack`` holds the keyword arguments of
@@ -270,7 +270,7 @@ def load_curves(paths, columns=None, current=None, sign="auto", segment="auto", 
     """
     from .fit import Curve
 
-    loaded = read_data_files(paths, columns, current, sign, segment, units)
+    loaded = read_data_files(paths, columns, current, sign, segment, units, status=status)
     warnings = check_plausible(loaded, pack or {}, strict)
     curves, metas = [], []
     for data, meta in loaded:
@@ -345,10 +345,19 @@ def _print_fit(result, battery_path=None):
 @app.command("fit")
 @click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @data_options
-@click.option("--cells", default=1, show_default=True, type=click.IntRange(1),
-              help="Cells in series in the measured pack (the model is per cell).")
+@click.option("--cells", default=None, type=click.IntRange(1),
+              help="Cells in series in the measured pack (the model is per cell) "
+                   "[default: 1, or a flight log's own count].")
 @click.option("--parallel", default=1, show_default=True, type=click.IntRange(1),
               help="Strings in parallel in the measured pack.")
+@click.option("--flight", "flights", multiple=True, metavar="N[,N...]",
+              help="Flight logs: the flights to fit together (repeatable or a comma list; "
+                   "default every flight).")
+@click.option("--battery", "battery_index", type=click.IntRange(0), metavar="N",
+              help="Flight logs: battery instance N [default: the first with data].")
+@click.option("--capacity", type=float, metavar="AH",
+              help="Flight logs: label capacity of the pack [Ah] (needed when the log does not "
+                   "state it); the initial charge of each flight is (1 - SOC) x capacity.")
 @click.option("--e0", type=float, metavar="V",
               help="Fix E0 [V per cell] (e.g. read from a low-rate curve).")
 @click.option("--fix", "fix", multiple=True, metavar="NAME=VALUE",
@@ -385,8 +394,8 @@ def _print_fit(result, battery_path=None):
 @click.option("--quiet", is_flag=True,
               help="Print only the result (warnings that change it are always shown).")
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, e0, fix, bound,
-            model_name, paper_mode, bootstrap,
+def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, flights,
+            battery_index, capacity, e0, fix, bound, model_name, paper_mode, bootstrap,
             no_rest, nominal_capacity, name, chemistry, output, plot_path, force, strict, quiet,
             as_json):
     """Fit the battery model to one or more discharge files.
@@ -402,6 +411,8 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, e0, f
       dischargelab fit 1C_discharge_U.txt --current 2.28 --e0 3.9
       dischargelab fit zippy.csv --cells 2 --e0 3.85 --paper-mode
       dischargelab fit c10.csv c1.csv c4.csv --model ecm -o cell.json
+      dischargelab fit 29.csv --capacity 1.6 --model ecm -o pack.json
+      dischargelab fit btfl_001.bbl --flight 1,2,3 --capacity 1.3 --model ecm
     """
     from .fit import AUTO, fit_battery
     from .models import get_family
@@ -414,13 +425,29 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, e0, f
         raise DischargelabError("--nominal-capacity must be a positive number of Ah")
     paths = expand_paths(data)
     guard_outputs([output, plot_path], paths, force, figures=[plot_path])
-    pack = {"cells_series": cells, "strings_parallel": parallel, "chemistry": chemistry,
-            "e0_V": e0}
-    curves, metas, data_warnings = load_curves(paths, columns, current, sign, segment, units,
-                                               pack, strict)
-    result = fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
-                         bounds=bounds, paper_mode=paper_mode, model=model_name,
-                         use_rest=not no_rest, bootstrap=bootstrap)
+    if _flight_fit_wanted(paths, flights, battery_index, capacity):
+        if columns or current or units or paper_mode:
+            raise DischargelabError("--columns, --current, --units and --paper-mode do not "
+                                    "apply to flight logs")
+        with err.status("fitting flights", spinner="dots"):
+            curves, result = _fit_flight_logs(
+                paths, _flight_numbers_option(flights), battery_index, capacity, chemistry,
+                cells, parallel, model_name, fixed, bounds, bootstrap, not no_rest)
+        metas, data_warnings = [], []
+        if capacity is not None and nominal_capacity is None:
+            nominal_capacity = capacity / parallel
+    else:
+        cells = cells or 1
+        pack = {"cells_series": cells, "strings_parallel": parallel, "chemistry": chemistry,
+                "e0_V": e0}
+        with err.status("reading", spinner="dots") as status:
+            curves, metas, data_warnings = load_curves(paths, columns, current, sign, segment,
+                                                       units, pack, strict, status=status)
+            status.update(f"fitting {len(curves)} curve(s), model {model_name}")
+            result = fit_battery(curves, cells_series=cells, strings_parallel=parallel,
+                                 fixed=fixed, bounds=bounds, paper_mode=paper_mode,
+                                 model=model_name, use_rest=not no_rest, bootstrap=bootstrap,
+                                 progress=_progress_callback(status, "bootstrap refits"))
     battery = result.battery
     label = name or ", ".join(c.name for c in curves)
     from dataclasses import replace as _replace
@@ -452,6 +479,59 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, e0, f
     _print_fit(result, output)
     if not output and not quiet:
         out.print("(not saved: add -o battery.json to keep this model)")
+
+
+def _flight_numbers_option(values) -> list[int] | None:
+    """``--flight 1 --flight 2,3`` as [1, 2, 3]; None when not given."""
+    if not values:
+        return None
+    numbers = []
+    for value in values:
+        for part in str(value).split(","):
+            try:
+                number = int(part)
+            except ValueError:
+                raise DischargelabError(f"--flight expects flight numbers such as 1 or 1,2,3; "
+                                        f"got {value!r}") from None
+            if number < 1:
+                raise DischargelabError(f"--flight numbers count from 1; got {number}")
+            numbers.append(number)
+    return numbers
+
+
+def _flight_fit_wanted(paths, flights, battery_index, capacity) -> bool:
+    """True when DATA are flight logs (fitted from their flights); errors on a mix."""
+    from .io.flightlog import detect_flight_log
+
+    logs = [detect_flight_log(p) is not None for p in paths]
+    if any(logs) and not all(logs):
+        raise DischargelabError("give either flight logs or discharge files to fit, not both")
+    if not all(logs) and (flights or battery_index is not None or capacity is not None):
+        raise DischargelabError("--flight, --battery and --capacity apply to flight logs "
+                                "(ArduPilot, PX4 ULog, blackbox, in-flight logger CSV)")
+    return all(logs)
+
+
+def _fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, parallel,
+                     model_name, fixed, bounds, bootstrap, use_rest):
+    """Fit the flights of flight logs together; returns (curves, FitResult)."""
+    from .flight import FlightCurves, fit_flights, flight_curves
+
+    parts = [flight_curves(p, flights, battery_index, capacity, chemistry, cells=cells)
+             for p in paths]
+    flights_all = parts[0]
+    for part in parts[1:]:
+        if part.cells_series != flights_all.cells_series:
+            raise DischargelabError(f"{part.source} has {part.cells_series} cells in series, "
+                                    f"{flights_all.source} {flights_all.cells_series}: fit "
+                                    "flights of one pack together")
+        flights_all = FlightCurves(flights_all.curves + part.curves, flights_all.cells_series,
+                                   flights_all.capacity_Ah, flights_all.capacity_source,
+                                   flights_all.chemistry, flights_all.flights + part.flights,
+                                   flights_all.notes + part.notes, flights_all.source)
+    result = fit_flights(flights_all, model=model_name, strings_parallel=parallel, cells=cells,
+                         fixed=fixed, bounds=bounds, bootstrap=bootstrap, use_rest=use_rest)
+    return flights_all.curves, result
 
 
 def _cutoff_options(func):
@@ -551,6 +631,11 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
     if summary.get("peak_temperature_C") is not None:
         rows.append(["peak cell temperature", f"{summary['peak_temperature_C']:.1f} degC "
                      f"(ambient {summary['ambient_C']:.1f} degC)"])
+    sens = summary.get("beta_sensitivity")
+    if sens:
+        alt = ", ".join(f"{key.rsplit('_', 1)[-1]}: {value:+.1f} %" for key, value in sens.items()
+                        if key.startswith("change_pct"))
+        rows.append([f"if beta were not {sens['prior_beta_K']:.0f} K", f"time {alt}"])
     out.print(table(f"Prediction ({bat.cells_series}S{bat.strings_parallel}P, {bat.model})",
                     ["quantity", "value"], rows))
     if spread and spread.get("interval_includes"):
@@ -813,6 +898,134 @@ def convert_cmd(log, output, flight, battery, topic, fields, force, as_json):
         out.print(f"note: {note}", markup=False)
     out.print(f"{result['rows']} rows of {result['battery_label']} written to "
               f"{result['output']}", markup=False)
+
+
+@app.command("flight")
+@click.argument("log", type=click.Path(dir_okay=False))
+@click.option("--battery-model", "battery_model", metavar="FILE",
+              help="Battery file (or preset) to fly the logged current through: predicted "
+                   "voltage and the remaining-time replay by the model.")
+@click.option("--flight", "flights", multiple=True, metavar="N[,N...]",
+              help="Flights to analyse (repeatable or a comma list) [default: all].")
+@click.option("--battery", "battery_index", type=click.IntRange(0), metavar="N",
+              help="Battery instance N [default: the first with data].")
+@click.option("--capacity", type=float, metavar="AH",
+              help="Label capacity of the pack [Ah] [default: the log's, else the model's].")
+@click.option("--chemistry", type=click.Choice(["lipo", "li-ion", "lifepo4"]),
+              help="Chemistry of the generic OCV curve and the default cutoff "
+                   "[default: the model's, else lipo].")
+@click.option("--cutoff", type=float, metavar="V",
+              help="Cutoff per cell [V] of the replay and its truth [default: by chemistry].")
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series [default: the log's count, else from the highest voltage].")
+@click.option("--parallel", type=click.IntRange(1), default=1, show_default=True,
+              help="Strings in parallel of the flight pack.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Save the three-panel plot (PNG, SVG or PDF).")
+@force_option
+@click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
+def flight_cmd(log, battery_model, flights, battery_index, capacity, chemistry, cutoff, cells,
+               parallel, output, force, as_json):
+    """What each flight of a flight log did to the pack, and how long it had left.
+
+    Per flight: duration, charge and energy used, loaded and resting voltages,
+    sag at the peak current, internal resistance (regression over 8 s windows,
+    beside the log's own estimate) and charge left at landing. With a battery
+    model: the voltage predicted from the logged current, and every 5 s the
+    remaining flight time by the model at the recent load next to the PX4 and
+    ArduPilot methods and, where the logged voltage reached the cutoff, the truth.
+
+    \b
+    Examples:
+      dischargelab flight 29.csv
+      dischargelab flight 29.csv --battery-model pack.json --cutoff 3.3 -o flight.png
+      dischargelab flight btfl_001.bbl --flight 2 --capacity 1.3 --json
+      dischargelab flight sample_log_small.ulg --battery 1
+    """
+    from .flight import analyse_flight
+
+    numbers = _flight_numbers_option(flights)
+    inputs = [log] + battery_input(battery_model)
+    guard_outputs([output], inputs, force, figures=[output])
+    model = load_battery_arg(battery_model) if battery_model else None
+    with err.status("analysing the flights", spinner="dots"):
+        report = analyse_flight(log, model, flights=numbers, battery=battery_index,
+                                capacity_Ah=capacity, chemistry=chemistry, cutoff=cutoff,
+                                cells=cells, parallel=parallel)
+    if output:
+        from .plot import save
+
+        save(report.plot()[0], output)
+    if as_json:
+        doc = report.to_dict()
+        if output:
+            doc["plot"] = str(output)
+        print_json(doc)
+        return
+    _print_flight_report(report)
+    if output:
+        out.print(f"plot: {output}", markup=False)
+
+
+def _print_flight_report(report) -> None:
+    def f(value, spec, scale=1.0):
+        if value is None or (isinstance(value, float) and not math.isfinite(value)):
+            return "-"
+        return format(value * scale, spec)
+
+    def cells(values):
+        return "-" if not values else " / ".join(f"{x:.2f}" for x in values)
+
+    def rest(r):
+        return "-" if r is None else f"{r['voltage_V']:.2f} V at {r['current_A']:.2f} A"
+
+    rows = [("duration [s]", lambda s: f(s["duration_s"], ".1f")),
+            ("charge used [mAh]", lambda s: f(s["charge_Ah"], ".0f", 1000)),
+            ("energy used [Wh]", lambda s: f(s["energy_Wh"], ".2f")),
+            ("mean / peak current [A]", lambda s: f"{f(s['mean_current_A'], '.1f')} / "
+                                                  f"{f(s['peak_current_A'], '.1f')}"),
+            ("rest before take-off", lambda s: rest(s["rest_before"])),
+            ("rest after landing", lambda s: rest(s["rest_after"])),
+            ("min loaded voltage [V]", lambda s: f(s["min_loaded_V"], ".2f")),
+            ("min loaded cells [V]", lambda s: cells(s["min_loaded_cell_V"])),
+            ("sag at peak [V]", lambda s: f(s["sag_V"], ".2f")),
+            ("sag at peak, cells [V]", lambda s: cells(s["sag_cells_V"])),
+            ("resistance, pack [mOhm]", lambda s: f(s["resistance_ohm"], ".1f", 1000)),
+            ("resistance, log's [mOhm]", lambda s: f(s["log_resistance_ohm"], ".1f", 1000)),
+            ("SOC take-off / landing [%]", lambda s: f"{f(s['soc_start'], '.0f', 100)} / "
+                                                     f"{f(s['soc_landing_ocv'], '.0f', 100)}"),
+            ("left at landing, OCV [mAh]", lambda s: f(s["charge_left_ocv_Ah"], ".0f", 1000)),
+            ("left, label - used [mAh]", lambda s: f(s["charge_left_label_Ah"], ".0f", 1000))]
+    if report.model:
+        rows += [("left, model [mAh]", lambda s: f(s.get("charge_left_model_Ah"), ".0f", 1000)),
+                 ("voltage RMSE, pack [mV]", lambda s: f(s.get("rmse_V"), ".0f", 1000)),
+                 ("voltage RMSE, cells [mV]",
+                  lambda s: "-" if not s.get("rmse_cell_V") else
+                  " / ".join(f"{1000 * x:.0f}" for x in s["rmse_cell_V"]))]
+    rows.append(("remaining at mid-flight [s]", _mid_flight_text))
+    out.print(table(f"{Path(report.source).name}: {report.battery_label}, "
+                    f"{report.cells_series} cells, capacity "
+                    f"{f(report.capacity_Ah, '.3g')} Ah ({report.capacity_source}), cutoff "
+                    f"{report.cutoff_cell_V:g} V/cell",
+                    ["quantity"] + [f"flight {a.number}" for a in report.flights],
+                    [[name] + [fn(a.summary) for a in report.flights] for name, fn in rows]))
+    for note in report.notes:
+        out.print(f"note: {note}", markup=False)
+    for a in report.flights:
+        for note in a.notes:
+            out.print(f"note: flight {a.number}: {note}", markup=False)
+
+
+def _mid_flight_text(summary) -> str:
+    mid = summary.get("replay_mid_flight")
+    if not mid:
+        return "-"
+    parts = []
+    for key, name in (("true_s", "true"), ("model_s", "model"), ("px4_s", "PX4"),
+                      ("ardupilot_s", "ArduPilot")):
+        if mid.get(key) is not None:
+            parts.append(f"{name} {mid[key]:.0f}")
+    return ", ".join(parts) or "-"
 
 
 BUG_LINE = "this is a bug in dischargelab; please report it with the command you ran"
@@ -1364,12 +1577,13 @@ def _progress_callback(status, what: str):
 
 
 def _validation_cases(battery, paths, cutoff, columns, current, sign, segment, units,
-                      status=None):
+                      status=None, flight_options=None):
     from .validate import compare_discharge
 
     return [compare_discharge(battery, data, meta, cutoff)
             for data, meta in read_data_files(paths, columns, current, sign, segment, units,
-                                              status=status, verb="validating")]
+                                              status=status, verb="validating",
+                                              flight_options=flight_options)]
 
 
 def _print_mission(result) -> None:
@@ -1493,12 +1707,16 @@ def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, ambient, d
               help="Cells in series of the measured pack (default: as in the battery file).")
 @click.option("--parallel", type=click.IntRange(1), default=None,
               help="Strings in parallel of the measured pack (default: as in the battery file).")
+@click.option("--flight", type=click.IntRange(1), metavar="N",
+              help="Flight logs: flight N (counting from 1) [default: the longest].")
+@click.option("--battery", "battery_index", type=click.IntRange(0), metavar="N",
+              help="Flight logs: battery instance N [default: the first with data].")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
               help="Save measured vs predicted curves (PNG, SVG or PDF).")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
 def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, cells, parallel,
-                 plot_path, force, as_json):
+                 flight, battery_index, plot_path, force, as_json):
     """Compare the model with measured discharges: endurance and voltage errors.
 
     Each DATA file is predicted with its own measured current (constant or the
@@ -1510,15 +1728,17 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
       dischargelab validate battery.json 'data/*.csv' --cutoff 2.5 --columns \\
           time_s=0,current_A=1,voltage_V=2 --plot validation.png
       dischargelab validate battery.json log.txt --current 2.28 --cutoff 3.0 --json
+      dischargelab validate pack.json btfl_001.bbl --flight 2 --cutoff 3.3
     """
     from .validate import summarise
 
     paths = expand_paths(data)
     guard_outputs([plot_path], battery_input(battery) + paths, force, figures=[plot_path])
     bat = load_battery_arg(battery).with_pack(cells, parallel)
+    chosen = {k: v for k, v in (("flight", flight), ("battery", battery_index)) if v is not None}
     with err.status("validating", spinner="dots") as status:
         cases = _validation_cases(bat, paths, cutoff, columns, current, sign, segment, units,
-                                  status)
+                                  status, flight_options=chosen)
     if plot_path:
         from .plot import plot_validation, save
 

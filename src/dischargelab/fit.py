@@ -646,7 +646,8 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 fixed: dict | None = None, bounds: dict | None = None,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
                 weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
-                seed: int = 0, model="shepherd", model_error: bool = True) -> FitResult:
+                seed: int = 0, model="shepherd", model_error: bool = True,
+                progress=None) -> FitResult:
     """Fit a model family to one or several discharges with shared parameters.
 
     Parameters
@@ -683,6 +684,8 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     model_error : bool
         With two or more curves at different currents, estimate the model's own
         error from leave-one-curve-out predictions (stored in ``model_error``).
+    progress : callable, optional
+        Called as ``progress(done, total)`` during the bootstrap refits.
 
     Returns
     -------
@@ -701,7 +704,8 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         return _fit_auto(curves, t_start, cells_series=cells_series,
                          strings_parallel=strings_parallel, fixed=fixed, bounds=bounds,
                          guess=guess, paper_mode=paper_mode, use_rest=use_rest,
-                         weighting=weighting, n_best=n_best, bootstrap=bootstrap, seed=seed)
+                         weighting=weighting, n_best=n_best, bootstrap=bootstrap, seed=seed,
+                         progress=progress)
     family = get_family(model)
     if cells_series < 1 or strings_parallel < 1:
         raise FitError("cells in series and strings in parallel must be at least 1")
@@ -795,7 +799,7 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     warnings += implausible + undetermined(family, params, ci95, fixed)
     samples = None
     if bootstrap:
-        samples = _bootstrap(mdl, values, residual, bnds, int(bootstrap), seed)
+        samples = _bootstrap(mdl, values, residual, bnds, int(bootstrap), seed, progress)
         if thermal is not None:
             for name in ("Cth_J_per_K", "Rth_K_per_W"):
                 samples[:, names_all.index(name)] = params[name]
@@ -861,7 +865,7 @@ def _fit_auto(curves, t_start, **kw) -> FitResult:
     fits, scores = {}, {}
     for name in names:
         try:
-            fits[name] = fit_battery(curves, model=name, **dict(kw, bootstrap=0))
+            fits[name] = fit_battery(curves, model=name, **dict(kw, bootstrap=0, progress=None))
         except FitError:
             continue
         err = fits[name].model_error
@@ -976,7 +980,8 @@ def _block_length(residual, stack: Samples) -> int:
     return max(1, int(np.ceil((1 + rho) / (1 - rho))))
 
 
-def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed: int):
+def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed: int,
+               progress=None):
     """Parameter sets refitted to the fit plus block-resampled residuals.
 
     Circular moving-block bootstrap of the residuals within each curve (blocks as
@@ -1009,6 +1014,8 @@ def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed
         vals = _polish(replica, dict(replica.project(theta)[0]), bounds)
         params, _ = replica.params(vals)
         out[b] = params.as_array(model.family.names)
+        if progress is not None:
+            progress(b + 1, n)
     return out
 
 

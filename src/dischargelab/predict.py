@@ -25,6 +25,7 @@ class Prediction:
     simulation: object
     interval: dict | None
     warnings: list = field(default_factory=list)
+    sensitivity: dict | None = None
 
     @property
     def time_to_cutoff_s(self) -> float:
@@ -43,6 +44,8 @@ class Prediction:
             if "draws" in self.interval and "failed" in self.interval:
                 out["interval95"]["bootstrap_draws"] = (self.interval["draws"]
                                                         - self.interval["failed"])
+        if self.sensitivity is not None:
+            out["beta_sensitivity"] = dict(self.sensitivity)
         out["warnings"] = list(self.warnings)
         return out
 
@@ -109,12 +112,41 @@ def predict(battery: Battery | str, *, current: float | None = None, c_rate: flo
             return simulate_current(b, amps, initial_charge_Ah=q0, ambient_C=ambient, **cut)
     sim = run(bat)
     spread = simulation_interval(bat, run) if interval else None
+    sensitivity = beta_sensitivity(bat, run, sim.time_to_cutoff_s)
     warnings = []
     cell_current = float(sim.current_A[0]) / bat.strings_parallel
     side = bat.extrapolation(cell_current)
     if side:
         warnings.append(extrapolation_warning(bat, cell_current, side))
-    return Prediction(sim, spread, warnings)
+    return Prediction(sim, spread, warnings, sensitivity)
+
+
+#: Arrhenius coefficients [K] tried when the fit held beta at its prior (E_a ~ 12-33 kJ/mol).
+BETA_ALTERNATIVES_K = (1500.0, 4000.0)
+
+
+def beta_sensitivity(battery: Battery, run, time_s: float) -> dict | None:
+    """Time to cutoff [s] with other Arrhenius coefficients, when the fit held beta at a prior.
+
+    From one rate the temperature dependence of R and K is not identifiable, so
+    the prediction's dependence on that prior is reported next to it.
+    """
+    from dataclasses import replace
+
+    fixed = battery.extra.get("fixed") if isinstance(battery.extra, dict) else None
+    if "beta_K" not in battery.parameter_names or not isinstance(fixed, dict) or \
+            "beta_K" not in fixed:
+        return None
+    out = {"prior_beta_K": float(battery.parameters["beta_K"])}
+    for beta in BETA_ALTERNATIVES_K:
+        other = replace(battery, parameters=battery.parameters.replace(beta_K=beta))
+        try:
+            t = run(other).time_to_cutoff_s
+        except SimulationError:
+            t = float("nan")
+        out[f"time_to_cutoff_s_beta_{beta:.0f}K"] = t
+        out[f"change_pct_beta_{beta:.0f}K"] = 100.0 * (t - time_s) / time_s
+    return out
 
 
 def extrapolation_warning(battery: Battery, cell_current_A: float, side: str) -> str:
