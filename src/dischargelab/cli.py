@@ -430,12 +430,13 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, fligh
             raise DischargelabError("--columns, --current, --units and --paper-mode do not "
                                     "apply to flight logs")
         with err.status("fitting flights", spinner="dots"):
-            curves, result = _fit_flight_logs(
+            flown, result = _fit_flight_logs(
                 paths, _flight_numbers_option(flights), battery_index, capacity, chemistry,
                 cells, parallel, model_name, fixed, bounds, bootstrap, not no_rest)
+        curves, chemistry = flown.curves, chemistry or flown.chemistry
         metas, data_warnings = [], []
-        if capacity is not None and nominal_capacity is None:
-            nominal_capacity = capacity / parallel
+        if nominal_capacity is None:
+            nominal_capacity = flown.capacity_Ah / parallel
     else:
         cells = cells or 1
         pack = {"cells_series": cells, "strings_parallel": parallel, "chemistry": chemistry,
@@ -514,7 +515,7 @@ def _flight_fit_wanted(paths, flights, battery_index, capacity) -> bool:
 
 def _fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, parallel,
                      model_name, fixed, bounds, bootstrap, use_rest):
-    """Fit the flights of flight logs together; returns (curves, FitResult)."""
+    """Fit the flights of flight logs together; returns (FlightCurves, FitResult)."""
     from .flight import FlightCurves, fit_flights, flight_curves
 
     parts = [flight_curves(p, flights, battery_index, capacity, chemistry, cells=cells)
@@ -531,7 +532,7 @@ def _fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, 
                                    flights_all.notes + part.notes, flights_all.source)
     result = fit_flights(flights_all, model=model_name, strings_parallel=parallel, cells=cells,
                          fixed=fixed, bounds=bounds, bootstrap=bootstrap, use_rest=use_rest)
-    return flights_all.curves, result
+    return flights_all, result
 
 
 def _cutoff_options(func):
