@@ -1022,7 +1022,8 @@ def _mid_flight_text(summary) -> str:
     if not mid:
         return "-"
     parts = []
-    for key, name in (("true_s", "true"), ("model_s", "model"), ("px4_s", "PX4"),
+    for key, name in (("true_s", "true"), ("model_profile_s", "model (recent load)"),
+                      ("model_s", "model (mean load)"), ("px4_s", "PX4"),
                       ("ardupilot_s", "ArduPilot")):
         if mid.get(key) is not None:
             parts.append(f"{name} {mid[key]:.0f}")

@@ -1388,6 +1388,7 @@ def _replay(part: FlightSamples, series, s: _Settings, bat, states: dict,
         load = _recent_current(t, i, k, min(s.recent_load_s, t[k] - part.load_start_s))
         after = t >= t[k]
         row = {"time_s": float(t[k]), "recent_current_A": load, "model_s": float("nan"),
+               "model_profile_s": float("nan"),
                "model_logged_load_s": _time_to(t[ok & after], None if predicted is None else
                                                predicted[ok & after], s.cutoff_pack_V, t[k]),
                "px4_s": float("nan"), "ardupilot_s": float("nan"),
@@ -1395,15 +1396,59 @@ def _replay(part: FlightSamples, series, s: _Settings, bat, states: dict,
         if load >= MIN_REPLAY_CURRENT_A:
             if bat is not None and k in states:
                 row["model_s"] = _model_remaining(bat, states[k], load, s)
+                window = min(s.recent_load_s, t[k] - part.load_start_s)
+                row["model_profile_s"] = _model_remaining_profile(
+                    bat, states[k], t[(t >= t[k] - window) & (t <= t[k])],
+                    i[(t >= t[k] - window) & (t <= t[k])], load, s)
             if s.capacity_Ah is not None:
                 px4 = _px4_remaining_frac(series, frame, k, s)
                 row["px4_s"] = px4 * s.capacity_Ah * 3600.0 / load
                 left = max(s.capacity_Ah - consumed(t[k]), 0.0)
                 row["ardupilot_s"] = left * 3600.0 / load
         out.append(row)
-    columns = ["time_s", "recent_current_A", "model_s", "model_logged_load_s", "px4_s",
+    columns = ["time_s", "recent_current_A", "model_s", "model_profile_s", "model_logged_load_s",
+               "px4_s",
                "ardupilot_s", "true_s"]
     return pd.DataFrame(out, columns=columns)
+
+
+#: Bin width [s] of the recent load profile the replay repeats (keeps its peaks).
+PROFILE_BIN_S = 0.5
+
+
+def _model_remaining_profile(bat, state: dict, t_window, i_window, load_A: float,
+                             s: _Settings) -> float:
+    """Time [s] until the cutoff when the recent load profile repeats, peaks included.
+
+    The last ``recent_load_s`` of logged current, averaged in :data:`PROFILE_BIN_S`
+    bins, is flown again and again from the engine ``state`` (enough repetitions to
+    empty the pack at its mean current, twice over, bounded). A pack whose cutoff is
+    set by load peaks reaches it sooner than at the mean load.
+    """
+    from .engine import Step, run
+
+    if np.size(t_window) < 3 or not np.ptp(t_window) > PROFILE_BIN_S:
+        return _model_remaining(bat, state, load_A, s)
+    edges = np.arange(t_window[0], t_window[-1] + PROFILE_BIN_S, PROFILE_BIN_S)
+    idx = np.clip(np.searchsorted(edges, t_window, side="right") - 1, 0, edges.size - 2)
+    sums = np.bincount(idx, weights=i_window, minlength=edges.size - 1)
+    counts = np.bincount(idx, minlength=edges.size - 1)
+    binned = np.where(counts > 0, sums / np.maximum(counts, 1), load_A)
+    period = binned.size * PROFILE_BIN_S
+    left_Ah = float(bat.capacity_Ah) - float(state["charge_Ah"][0]) * bat.strings_parallel
+    cycles = int(min(max(np.ceil(2.0 * left_Ah * 3600.0 / max(load_A, 1e-6) / period), 1), 2000))
+    times = np.arange(binned.size * cycles) * PROFILE_BIN_S
+    try:
+        res = run(bat.family, _engine_params(bat),
+                  [Step("profile", duration_s=float(times[-1] + PROFILE_BIN_S),
+                        profile_time_s=tuple(times), profile_current_A=tuple(np.tile(binned,
+                                                                                     cycles)))],
+                  cutoff_pack_V=s.cutoff_pack_V, cells_series=bat.cells_series,
+                  strings_parallel=bat.strings_parallel, ambient_C=bat.ambient_C,
+                  initial_state=state)
+    except SimulationError:
+        return float("nan")
+    return float(res.end_s[0]) if res.ended_by[0] == "cutoff" else float("nan")
 
 
 def _time_to(t, v, cutoff_V: float, now_s: float) -> float:
@@ -1475,6 +1520,8 @@ def _mid_flight(replay: pd.DataFrame, part: FlightSamples) -> dict | None:
                                  else val) for key, val in replay.iloc[k].to_dict().items()}
     if row.get("true_s") is not None and row.get("model_s") is not None:
         row["model_error_s"] = row["model_s"] - row["true_s"]
+    if row.get("true_s") is not None and row.get("model_profile_s") is not None:
+        row["model_profile_error_s"] = row["model_profile_s"] - row["true_s"]
     return row
 
 
@@ -1550,6 +1597,8 @@ def _plot_replay(ax, replay: pd.DataFrame, label) -> float | None:
         return None
     t = replay["time_s"].to_numpy()
     styles = [("true_s", "truth: logged voltage reaches the cutoff", "k", "-", None),
+              ("model_profile_s", "model repeating the recent load (peaks kept)", "tab:red",
+               "-", "D"),
               ("model_s", "model at the recent mean load", "tab:orange", "-", "o"),
               ("model_logged_load_s", "model flying the logged load (hindsight)", "tab:orange",
                ":", None),

@@ -1445,7 +1445,6 @@ def extrapolation_warnings(battery: Battery, phase_rows: list[dict]) -> list[str
     if not fitted:
         return ["the battery file lists no fit currents; cannot check whether the mission "
                 "currents lie inside the fitted range"]
-    lo, hi = min(fitted), max(fitted)
     p = battery.strings_parallel
     found = {"above": {}, "below": {}}
     for row in phase_rows:
@@ -1453,16 +1452,15 @@ def extrapolation_warnings(battery: Battery, phase_rows: list[dict]) -> list[str
         side = battery.extrapolation(cell)
         if side:
             found[side].setdefault(row["phase"], cell)
-    above, below = found["above"], found["below"]
+    from .predict import extrapolation_warning
+
     out = []
-    if above:
-        names = ", ".join(f"{n} ({c:.3g} A)" for n, c in above.items())
-        out.append(f"extrapolation: cell current of {names} is more than 2x the highest "
-                   f"fitted current {hi:.3g} A/cell; fit a discharge near this rate")
-    if below:
-        names = ", ".join(f"{n} ({c:.3g} A)" for n, c in below.items())
-        out.append(f"extrapolation: cell current of {names} is below half the lowest fitted "
-                   f"current {lo:.3g} A/cell; fit a discharge near this rate")
+    for side, phases in found.items():
+        if phases:
+            # the phase furthest out speaks for the group, in the one wording of predict/curves
+            worst = max(phases.values(), key=battery.extrapolation_ratio)
+            names = ", ".join(f"{n} ({c:.3g} A)" for n, c in phases.items())
+            out.append(f"{extrapolation_warning(battery, worst, side)} [phases: {names}]")
     return out
 
 
