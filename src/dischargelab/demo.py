@@ -44,7 +44,13 @@ def load_demo_curves():
 
 #: Files :func:`run_demo` writes into its folder.
 DEMO_OUTPUTS = ("battery-1C.json", "fit-battery-1C.png", "battery.json", "fit-battery.png",
-                "curves.png", "paper-table5.png", "survey.png", "report.html")
+                "curves.png", "paper-table5.png", "survey.png", "report.html", "flight.png",
+                "battery.param")
+
+#: The flight-log example: a PX4 multirotor log (6S pack, 27-74 A in flight), bundled under
+#: its MIT licence (see NOTICE), and the label capacity assumed for it [Ah].
+FLIGHT_LOG = "esc_status_log.ulg"
+FLIGHT_LOG_CAPACITY_AH = 10.0
 
 
 def check_demo(out_dir, force: bool = False) -> None:
@@ -53,7 +59,7 @@ def check_demo(out_dir, force: bool = False) -> None:
     Raises
     ------
     MissingExtraError
-        matplotlib (extra ``plot``) is not installed.
+        matplotlib (extra ``plot``) or pyulog (extra ``logs``) is not installed.
     OutputError
         A demo file exists in ``out_dir`` and ``force`` is false, or ``out_dir`` is a file.
     """
@@ -61,6 +67,7 @@ def check_demo(out_dir, force: bool = False) -> None:
     from .errors import require
 
     require("matplotlib", "plot")
+    require("pyulog", "logs")
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputError(f"{out_dir} is a file; give a folder for the demo's files")
@@ -140,6 +147,15 @@ def run_demo(out_dir: Path, console=None, force: bool = False) -> dict:
                          title=f"Samsung 30Q: model, validation and a {PACK[0]}S{PACK[1]}P "
                                f"survey mission")
         files["report.html"] = out_dir / "report.html"
+    with status("reading a PX4 flight log and deriving autopilot settings"):
+        flight, params = _flight_example(pack_file)
+        files["flight.png"] = save(flight.plot()[0], out_dir / "flight.png")
+        files["battery.param"] = params.write(out_dir / "battery.param", force=True)
+    say(f"\n[bold]Flight log[/] {FLIGHT_LOG}: " + _flight_text(flight))
+    say(f"ArduPilot settings for a {PACK[0]}S{PACK[1]}P pack of the fitted cells "
+        f"(written to battery.param):")
+    for setting in params.settings:
+        say(f"  {setting.name},{setting.text()}  # {setting.comment}", markup=False)
 
     if console is not None:
         _print_summary(console, models, rows, files)
@@ -152,6 +168,35 @@ def run_demo(out_dir: Path, console=None, force: bool = False) -> dict:
                         "max_temperature_C": r["max_temperature_C"],
                         **{label: r[label] for label in models}} for r in rows],
     }
+
+
+def _flight_example(battery_file):
+    """The bundled PX4 log analysed, and ArduPilot settings for a pack of the fitted cells."""
+    from .autopilot import autopilot_params
+    from .flight import analyse_flight
+
+    log = Path(str(resources.files("dischargelab") / "data" / "flightlogs" / FLIGHT_LOG))
+    flight = analyse_flight(log, capacity_Ah=FLIGHT_LOG_CAPACITY_AH)
+    params = autopilot_params(battery_file, firmware="ardupilot", cells=PACK[0],
+                              parallel=PACK[1], load_current_A=6.0, cutoff=SURVEY_CUTOFF_V)
+    return flight, params
+
+
+def _flight_text(report) -> str:
+    """One line per flight: duration, charge, peak current and sag, resistance."""
+    def part(label, value, scale=1.0, spec=".0f", unit=""):
+        return None if value is None else f"{label}{value * scale:{spec}}{unit}"
+
+    out = []
+    for a in report.flights:
+        s = a.summary
+        items = [part("", s.get("duration_s"), unit=" s"),
+                 part("", s.get("charge_Ah"), 1000, unit=" mAh"),
+                 part("peak ", s.get("peak_current_A"), unit=" A"),
+                 part("sag ", s.get("sag_V"), spec=".2f", unit=" V"),
+                 part("resistance ", s.get("resistance_ohm"), 1000, unit=" mOhm")]
+        out.append(f"flight {a.number}: " + ", ".join(x for x in items if x))
+    return "; ".join(out)
 
 
 def _print_summary(console, models, rows, files):

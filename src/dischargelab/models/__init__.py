@@ -9,18 +9,14 @@ from __future__ import annotations
 
 from ..errors import DataError
 from .base import Family, Parameter, Samples, State
+from .ecm import EquivalentCircuit
 from .shepherd import Shepherd
 from .thermal import ShepherdThermal
 
-#: Registered families by name (the value of ``model`` in battery files).
-FAMILIES: dict[str, Family] = {f.name: f for f in (Shepherd(), ShepherdThermal())}
-
-try:  # the equivalent-circuit family lives in its own module
-    from .ecm import EquivalentCircuit
-except ImportError:  # pragma: no cover - only while the module is absent
-    EquivalentCircuit = None
-else:
-    FAMILIES[EquivalentCircuit.name] = EquivalentCircuit()
+#: Registered families by name (the value of ``model`` in battery files). A new family
+#: is one new module plus its entry here.
+FAMILIES: dict[str, Family] = {f.name: f for f in (Shepherd(), ShepherdThermal(),
+                                                   EquivalentCircuit())}
 
 #: Names written by older versions of dischargelab.
 ALIASES = {"tremblay": "shepherd"}
