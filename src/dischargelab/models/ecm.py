@@ -60,14 +60,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Family, Parameter, Samples, State, arrhenius, arrhenius_dbeta, lowpass_samples
-from .shepherd import C_UPPER_FACTOR
-from .thermal import (
-    BETA_PRIOR_K,
-    BETA_SPAN_K,
-    HEAT_CAPACITY_PER_AH,
-    THERMAL_RESISTANCE_AH,
-    _curve_temperatures,
-)
+from .thermal import BETA_PRIOR_K, thermal_bounds, thermal_fixed
 
 #: Nodes of the piecewise-linear OCV in the surface state of discharge ``x = q_s / C`` [-]
 #: (dense near empty, where the end of every discharge and its time to cutoff are decided).
@@ -335,15 +328,8 @@ class EquivalentCircuit(Family):
         return {k: v for k, v in grid.items() if k in free_nonlinear}
 
     def fit_bounds(self, data: Samples):
-        lo_c = data.q_max * (1.0 + 1e-4)
-        return {"C_Ah": (lo_c, max(data.q_max * C_UPPER_FACTOR, lo_c * 1.01)),
-                "tau1_s": TAU1_BOUNDS_S, "tau2_s": TAU2_BOUNDS_S, "tau_d_s": TAU_D_BOUNDS_S,
-                "beta_K": (300.0, 12000.0)}
+        return dict(thermal_bounds(data), tau1_s=TAU1_BOUNDS_S, tau2_s=TAU2_BOUNDS_S,
+                    tau_d_s=TAU_D_BOUNDS_S)
 
     def fit_fixed(self, data: Samples):
-        fixed = {"Cth_J_per_K": HEAT_CAPACITY_PER_AH * data.q_max,
-                 "Rth_K_per_W": THERMAL_RESISTANCE_AH / data.q_max}
-        peaks, _ = _curve_temperatures(data)
-        if not data.has_temperature or np.ptp(peaks) < BETA_SPAN_K:
-            fixed["beta_K"] = BETA_PRIOR_K
-        return fixed
+        return thermal_fixed(data)

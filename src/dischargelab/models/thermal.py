@@ -146,20 +146,35 @@ class ShepherdThermal(Family):
         return grid
 
     def fit_bounds(self, data: Samples):
-        lo_c = data.q_max * (1.0 + 1e-4)
-        return {"C_Ah": (lo_c, max(data.q_max * C_UPPER_FACTOR, lo_c * 1.01)),
-                "beta_K": (300.0, 12000.0)}
+        return thermal_bounds(data)
 
     def fit_fixed(self, data: Samples):
-        fixed = {"Cth_J_per_K": HEAT_CAPACITY_PER_AH * data.q_max,
-                 "Rth_K_per_W": THERMAL_RESISTANCE_AH / data.q_max}
-        peaks, ambients = _curve_temperatures(data)
-        if not data.has_temperature or np.ptp(peaks) < BETA_SPAN_K:
-            fixed["beta_K"] = BETA_PRIOR_K
+        fixed = thermal_fixed(data)
+        _, ambients = _curve_temperatures(data)
         if not data.has_temperature or np.ptp(ambients) < AMBIENT_SPAN_K:
             fixed["dE0_dT_V_per_K"] = 0.0
             fixed["dC_dT_Ah_per_K"] = 0.0
         return fixed
+
+
+def thermal_bounds(data: Samples) -> dict:
+    """Data-dependent bounds shared by the thermal families: capacity above the
+    discharged charge, Arrhenius coefficient 300-12,000 K."""
+    lo_c = data.q_max * (1.0 + 1e-4)
+    return {"C_Ah": (lo_c, max(data.q_max * C_UPPER_FACTOR, lo_c * 1.01)),
+            "beta_K": (300.0, 12000.0)}
+
+
+def thermal_fixed(data: Samples) -> dict:
+    """Held parameters shared by the thermal families: the thermal mass and resistance
+    (fitted afterwards from the logged temperature) and beta at its prior unless the
+    fitted runs span :data:`BETA_SPAN_K` of peak temperature."""
+    fixed = {"Cth_J_per_K": HEAT_CAPACITY_PER_AH * data.q_max,
+             "Rth_K_per_W": THERMAL_RESISTANCE_AH / data.q_max}
+    peaks, _ = _curve_temperatures(data)
+    if not data.has_temperature or np.ptp(peaks) < BETA_SPAN_K:
+        fixed["beta_K"] = BETA_PRIOR_K
+    return fixed
 
 
 def _curve_temperatures(data: Samples):
