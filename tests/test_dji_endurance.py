@@ -27,7 +27,7 @@ def test_endurance_on_a_dji_fitted_battery_returns_quickly(dji_battery, mission,
         main(["endurance", str(dji_battery), mission, "--json"])
     elapsed = time.perf_counter() - start
     captured = capsys.readouterr()
-    assert elapsed < 10.0
+    assert elapsed < 30.0  # a hang, not a timing: each mission takes about 1 s here
     if exc.value.code == 0:
         doc = json.loads(captured.out)
         assert doc["endurance_s"] is None or doc["endurance_s"] > 0
