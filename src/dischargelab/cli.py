@@ -652,14 +652,16 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
 @click.option("--c-rates", metavar="X,X,...", help="C-rates, e.g. 0.5,1,2,4.")
 @click.option("--powers", metavar="W,W,...", help="Pack powers [W], e.g. 50,100,200.")
 @_cutoff_options
+@click.option("--ambient", type=float, metavar="C", default=None,
+              help="Ambient temperature [degC] for thermal models (default: the fitted data's).")
 @click.option("--x", "x_axis", type=click.Choice(["charge", "time"]), default="charge",
               show_default=True, help="Horizontal axis.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="Save the plot (PNG, SVG or PDF).")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
-def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cutoff_pack, x_axis,
-               output, force, as_json):
+def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cutoff_pack, ambient,
+               x_axis, output, force, as_json):
     """Simulate a family of discharges (like the paper's Figs 5, 7 and 10).
 
     \b
@@ -677,12 +679,13 @@ def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cuto
     guard_outputs([output], battery_input(battery), force, figures=[output])
     bat, cut = _battery_and_cutoff(battery, cells, parallel, cutoff, cutoff_pack)
     if powers:
-        results = curve_family(bat, powers_W=parse_number_list(powers, "--powers"), **cut)
+        results = curve_family(bat, powers_W=parse_number_list(powers, "--powers"),
+                               ambient_C=ambient, **cut)
     else:
         values = parse_number_list(currents or c_rates, "--currents" if currents else "--c-rates")
         if c_rates:
             values = [x * bat.rated_capacity_Ah for x in values]
-        results = curve_family(bat, values, **cut)
+        results = curve_family(bat, values, ambient_C=ambient, **cut)
     if output:
         from .plot import plot_family, save
 
