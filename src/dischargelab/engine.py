@@ -318,6 +318,22 @@ class _Recorder:
         return out
 
 
+def start_load(family, params: dict, step: Step, *, charge_Ah: float, ambient_C: float,
+               cells_series: int = 1, strings_parallel: int = 1) -> tuple[float, float, float]:
+    """Pack current [A], voltage [V] and maximum power [W] as ``step`` starts from rest
+    with ``charge_Ah`` [Ah, pack] removed: what the engine applies first. The current
+    is NaN where a power step cannot be delivered."""
+    pack = _Pack(family, {k: np.atleast_1d(np.asarray(v, dtype=float))
+                          for k, v in params.items()},
+                 cells_series, strings_parallel, float(ambient_C))
+    state = family.initial_state(pack.p, charge_Ah=np.atleast_1d(charge_Ah) / pack.par,
+                                 temperature_C=float(ambient_C))
+    current = _current_at(pack, step, state, np.zeros(1))
+    a, b = pack.affine(state)
+    max_power = float(a[0] * a[0] / (4.0 * b[0])) if b[0] > 0 else float("inf")
+    return float(current[0]), float(pack.voltage(state, current)[0]), max_power
+
+
 def _current_at(pack, st, state, t_in_step):
     """Pack current for step ``st`` at ``state`` (NaN where a power cannot be delivered)."""
     if st.kind == "rest":

@@ -211,31 +211,18 @@ def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
 def _start_voltage(battery: Battery, step: Step, q0: float, ambient_C: float) -> float:
     """Pack voltage [V] as ``step`` starts from rest with ``q0`` [Ah] removed.
 
-    The terminal voltage of every family is affine in the current for a given
-    state, ``V = a - b I``; a power step draws the low-current root of
-    ``(a - b I) I = P``.
-
     Raises
     ------
     SimulationError
         The power cannot be delivered at the start.
     """
-    fam, prm = battery.family, battery.parameters
-    s, p = battery.cells_series, battery.strings_parallel
-    state = fam.initial_state(dict(prm), charge_Ah=q0 / p, temperature_C=ambient_C)
-    a = s * float(fam.voltage(prm, state, 0.0))
-    b = s * (a / s - float(fam.voltage(prm, state, 1.0))) / p
-    if step.kind == "current":
-        return a - b * step.value
-    if step.kind == "profile":
-        first = min(int(np.searchsorted(step.profile_time_s, 0.0, side="right")),
-                    len(step.profile_current_A) - 1)   # the current the engine applies first
-        return a - b * step.profile_current_A[first]
-    disc = a * a - 4.0 * b * step.value
-    if not disc >= 0:
+    current, voltage, max_power = engine.start_load(
+        battery.family, dict(battery.parameters), step, charge_Ah=q0, ambient_C=ambient_C,
+        cells_series=battery.cells_series, strings_parallel=battery.strings_parallel)
+    if not np.isfinite(current):
         raise SimulationError(f"the battery cannot deliver {step.value:g} W: its maximum power "
-                              f"at the start is {a * a / (4 * b):.1f} W; lower the power")
-    return a - b * 2.0 * step.value / (a + np.sqrt(disc))
+                              f"at the start is {max_power:.1f} W; lower the power")
+    return voltage
 
 
 def _cumulative_energy(t, p):
