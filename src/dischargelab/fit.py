@@ -134,19 +134,13 @@ class Curve:
 
     @classmethod
     def from_frame(cls, data, meta: dict | None = None, name: str = "") -> Curve:
-        """Build from a canonical DataFrame (``time_s``, ``voltage_V``, ``current_A``)."""
+        """Build from a canonical DataFrame (``time_s``, ``voltage_V``, ``current_A``)
+        and the reader's meta (see :meth:`dischargelab.Discharge.from_frame`)."""
+        from .discharge import Discharge
+
         meta = dict(meta or {})
-        missing = [c for c in ("time_s", "voltage_V", "current_A") if c not in data]
-        if missing:
-            raise DataError(f"data has no {', '.join(missing)} column; "
-                            f"files without a current column need --current A")
-        rest = (meta.get("rest_sample") or {}).get("voltage_V")
-        temp = data["temperature_C"].to_numpy(float) if "temperature_C" in data else None
-        return cls(data["time_s"].to_numpy(float), data["voltage_V"].to_numpy(float),
-                   data["current_A"].to_numpy(float),
-                   name=name or str(meta.get("name") or meta.get("source", "")),
-                   rest_voltage_V=None if rest is None else float(rest), meta=meta,
-                   temperature_C=temp)
+        label = name or str(meta.get("name") or meta.get("source", ""))
+        return Discharge.from_frame(data, meta, name=label).to_curve()
 
     @property
     def mean_current_A(self) -> float:
