@@ -355,13 +355,14 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
                                 for s in sources)
         if summary["in_fit"]:
             warnings.append("this file was used in the fit: not an independent validation")
-    fitted = [abs(x) for x in battery.fit_currents_A if x]
-    if fitted:
+    if any(battery.fit_currents_A):
+        from .predict import extrapolation_warning
+
         cell = summary["cell_current_A"]
-        summary["extrapolation"] = battery.extrapolation(cell) is not None
-        if summary["extrapolation"]:
-            warnings.append(f"extrapolation: cell current {cell:.3g} A is far outside the "
-                            f"fitted currents {', '.join(f'{x:.3g}' for x in fitted)} A")
+        side = battery.extrapolation(cell)
+        summary["extrapolation"] = side is not None
+        if side:
+            warnings.append(extrapolation_warning(battery, cell, side))
     return ValidationCase(summary=summary, time_s=t, voltage_measured_V=v,
                           voltage_predicted_V=v_pred, prediction=prediction, current_A=i)
 
