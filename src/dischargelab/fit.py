@@ -824,6 +824,12 @@ AUTO = "auto"
 PHYSICAL_PREFERENCE = 0.01
 
 
+def _several_rates(curves) -> bool:
+    """Two or more curves whose mean currents differ by 20 % or more."""
+    currents = [c.mean_current_A for c in curves]
+    return len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
+
+
 def choose_model(curves) -> tuple[list[str], str]:
     """Candidate families for ``model="auto"`` and why.
 
@@ -836,9 +842,7 @@ def choose_model(curves) -> tuple[list[str], str]:
     from .models import FAMILIES
 
     has_temp = all(c.temperature_C is not None for c in curves)
-    currents = [c.mean_current_A for c in curves]
-    several = len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
-    if not several:
+    if not _several_rates(curves):
         if has_temp:
             return ["shepherd-thermal"], ("one rate with a logged temperature: shepherd-thermal "
                                           "(self-heating from the log, Arrhenius prior)")
@@ -874,7 +878,10 @@ def _fit_auto(curves, t_start, **kw) -> FitResult:
         best = physical[0]
         why += (f", preferring physically plausible parameters within "
                 f"{100 * PHYSICAL_PREFERENCE:g} points of the best")
-    res = fit_battery(curves, model=best, **kw) if kw.get("bootstrap") else fits[best]
+    res = fits[best]
+    if kw.get("bootstrap"):  # refit with the bootstrap; the held-out error is already known
+        res = fit_battery(curves, model=best, model_error=False, **kw)
+        res.model_error = fits[best].model_error
     table = ", ".join(f"{n} {100 * scores[n]:.2f} %"
                       + ("" if fits[n].physical else " (implausible parameters)") for n in fits)
     res.notes.insert(0, f"model {best!r} chosen automatically: {why} (held-out time-to-cutoff "
@@ -932,8 +939,7 @@ def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=N
     from .errors import SimulationError
     from .simulate import simulate_current
 
-    currents = [c.mean_current_A for c in curves]
-    if len(curves) < 2 or max(currents) < 1.2 * min(currents):
+    if not _several_rates(curves):
         return None
     errors, names = [], []
     for k, left in enumerate(curves):
