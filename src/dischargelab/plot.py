@@ -115,26 +115,14 @@ def plot_fit(result, ax=None, x: str = "charge"):
     return ax
 
 
-#: Parameters shown in a fit plot's title, per model family (name, label, scale, unit).
-_TITLE_PARAMETERS = {
-    "shepherd": (("E0_V", "E0", 1, "V"), ("R_ohm", "R", 1000, "mohm"),
-                 ("K_V_per_Ah", "K", 1, "V/Ah"), ("A_V", "A", 1, "V"), ("B_per_Ah", "B", 1, "/Ah"),
-                 ("C_Ah", "C", 1, "Ah")),
-    "ecm": (("U_full_V", "U_full", 1, "V"), ("R0_ohm", "R0", 1000, "mohm"),
-            ("R1_ohm", "R1", 1000, "mohm"), ("R2_ohm", "R2", 1000, "mohm"),
-            ("tau_d_s", "tau_d", 1, "s"), ("C_Ah", "C", 1, "Ah")),
-}
-_TITLE_PARAMETERS["shepherd-thermal"] = _TITLE_PARAMETERS["shepherd"] + (
-    ("beta_K", "beta", 1, "K"),)
-
-
 def _fit_title(result) -> str:
-    """``model: E0=... R=...`` with the main parameters of the fitted family."""
-    model = getattr(result, "model", "shepherd")
+    """``model: E0=... R=...`` with the headline parameters of the fitted family."""
+    from .models import get_family
+
+    family = get_family(getattr(result, "model", "shepherd"))
     p = result.parameters
-    shown = [f"{label}={float(p[name]) * scale:.4g} {unit}"
-             for name, label, scale, unit in _TITLE_PARAMETERS.get(model, ()) if name in p]
-    return f"{model}: " + "  ".join(shown)
+    shown = [f"{name}={float(p[name]):.4g}" for name in family.headline if name in p]
+    return f"{family.name}: " + "  ".join(shown)
 
 
 def plot_simulation(result, ax=None, x: str = "time", label: str | None = None, **kwargs):

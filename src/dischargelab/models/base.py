@@ -239,6 +239,8 @@ class Family:
     description: str = ""
     parameters: tuple[Parameter, ...] = ()
     states: tuple[State, ...] = (State("charge_Ah", "Ah", "charge"),)
+    #: Parameters shown in plot titles and short summaries.
+    headline: tuple[str, ...] = ()
 
     # ---- parameters -------------------------------------------------------------
     @property

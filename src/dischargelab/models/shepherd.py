@@ -41,6 +41,7 @@ class Shepherd(Family):
     title = "modified Shepherd (paper eq. 6)"
     description = ("E0 - R i - K C/(C-q) (i+q) + A exp(-B q); isothermal, the paper's model. "
                    "Good near the fitted rate; misses self-heating at high rate.")
+    headline = ("E0_V", "R_ohm", "K_V_per_Ah", "A_V", "B_per_Ah", "C_Ah")
     parameters = (
         Parameter("E0_V", "V", 0.5, 6.0, 3.7, True, "battery constant voltage"),
         Parameter("R_ohm", "ohm", 0.0, 2.0, 0.02, True, "internal resistance"),

@@ -68,6 +68,7 @@ class ShepherdThermal(Family):
     title = "modified Shepherd with temperature (Tremblay/Simscape) + lumped thermal model"
     description = ("eq. 6 with R, K Arrhenius in T, E0 and C linear in T, and a lumped thermal "
                    "state: predicts self-heating at high rate from a bench test.")
+    headline = ("E0_V", "R_ohm", "K_V_per_Ah", "A_V", "B_per_Ah", "C_Ah", "beta_K")
     parameters = Shepherd.parameters[:4] + (
         Parameter("dE0_dT_V_per_K", "V/K", -0.01, 0.01, 0.0, True,
                   "temperature slope of E0", fit=False),
