@@ -277,3 +277,13 @@ def test_the_engine_step_limit_becomes_one_line_and_no_crash_for_draws(monkeypat
                                  cutoff_pack_V=10.0, cell_current_A=20.0)
     assert spread["interval_includes"] == ["model error (prior, extrapolation x2.5)"]
     assert "could not be flown" in spread["method"]
+
+
+@pytest.mark.parametrize("name", sorted(FAMILIES))
+def test_every_family_flies_the_bundled_repeat_until_mission(name):
+    fam = FAMILIES[name]
+    battery = Battery(CellParameters(fam.defaults()), model=name, cells_series=4,
+                      fit_currents_A=(3.0,))
+    mission = load_mission("multirotor-hover", battery=battery, cutoff_cell_V=3.0)
+    result = run_mission(mission)
+    assert result.flight_time_s > 0

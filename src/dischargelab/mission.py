@@ -958,8 +958,8 @@ def _expand(items, first_index: int = 0, stretch_s: float | None = None):
 
 
 def _pass_charge_estimate_Ah(mission: Mission, block: RepeatBlock) -> float:
-    """Charge of one block pass at the nominal pack voltage (only to size a batch)."""
-    nominal_V = mission.battery.cells_series * max(float(mission.battery.parameters["E0_V"]), 0.1)
+    """Charge of one block pass at the pack's rest voltage when full (only to size a batch)."""
+    nominal_V = max(float(mission.battery.voltage(0.0, 0.0)), 0.1 * mission.battery.cells_series)
     charge = 0.0
     for ph in block.phases:
         current = ph.value if ph.kind == "current" else ph.value / nominal_V
