@@ -232,3 +232,19 @@ def test_unanswered_port_gives_one_clear_error(tmp_path):
         os.close(slave)
     with pytest.raises(SourceDisconnected, match="cannot open serial port"):
         ArduinoSource(str(tmp_path / "nope"), calibration=KE)
+
+
+@pytest.mark.parametrize("name", ["shepherd", "shepherd-thermal", "ecm"])
+def test_virtual_device_runs_any_model_family(name):
+    from dischargelab.model import Battery, CellParameters
+    from dischargelab.models import FAMILIES
+
+    fam = FAMILIES[name]
+    battery = Battery(CellParameters(fam.defaults()), model=name, cells_series=2)
+    dev = VirtualDevice(battery, current_A=3.0, speed=60.0, thermistor=Thermistor())
+    dev._discharging = True   # the load is on (no relay): what START does
+    dev._advance(0.0)
+    dev._advance(1.0)   # one minute of the model at 3 A: it heats the cell and uses charge
+    assert dev.charge_Ah == pytest.approx(3.0 / 60.0)
+    assert dev.temperature_C > dev.ambient_C
+    assert 0 < dev.pack_voltage_V() < 2 * 4.5

@@ -322,10 +322,12 @@ class VirtualDevice:
             return
         i = self.current_A if self.load_on else 0.0
         t0 = self.battery_time_s
+        t_charge = self.charge_Ah
         self.charge_Ah = float(charge_from_current(np.array([t0, t0 + dt]), np.array([i, i]),
                                                    self.charge_Ah)[-1])
-        heat_W = i * i * self.battery.parameters.R_ohm * self.battery.cells_series \
-            / max(self.battery.strings_parallel, 1)
+        # current x overpotential of the model (any family), at the charge before the step
+        drop = float(self.battery.voltage(0.0, t_charge) - self.battery.voltage(i, t_charge))
+        heat_W = i * drop if math.isfinite(drop) else 0.0
         target = self.ambient_C + heat_W * self.thermal_resistance
         self.temperature_C = target + (self.temperature_C - target) * math.exp(
             -dt / self.thermal_tau_s)
