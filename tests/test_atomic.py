@@ -7,6 +7,7 @@ import stat
 
 import pytest
 
+from cli_run import run
 from dischargelab.atomic import (
     DuplicateInputError,
     OutputError,
@@ -18,16 +19,10 @@ from dischargelab.atomic import (
     write_json,
     write_text,
 )
-from dischargelab.cli import main
 
 SAMSUNG_COLUMNS = "time_s=0,current_A=1,voltage_V=2"
 
 
-def run(capsys, *args):
-    with pytest.raises(SystemExit) as exc:
-        main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return exc.value.code, captured.out, captured.err
 
 
 # ------------------------------------------------------------------ library policy

@@ -6,6 +6,7 @@ import sys
 
 import pytest
 
+from cli_run import run
 from dischargelab.cli import main
 from dischargelab.model import PARAMETER_NAMES
 from dischargelab.models import FAMILIES
@@ -13,12 +14,6 @@ from dischargelab.models import FAMILIES
 SAMSUNG_COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 
-def run(capsys, *args):
-    """Run the CLI in-process; return (exit code, stdout, stderr)."""
-    with pytest.raises(SystemExit) as exc:
-        main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return exc.value.code, captured.out, captured.err
 
 
 @pytest.fixture(scope="module")

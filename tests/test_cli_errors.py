@@ -5,14 +5,8 @@ import sys
 
 import pytest
 
-from dischargelab.cli import BUG_LINE, main
-
-
-def run(capsys, *args):
-    with pytest.raises(SystemExit) as exc:
-        main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return exc.value.code, captured.out, captured.err
+from cli_run import run
+from dischargelab.cli import BUG_LINE
 
 
 def test_a_bug_is_reported_as_a_bug_with_its_traceback(capsys, monkeypatch, tmp_path):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import dischargelab as dl
-from dischargelab.cli import main
+from cli_run import run
 from dischargelab.errors import DataError
 from dischargelab.flight import (
     CAPACITY_TOLERANCE,
@@ -46,11 +46,6 @@ def logs(shared_data):
     return shared_data / "flight_logs"
 
 
-def run(capsys, *args):
-    with pytest.raises(SystemExit) as exc:
-        main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return exc.value.code, captured.out, captured.err
 
 
 # --------------------------------------------------------------------------- OCV prior

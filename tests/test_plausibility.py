@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dischargelab.cli import main
+from cli_run import run
 from dischargelab.errors import DataError
 from dischargelab.io import read_discharge
 from dischargelab.plausibility import (
@@ -21,11 +21,6 @@ from dischargelab.plausibility import (
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 
-def run(capsys, *args):
-    with pytest.raises(SystemExit) as exc:
-        main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return exc.value.code, captured.out, captured.err
 
 
 def scaled_copy(bundled_data, path, factor, header=None):
