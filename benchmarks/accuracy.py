@@ -228,6 +228,7 @@ def evaluate(set_name, title, runs, trainings, family, bootstrap, failures):
                 iv = (out.get("interval95") or {}).get("time_to_cutoff_s")
                 row["interval"] = None if iv is None else (float(iv[0]), float(iv[1]))
                 row["predicted_s"] = float(out["time_to_cutoff_s"])
+                peak_row(row, run, out)
             except Exception as exc:
                 failures.append((family, set_name, " + ".join(train), "interval",
                                  failure_text(exc)))
@@ -248,6 +249,37 @@ def evaluate(set_name, title, runs, trainings, family, bootstrap, failures):
                 row["half_width_pct"] = 100.0 * (hi - lo) / 2.0 / pred
             rows.append(row)
     return rows
+
+
+def peak_row(row, run, out) -> None:
+    """Peak temperature measured (logged, up to the cutoff) and predicted, with its
+    interval, for thermal families on runs that logged a temperature."""
+    d = run.discharge
+    band = (out.get("interval95") or {}).get("peak_temperature_C")
+    if out.get("peak_temperature_C") is None or d.temperature_C is None or band is None:
+        return
+    end = int(np.searchsorted(d.time_s, d.time_s[0] + run.measured_s, side="right"))
+    row["peak_measured_C"] = float(np.nanmax(d.temperature_C[:max(end, 1)]))
+    row["peak_predicted_C"] = float(out["peak_temperature_C"])
+    row["peak_interval_C"] = (float(band[0]), float(band[1]))
+    row["peak_covered"] = bool(band[0] <= row["peak_measured_C"] <= band[1])
+
+
+def peak_table(rows, families):
+    """Peak cell temperature: error and coverage of its 95 % interval per family."""
+    print("| family | held-out runs with a logged temperature | median abs. error [K] | "
+          "worst error [K] | coverage of 95 % intervals | median half-width [K] |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for fam in families:
+        fr = [r for r in rows if r["family"] == fam and "peak_covered" in r]
+        if not fr:
+            continue
+        err = np.array([r["peak_predicted_C"] - r["peak_measured_C"] for r in fr])
+        half = [(r["peak_interval_C"][1] - r["peak_interval_C"][0]) / 2 for r in fr]
+        worst_k = err[np.argmax(np.abs(err))]
+        print(f"| {fam} | {len(fr)} | {np.median(np.abs(err)):.1f} | {worst_k:+.1f} | "
+              f"{100 * np.mean([r['peak_covered'] for r in fr]):.0f} % "
+              f"({sum(r['peak_covered'] for r in fr)}/{len(fr)}) | {np.median(half):.1f} |")
 
 
 # ---- tables ---------------------------------------------------------------------------------
@@ -465,6 +497,8 @@ def main(argv=None):
         detail_table(rows)
     print("\n## Summary per family (held-out runs only)\n")
     summary_table(rows, families)
+    print("\n## Peak cell temperature (thermal families, runs with a logged temperature)\n")
+    peak_table(rows, families)
     print("\n## Acceptance figures\n")
     for line in acceptance(rows, families):
         print(line)

@@ -327,3 +327,58 @@ def test_lfp_rate_capacity_needs_the_diffusion_state():
     params, res = _virtual_fit("lfp", ("0.2C", "2C"), fixed={"tau_d_s": 1.0})
     assert res.rmse_V > 0.04
     assert _endurance_error(params, "lfp", "1C") > 0.05
+
+
+@pytest.mark.slow
+def test_auto_picks_by_held_out_ends_on_two_rates():
+    """0.1C + 3C of the virtual LCO cell: leaving a whole curve out leaves a one-rate fit
+    (ecm's 3C-only fit misses 0.1C by tens of %), yet ecm predicts the rates between them
+    best; scoring the held-out curve ends too makes auto pick it, and 2C is within 2 %."""
+    import dischargelab as dl
+
+    res = dl.fit([dl.read(VIRTUAL / "lco_0.1C_25C.csv"), dl.read(VIRTUAL / "lco_3C_25C.csv")],
+                 bootstrap=0)
+    assert res.model == "ecm", res.notes[0]
+    assert "curve ends left out" in res.notes[0]
+    meta, _, _ = _read_virtual("lco_2C_25C.csv")
+    predicted = res.battery.predict(current=float(meta["current_A"]),
+                                    cutoff=float(meta["cutoff_V"]), ambient=25.0)
+    assert abs(predicted.time_to_cutoff_s / float(meta["time_to_cutoff_s"]) - 1) < 0.02
+    # the model error inside the fitted currents is not the ten-fold extrapolation's
+    assert res.model_error["relative_sd"] < res.model_error["held_out_rms"]
+
+
+def test_thermal_resistance_from_a_log_that_hardly_heats():
+    """The virtual LCO cell warms by about 1 K at 3C: the heat capacity keeps its default,
+    the thermal resistance comes from the log, and 2C is predicted to stay as cool."""
+    import dischargelab as dl
+
+    res = dl.fit([dl.read(VIRTUAL / "lco_3C_25C.csv")], model="shepherd-thermal",
+                 bootstrap=0, use_rest=True)
+    assert any("heat capacity" in n and "default" in n and "fitted to the logged" in n
+               for n in res.notes)
+    meta, _, _ = _read_virtual("lco_2C_25C.csv")
+    pred = res.battery.predict(current=float(meta["current_A"]),
+                               cutoff=float(meta["cutoff_V"]), ambient=25.0)
+    _, logged, _ = _read_virtual("lco_2C_25C.csv")
+    assert logged[3].max() - 25.0 < 2.0
+    assert abs(pred.simulation.peak_temperature_C - logged[3].max()) < 1.0
+
+
+def test_ecm_fits_curves_that_stop_before_the_knee(shared_data):
+    """A test stopped early (its last fifth missing) next to a full high-rate curve: the
+    coarse search can place the capacity just below a sample it did not see, and the
+    refinement must start from a capacity the model is defined at."""
+    from dataclasses import replace
+
+    import dischargelab as dl
+
+    folder = shared_data / "samsung30q_S001"
+    cols = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
+    low, high = (dl.read(folder / f"Q30_S001_{r}.csv", columns=cols).to_curve()
+                 for r in ("C10", "4C"))
+    keep = low.time_s <= low.time_s[0] + 0.8 * (low.time_s[-1] - low.time_s[0])
+    short = replace(low, time_s=low.time_s[keep], voltage_V=low.voltage_V[keep],
+                    current_A=low.current_A[keep], temperature_C=low.temperature_C[keep])
+    res = fit_battery([short, high], model="ecm", model_error=False)
+    assert res.rmse_V < 0.03

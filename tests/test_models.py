@@ -146,3 +146,20 @@ def test_thermal_engine_heats_more_at_high_rate():
     peaks = [engine.run(fam, p, [engine.Step("current", c)], cutoff_pack_V=2.8,
                         ambient_C=25.0).peak_temperature_C[0] for c in (0.5, 4.0)]
     assert 25.0 < peaks[0] < peaks[1]
+
+
+def test_thermal_engine_is_stable_for_a_short_thermal_time_constant():
+    """R_th C_th = 2 s against steps of about a minute: the temperature follows
+    T_amb + Q R_th without overshoot (an explicit scheme oscillates and diverges)."""
+    from dischargelab.model import PRESETS
+
+    fam = get_family("shepherd-thermal")
+    p = fam.defaults()
+    p.update(PRESETS["hacker-4100-4s-lifepo4"].parameters.as_dict())
+    p.update(Cth_J_per_K=1.0, Rth_K_per_W=2.0)
+    res = engine.run(fam, p, [engine.Step("current", 20.0)], cutoff_pack_V=2.5, ambient_C=25.0,
+                     steps_per_discharge=100, record=True)
+    temp = np.asarray(res.series["temperature_C"])
+    assert np.all(np.isfinite(temp)) and np.all(temp >= 25.0 - 1e-9)
+    assert np.all(np.diff(temp) >= -0.2)           # no oscillation
+    assert temp.max() < 25.0 + 2.0 * 20.0 * 1.0     # Q R_th with at most 1 V overpotential

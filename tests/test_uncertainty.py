@@ -20,8 +20,12 @@ from dischargelab.simulate import simulate_current
 from dischargelab.uncertainty import (
     MIN_HELD_OUT_SD,
     PRIOR_RELATIVE_SD,
+    PRIOR_WEIGHT_CURVES,
+    THERMAL_ABSOLUTE_SD_K,
     bootstrap_parameters,
+    held_out_posterior,
     model_error_sd,
+    peak_temperature_interval,
     prediction_interval,
     simulation_interval,
 )
@@ -83,6 +87,80 @@ def test_model_error_from_held_out_curves():
         pytest.approx(PRIOR_RELATIVE_SD)                                    # not held-out
     with pytest.raises(DataError, match="relative_sd must be a number"):
         model_error_sd(held_out("big"), 3.0)
+
+
+def test_held_out_errors_are_pooled_with_the_prior():
+    # no error at all on two curves: the prior still counts as two curves
+    sd, dof = held_out_posterior([0.0, 0.0])
+    assert dof == PRIOR_WEIGHT_CURVES + 2
+    assert sd == pytest.approx(PRIOR_RELATIVE_SD * math.sqrt(PRIOR_WEIGHT_CURVES / dof))
+    # large held-out errors dominate the prior
+    sd, _ = held_out_posterior([0.2, -0.2, 0.2])
+    assert 0.15 < sd < 0.2
+
+
+def test_held_out_model_error_uses_students_t():
+    error = {"relative_sd": 0.02, "source": "held-out", "dof": 4}
+    battery = replace(ONE_RATE, extra={"model_error": error})
+    sim = simulate_current(battery, 3.0, cutoff_cell_V=2.5)
+    lo, hi = simulation_interval(battery, sim)["time_to_cutoff_s"]
+    t975 = 2.7764451051977987                      # Student's t, 4 degrees of freedom
+    assert hi / sim.time_to_cutoff_s == pytest.approx(math.exp(t975 * 0.02), rel=1e-9)
+    assert lo / sim.time_to_cutoff_s == pytest.approx(math.exp(-t975 * 0.02), rel=1e-9)
+    bad = replace(ONE_RATE, extra={"model_error": dict(error, dof=0)})
+    with pytest.raises(DataError, match="dof must be a number >= 1"):
+        simulation_interval(bad, sim)
+
+
+def test_held_out_errors_are_brought_back_to_the_fitted_currents():
+    """A curve predicted from another one ten times its current carries the error of a
+    ten-fold extrapolation; inside the fitted currents the model error is smaller."""
+    from dischargelab.fit import Curve, held_out_error
+
+    def curve(current, name):
+        sim = simulate_current(HACKER, current, cutoff_cell_V=2.8)
+        # a rate-dependent capacity the model cannot follow: 4 % short at the high rate
+        t = sim.time_s * (1.0 - 0.04 * (current > 10))
+        return Curve(t, sim.voltage_V, sim.current_A, name=name,
+                     rest_voltage_V=float(sim.voltage_V[0]) + 0.05)
+
+    err = held_out_error([curve(4.1, "1C"), curve(41.0, "10C")], model="shepherd",
+                         cells_series=HACKER.cells_series)
+    assert err["extrapolation_ratios"] == pytest.approx([10.0, 10.0], rel=0.02)
+    raw = err["held_out_rms"]
+    assert raw > 0.01
+    sd, dof = held_out_posterior([e / 100 / (1 + 2.0 * math.log(r))
+                                  for e, r in zip(err["errors_pct"],
+                                                  err["extrapolation_ratios"])])
+    assert err["relative_sd"] == pytest.approx(sd) and err["dof"] == dof
+    assert err["relative_sd"] < raw
+
+
+def test_peak_temperature_interval():
+    lo, hi = peak_temperature_interval([45.0], 25.0, 1.0)
+    assert lo < 45.0 < hi
+    assert 45.0 - lo < hi - 45.0                         # a relative error of the rise
+    wide = peak_temperature_interval([45.0], 25.0, 4.0)
+    assert wide[1] - wide[0] > hi - lo                   # grows with the extrapolation
+    flat = peak_temperature_interval([25.0], 25.0, 1.0)  # no rise: the sensor tolerance
+    assert flat[1] - 25.0 == pytest.approx(Z95 * THERMAL_ABSOLUTE_SD_K, rel=0.1)
+
+
+def test_thermal_prediction_reports_a_peak_temperature_interval():
+    battery = replace(thermal_hacker(), covariance=np.diag(
+        (0.01 * thermal_hacker().parameters.as_array()) ** 2), fit_currents_A=(20.0,))
+    sim = simulate_current(battery, 40.0, cutoff_cell_V=2.5, ambient_C=20.0)
+    spread = simulation_interval(battery, sim, draws=100)
+    lo, hi = spread["peak_temperature_C"]
+    assert lo < sim.peak_temperature_C < hi
+    assert sim.peak_temperature_C > 25.0
+    # without draws (a preset): the model error alone, around the point value
+    alone = simulation_interval(thermal_hacker(), sim)
+    assert alone["peak_temperature_C"][0] < sim.peak_temperature_C < \
+        alone["peak_temperature_C"][1]
+    # isothermal families have none
+    assert "peak_temperature_C" not in simulation_interval(
+        HACKER, simulate_current(HACKER, 40.0, cutoff_cell_V=2.5))
 
 
 def test_prediction_without_draws_is_the_model_error_alone():

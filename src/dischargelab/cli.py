@@ -328,8 +328,10 @@ def _print_fit(result, battery_path=None):
     out.print(f"RMSE {result.rmse_V * 1000:.2f} mV per cell "
               f"({result.rmse_V * result.cells_series * 1000:.1f} mV pack)")
     if result.model_error:
+        err = result.model_error
         out.print(f"held-out error (leave one curve out): "
-                  f"{100 * result.model_error['relative_sd']:.2f} % RMS time to cutoff")
+                  f"{100 * err.get('held_out_rms', err['relative_sd']):.2f} % RMS time to cutoff"
+                  f"; {100 * err['relative_sd']:.2f} % inside the fitted currents")
     if result.paper_mode:
         for c, fitted in zip(result.curves, result.fit_currents_A):
             out.print(f"paper mode: fitted current {fitted:.4g} A vs measured "
@@ -368,7 +370,7 @@ def _print_fit(result, battery_path=None):
               help="Model family (see `dischargelab models`): shepherd, shepherd-thermal, ecm, "
                    "or auto (one curve: shepherd, or shepherd-thermal when the file logs the "
                    "cell temperature; several rates: the family with the smallest held-out "
-                   "error).")
+                   "error, whole curves and curve ends left out).")
 @click.option("--paper-mode", is_flag=True,
               help="Reproduce the paper: E0 given (--e0), current fitted with R, K, A, B, C. "
                    "Degenerate by construction; prints why.")
@@ -630,8 +632,9 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
             ["energy delivered", with_interval(f"{summary['energy_Wh']:.4g} Wh", "energy_Wh")],
             ["ended by", summary["ended_by"]]]
     if summary.get("peak_temperature_C") is not None:
-        rows.append(["peak cell temperature", f"{summary['peak_temperature_C']:.1f} degC "
-                     f"(ambient {summary['ambient_C']:.1f} degC)"])
+        rows.append(["peak cell temperature", with_interval(
+            f"{summary['peak_temperature_C']:.1f} degC (ambient {summary['ambient_C']:.1f} degC)",
+            "peak_temperature_C", spec=".1f")])
     sens = summary.get("beta_sensitivity")
     if sens:
         alt = ", ".join(f"{key.rsplit('_', 1)[-1]}: {value:+.1f} %" for key, value in sens.items()

@@ -13,7 +13,8 @@ Stepping
 Over one time step the load is held: a current step at its current; a power
 step at the current that delivers the power (Heun's method: the mean of the
 currents at the start and at the predicted end). Charge and lowpass states are
-advanced exactly for that current, the thermal state with Heun's method. The
+advanced exactly for that current, the thermal state exactly for the mean of the
+heat at the start and at the end of the step (Heun's predictor-corrector). The
 instant a stop condition is crossed is then located by bisection on the length
 of the last step (exact to ~1e-9 of the step for charge/lowpass states), so the
 time to cutoff does not depend on the step size for the paper's model.
@@ -206,18 +207,27 @@ class _Pack:
         if any(st.kind == "thermal" for st in self.kinds.values()):
             for name, st in self.kinds.items():
                 if st.kind == "thermal":
-                    t0 = state[name]
-                    d0 = self._dtemp(state, i, t0)
+                    q0 = self._heat(state, i)
                     pred = dict(new)
-                    pred[name] = t0 + dt * d0
-                    d1 = self._dtemp(pred, i, pred[name])
-                    new[name] = t0 + 0.5 * dt * (d0 + d1)
+                    pred[name] = self._relax(state[name], q0, dt)
+                    new[name] = self._relax(state[name], 0.5 * (q0 + self._heat(pred, i)), dt)
         return new
 
-    def _dtemp(self, state, i, temperature):
-        heat = self.family.heat_W(self.p, state, i)
-        heat = np.where(np.isfinite(heat), heat, 0.0)
-        return (heat - (temperature - self.ambient) / self.p["Rth_K_per_W"]) / self.p["Cth_J_per_K"]
+    def _heat(self, state, i):
+        """Heat [W]; 0 where the cell is past empty (the step is cut there anyway)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            heat = self.family.heat_W(self.p, state, i)
+        return np.where(np.isfinite(heat), heat, 0.0)
+
+    def _relax(self, temperature, heat, dt):
+        """Lumped temperature after ``dt`` [s] at a constant heat [W], solved exactly:
+        ``T_amb + Q R_th + (T - T_amb - Q R_th) exp(-dt / (R_th C_th))`` (stable for any
+        step, however short the thermal time constant)."""
+        rth = np.asarray(self.p["Rth_K_per_W"], dtype=float)
+        steady = self.ambient + heat * rth
+        with np.errstate(under="ignore"):
+            decay = np.exp(-dt / (rth * np.asarray(self.p["Cth_J_per_K"], dtype=float)))
+        return steady + (temperature - steady) * decay
 
     def temperature(self, state):
         return self.family.temperature_C(state, self.ambient)

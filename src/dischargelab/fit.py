@@ -53,7 +53,7 @@ from .errors import DataError, FitError
 from .identifiability import Identifiability, analyse, equilibrated_svd, plausibility, undetermined
 from .model import Battery, CellParameters, charge_from_current
 from .models import Family, Samples, get_family
-from .models.base import fit_lumped_thermal
+from .models.base import MIN_HEATING_K, fit_lumped_thermal
 
 #: Name of the current-scale parameter fitted in paper mode.
 CURRENT_SCALE = "current_scale"
@@ -744,7 +744,7 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             nfev += sol.nfev
             if best is None or sol.cost < best.cost:
                 best = sol
-        sol = _varpro_solve(mdl, best.x, lo, hi)
+        sol = _varpro_solve(mdl, _defined_start(mdl, best.x, hi), lo, hi)
         nfev += sol.nfev
         theta = sol.x
     values = dict(mdl.project(theta)[0])
@@ -830,6 +830,23 @@ def _several_rates(curves) -> bool:
     return len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
 
 
+def selection_score(curve_rms: float | None, end_rms: float | None) -> float:
+    """Score of a family for ``model="auto"`` [-]: the geometric mean of its two
+    held-out errors of the time to cutoff, whole curves left out
+    (:func:`held_out_error`, how the capacity and overpotentials change with rate)
+    and curve ends left out (:func:`held_out_tail_error`, the knee at every fitted
+    rate). A family must predict both; with two curves, leaving one out leaves a
+    one-rate fit, which scores priors more than the family. ``inf`` when either
+    could not be computed."""
+    if curve_rms is None or end_rms is None:
+        return float("inf")
+    return float(np.sqrt(max(curve_rms, 1e-6) * max(end_rms, 1e-6)))
+
+
+def _pct(value) -> str:
+    return "n/a" if value is None or not np.isfinite(value) else f"{100 * value:.2f} %"
+
+
 def choose_model(curves) -> tuple[list[str], str]:
     """Candidate families for ``model="auto"`` and why.
 
@@ -848,7 +865,7 @@ def choose_model(curves) -> tuple[list[str], str]:
                                           "(self-heating from the log, Arrhenius prior)")
         return ["shepherd"], "one rate without temperature: the paper's shepherd model"
     names = [n for n in FAMILIES if has_temp or not get_family(n).thermal]
-    return names, "several rates: the family with the smallest held-out-curve error"
+    return names, "several rates: the family with the smallest held-out error"
 
 
 def _fit_auto(curves, t_start, **kw) -> FitResult:
@@ -860,14 +877,17 @@ def _fit_auto(curves, t_start, **kw) -> FitResult:
         res = fit_battery(curves, model=names[0], **kw)
         res.notes.insert(0, f"model {names[0]!r} chosen automatically: {why}")
         return res
-    fits, scores = {}, {}
+    fits, scores, tails = {}, {}, {}
+    common = {k: kw[k] for k in ("cells_series", "strings_parallel", "fixed", "bounds",
+                                 "use_rest", "weighting") if k in kw}
     for name in names:
         try:
             fits[name] = fit_battery(curves, model=name, **dict(kw, bootstrap=0, progress=None))
         except FitError:
             continue
         err = fits[name].model_error
-        scores[name] = err["relative_sd"] if err else np.inf
+        tails[name] = held_out_tail_error(curves, model=name, **common)
+        scores[name] = selection_score(err["held_out_rms"] if err else None, tails[name])
     if not fits:
         raise FitError("no model family could be fitted to these data")
     order = sorted(fits, key=lambda n: (scores[n], list(fits).index(n)))
@@ -882,10 +902,16 @@ def _fit_auto(curves, t_start, **kw) -> FitResult:
     if kw.get("bootstrap"):  # refit with the bootstrap; the held-out error is already known
         res = fit_battery(curves, model=best, model_error=False, **kw)
         res.model_error = fits[best].model_error
-    table = ", ".join(f"{n} {100 * scores[n]:.2f} %"
-                      + ("" if fits[n].physical else " (implausible parameters)") for n in fits)
+    def row(n):
+        err = fits[n].model_error
+        return (f"{n} {_pct(scores[n])} (curves {_pct(err and err['held_out_rms'])}, "
+                f"ends {_pct(tails[n])})"
+                + ("" if fits[n].physical else " implausible parameters"))
+
+    table = ", ".join(row(n) for n in fits)
     res.notes.insert(0, f"model {best!r} chosen automatically: {why} (held-out time-to-cutoff "
-                        f"error RMS: {table})")
+                        f"error, geometric mean of whole curves and curve ends left out: "
+                        f"{table})")
     res.elapsed_s = time.perf_counter() - t_start
     return res
 
@@ -908,17 +934,25 @@ def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list
     fitted = fit_lumped_thermal(family, params, stack)
     if fitted is None:
         source = ("default (no logged temperature)" if not stack.has_temperature
-                  else "default (the data show less than 2 K of self-heating)")
+                  else "default (the logged temperature could not be used)")
         notes.append(f"thermal model: {source}; heat capacity {params['Cth_J_per_K']:.3g} J/K, "
                      f"thermal resistance {params['Rth_K_per_W']:.3g} K/W")
         return params, {"Cth_J_per_K": float(params["Cth_J_per_K"]),
                         "Rth_K_per_W": float(params["Rth_K_per_W"]), "source": source}
     params = params.replace(Cth_J_per_K=fitted["Cth_J_per_K"],
                             Rth_K_per_W=fitted["Rth_K_per_W"])
-    notes.append(f"thermal model fitted to the logged cell temperature: heat capacity "
-                 f"{fitted['Cth_J_per_K']:.3g} J/K, thermal resistance "
-                 f"{fitted['Rth_K_per_W']:.3g} K/W (RMSE {fitted['rmse_K']:.2f} K)")
-    return params, dict(fitted, source="logged temperature")
+    if fitted["heat_capacity_fitted"]:
+        source = "logged temperature"
+        how = "heat capacity {:.3g} J/K, thermal resistance {:.3g} K/W"
+    else:
+        source = (f"logged temperature (less than {MIN_HEATING_K:g} K of self-heating: "
+                  f"heat capacity kept at its default)")
+        how = ("heat capacity {:.3g} J/K (default: the log shows less than "
+               f"{MIN_HEATING_K:g} K of self-heating), thermal resistance {{:.3g}} K/W")
+    notes.append("thermal model fitted to the logged cell temperature: "
+                 + how.format(fitted["Cth_J_per_K"], fitted["Rth_K_per_W"])
+                 + f" (RMSE {fitted['rmse_K']:.2f} K)")
+    return params, dict(fitted, source=source)
 
 
 def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=None,
@@ -930,18 +964,30 @@ def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=N
     (thermal families from its starting temperature). Needs two or more curves
     whose currents differ by 20 % or more.
 
+    Each held-out prediction is an extrapolation by the current ratio ``r_k``
+    between the left-out curve and the fitted ones, so its error is brought back
+    to the fitted currents by dividing it by ``1 + g_k ln r_k``, ``g_k`` being the
+    growth :func:`dischargelab.uncertainty.extrapolation_growth` of that smaller fit
+    (one rate: the prior's; several: the held-out one). Without this, two curves a
+    decade apart would give every prediction between them the error of a
+    ten-fold extrapolation.
+
     Returns
     -------
     dict or None
-        ``{"relative_sd", "errors_pct", "source": "held-out", "curves"}``: the
-        root-mean-square relative error of the held-out times to cutoff.
+        ``relative_sd`` and ``dof``: the model error inside the fitted currents,
+        the normalised errors pooled with the prior
+        (:func:`dischargelab.uncertainty.held_out_posterior`); ``held_out_rms``:
+        RMS of the raw held-out errors; ``errors_pct``, ``extrapolation_ratios``, ``curves`` per left-out curve;
+        ``source = "held-out"``.
     """
     from .errors import SimulationError
     from .simulate import simulate_current
+    from .uncertainty import extrapolation_growth, held_out_posterior
 
     if not _several_rates(curves):
         return None
-    errors, names = [], []
+    errors, ratios, normalised, names = [], [], [], []
     for k, left in enumerate(curves):
         rest = [c for j, c in enumerate(curves) if j != k]
         try:
@@ -955,12 +1001,65 @@ def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=N
             continue
         measured = float(left.time_s[-1] - left.time_s[0])
         if np.isfinite(sim.time_to_cutoff_s) and measured > 0:
-            errors.append(100.0 * (sim.time_to_cutoff_s - measured) / measured)
+            error = (sim.time_to_cutoff_s - measured) / measured
+            ratio = res.battery.extrapolation_ratio(left.mean_current_A / strings_parallel)
+            growth = extrapolation_growth(
+                res.battery, "held-out" if _several_rates(rest) else "prior")
+            errors.append(100.0 * error)
+            ratios.append(float(ratio))
+            normalised.append(error / (1.0 + growth * np.log(ratio)))
             names.append(left.name)
     if not errors:
         return None
-    rel = float(np.sqrt(np.mean(np.square(errors)))) / 100.0
-    return {"relative_sd": rel, "errors_pct": errors, "curves": names, "source": "held-out"}
+    sd, dof = held_out_posterior(normalised)
+    return {"relative_sd": sd, "dof": dof,
+            "held_out_rms": float(np.sqrt(np.mean(np.square(errors)))) / 100.0,
+            "errors_pct": errors, "extrapolation_ratios": ratios, "curves": names,
+            "source": "held-out"}
+
+
+#: Fraction of a curve's duration held out by :func:`held_out_tail_error`.
+HELD_OUT_TAIL = 0.2
+
+
+def held_out_tail_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=None,
+                        bounds=None, use_rest=True, weighting="equal") -> float | None:
+    """RMS relative error of the time to cutoff with each curve's end held out [-].
+
+    Each curve in turn loses its last :data:`HELD_OUT_TAIL` of duration (the knee
+    and the cutoff), the model is fitted to that and to every other curve whole,
+    and the time to the curve's last voltage is predicted at its mean current.
+    Unlike leaving a whole curve out, every rate stays in the fit, so this scores
+    what a fit to all the curves is used for: the end of discharge between and at
+    the fitted rates. ``None`` when no prediction could be made.
+    """
+    from dataclasses import replace as _replace
+
+    from .errors import SimulationError
+    from .simulate import simulate_current
+
+    errors = []
+    for k, left in enumerate(curves):
+        t = left.time_s
+        keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
+        cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
+               "current_A": left.current_A[keep]}
+        if left.temperature_C is not None:
+            cut["temperature_C"] = left.temperature_C[keep]
+        try:
+            rest = [_replace(left, **cut) if j == k else c for j, c in enumerate(curves)]
+            res = fit_battery(rest, cells_series=cells_series, strings_parallel=strings_parallel,
+                              fixed=fixed, bounds=bounds, use_rest=use_rest, weighting=weighting,
+                              model=model, model_error=False)
+            sim = simulate_current(res.battery, left.mean_current_A,
+                                   cutoff_pack_V=float(left.voltage_V[-1]),
+                                   ambient_C=left.ambient_C)
+        except (FitError, SimulationError, DataError):
+            continue
+        measured = float(t[-1] - t[0])
+        if np.isfinite(sim.time_to_cutoff_s) and measured > 0:
+            errors.append((sim.time_to_cutoff_s - measured) / measured)
+    return float(np.sqrt(np.mean(np.square(errors)))) if errors else None
 
 
 def _lag1_correlation(residual, stack: Samples) -> float:
@@ -1017,6 +1116,26 @@ def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed
         if progress is not None:
             progress(b + 1, n)
     return out
+
+
+#: Capacity increases tried when the coarse optimum leaves a sample past empty.
+_CAPACITY_STEPS = (1.0, 1.001, 1.003, 1.01, 1.03, 1.1)
+
+
+def _defined_start(model: _Model, theta, hi):
+    """``theta`` with the capacity raised just enough that the model is defined on
+    every sample: the coarse search sees a thinned copy of the data and can place
+    the capacity just under a sample it did not see (q >= C there)."""
+    theta = np.asarray(theta, dtype=float)
+    if "C_Ah" not in model.nonlinear:
+        return theta
+    k = model.nonlinear.index("C_Ah")
+    for factor in _CAPACITY_STEPS:
+        trial = theta.copy()
+        trial[k] = min(theta[k] * factor, hi[k])
+        if np.all(np.isfinite(model.varpro_residual(trial))):
+            return trial
+    return theta
 
 
 @dataclass

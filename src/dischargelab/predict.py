@@ -60,7 +60,31 @@ class Prediction:
         ax.axhline(sim.cutoff_pack_V, color="0.4", ls="--", lw=0.8)
         ax.set_title(f"{sim.steps[0].describe()}: {sim.time_to_cutoff_s / 60:.1f} min to "
                      f"{sim.cutoff_pack_V:.2f} V", fontsize=10)
+        if sim.peak_temperature_C is not None:
+            self._plot_temperature(ax, kwargs.get("x", "time"))
         return ax
+
+    def _plot_temperature(self, ax, x: str):
+        """Predicted cell temperature on a second axis, its peak with the 95 % interval."""
+        import numpy as np
+
+        from .plot import _xvalues
+
+        sim = self.simulation
+        xs = _xvalues(sim.charge_Ah, sim.time_s, x)
+        twin = ax.twinx()
+        temp = np.asarray(sim.temperature_C, dtype=float)
+        twin.plot(xs, temp, color="tab:red", lw=1.0, label="cell temperature")
+        k = int(np.nanargmax(temp))
+        band = (self.interval or {}).get("peak_temperature_C")
+        if band is not None:
+            twin.errorbar([xs[k]], [temp[k]], yerr=[[temp[k] - band[0]], [band[1] - temp[k]]],
+                          color="tab:red", capsize=4, fmt="o", ms=3,
+                          label=f"peak {temp[k]:.1f} degC [95 %: {band[0]:.1f} to "
+                                f"{band[1]:.1f}]")
+        twin.set_ylabel("cell temperature [degC]", color="tab:red")
+        twin.legend(fontsize=8, loc="upper right")
+        return twin
 
 
 def predict(battery: Battery | str, *, current: float | None = None, c_rate: float | None = None,

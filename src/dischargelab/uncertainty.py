@@ -31,6 +31,9 @@ References
    of distributions using a Monte Carlo method".
 .. [2] B. Efron, R. Tibshirani, "An Introduction to the Bootstrap", Chapman & Hall
    (1993), chapter 13 (percentile intervals).
+.. [3] A. Gelman et al., "Bayesian Data Analysis", 3rd ed., CRC Press (2013),
+   section 3.3 (normal model, conjugate scaled-inverse-chi-square prior on the
+   variance; the predictive distribution is Student's t).
 """
 
 from __future__ import annotations
@@ -55,6 +58,13 @@ PRIOR_RELATIVE_SD = 0.015
 #: curves cannot show an error below this).
 MIN_HELD_OUT_SD = 0.005
 
+#: Weight of the prior :data:`PRIOR_RELATIVE_SD` against held-out curves, in curves:
+#: the model error's variance is the scaled-inverse-chi-square posterior
+#: ``(nu0 s_prior^2 + sum e_k^2) / (nu0 + n)`` with ``nu0 + n`` degrees of freedom, and
+#: intervals use Student's t with those degrees of freedom (two or three held-out
+#: curves cannot pin a standard deviation down) [3].
+PRIOR_WEIGHT_CURVES = 2
+
 #: Growth of the model error with the logarithm of the extrapolation ratio [-].
 EXTRAPOLATION_GROWTH = 0.8
 
@@ -67,6 +77,21 @@ PRIOR_EXTRAPOLATION_GROWTH = 2.0
 #: that the data show, and the error grows with the rate (I^2 R heating).
 ISOTHERMAL_EXTRAPOLATION_GROWTH = 4.0
 SELF_HEATING_K = 5.0
+
+#: Relative standard deviation of a predicted temperature rise (peak - ambient) inside
+#: the fitted currents [-], and its growth with ln(extrapolation ratio). A lumped
+#: model's heat capacity and thermal resistance come from the fitted runs only: on
+#: the Samsung 30Q and PyBaMM NMC/LFP cells of ``benchmarks/accuracy.py`` the
+#: logged rise was exp(-0.6) to exp(+0.15) times the predicted one (RMS of the
+#: logarithm about 0.3), and a 1C fit predicting 4C can under-predict the rise by a
+#: quarter.
+THERMAL_RISE_SD = 0.25
+THERMAL_RISE_GROWTH = 0.3
+
+#: Absolute standard deviation [K] added to a predicted peak temperature: a
+#: thermocouple's tolerance (IEC 60584-1 class 1: +-1.5 K) and a lumped model's
+#: single temperature for a cell whose surface and core differ.
+THERMAL_ABSOLUTE_SD_K = 1.0
 
 #: Model-error samples per interval (shared out over the parameter draws).
 MODEL_ERROR_SAMPLES = 4000
@@ -243,17 +268,36 @@ def interval(values, level: float = 0.95) -> tuple[float, float]:
 # Model error
 # ---------------------------------------------------------------------------------------------
 
-def _model_error_base(battery: Battery) -> tuple[float, str]:
-    """(relative sd inside the fitted currents, "held-out" | "prior")."""
+def held_out_posterior(normalised_errors) -> tuple[float, int]:
+    """``(relative sd, degrees of freedom)`` of the model error from held-out curves.
+
+    ``normalised_errors`` are relative time-to-cutoff errors [-] of leave-one-out
+    predictions, each already brought back to the fitted currents. The prior
+    :data:`PRIOR_RELATIVE_SD` counts as :data:`PRIOR_WEIGHT_CURVES` curves [3].
+    """
+    e = np.asarray(normalised_errors, dtype=float)
+    dof = PRIOR_WEIGHT_CURVES + e.size
+    var = (PRIOR_WEIGHT_CURVES * PRIOR_RELATIVE_SD ** 2 + float(np.sum(e * e))) / dof
+    return math.sqrt(var), int(dof)
+
+
+def _model_error_base(battery: Battery) -> tuple[float, str, float | None]:
+    """(relative sd inside the fitted currents, "held-out" | "prior", Student-t degrees
+    of freedom or None for a normal)."""
     stored = battery.extra.get("model_error") if isinstance(battery.extra, dict) else None
     if not isinstance(stored, dict) or stored.get("source") != "held-out":
-        return PRIOR_RELATIVE_SD, "prior"
+        return PRIOR_RELATIVE_SD, "prior", None
     value = stored.get("relative_sd")
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
             not math.isfinite(value) or value < 0:
         raise DataError(f"battery file model_error.relative_sd must be a number >= 0, "
                         f"got {value!r}")
-    return max(float(value), MIN_HELD_OUT_SD), "held-out"
+    dof = stored.get("dof")
+    if dof is not None and (isinstance(dof, bool) or not isinstance(dof, (int, float))
+                            or not dof >= 1):
+        raise DataError(f"battery file model_error.dof must be a number >= 1, got {dof!r}")
+    return max(float(value), MIN_HELD_OUT_SD), "held-out", \
+        None if dof is None else float(dof)
 
 
 def model_error_sd(battery: Battery, cell_current_A: float) -> float:
@@ -264,9 +308,11 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
 
     * ``s0 = max(s_held_out, 0.005)``, ``g = 0.8`` when the battery file holds
       ``model_error = {"relative_sd": s_held_out, "source": "held-out"}`` (stored by
-      the fit from leave-one-curve-out predictions when >= 2 rates were fitted: the
-      held-out errors are themselves extrapolations, so they already carry the
-      rate dependence);
+      the fit from leave-one-curve-out predictions when >= 2 rates were fitted; each
+      held-out error is an extrapolation by the ratio ``r_k`` between the left-out
+      curve and the others, so it is divided by ``1 + g_k ln r_k`` with the growth
+      ``g_k`` of that smaller fit before the RMS is taken: ``s_held_out`` is the
+      error inside the fitted currents);
     * ``s0 = 0.015`` otherwise (prior: the paper's endurance errors on unseen rates
       were 1-6 %), ``g = 2`` (one rate cannot show how capacity and overpotentials
       change with rate), or ``g = 4`` for an isothermal family fitted to data that
@@ -283,13 +329,16 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     float
         Relative standard deviation [-] (e.g. 0.015 = 1.5 %).
     """
-    base, source = _model_error_base(battery)
+    base, source, _ = _model_error_base(battery)
     ratio = battery.extrapolation_ratio(cell_current_A)
-    return base * (1.0 + _growth(battery, source) * math.log(ratio))
+    return base * (1.0 + extrapolation_growth(battery, source) * math.log(ratio))
 
 
-def _growth(battery: Battery, source: str) -> float:
-    """How fast the model error grows with ln(extrapolation ratio) (see model_error_sd)."""
+def extrapolation_growth(battery: Battery, source: str) -> float:
+    """How fast the model error grows with ln(extrapolation ratio) (see model_error_sd).
+
+    ``source`` is ``"held-out"`` (several rates fitted) or ``"prior"`` (one rate).
+    """
     if source == "held-out":
         return EXTRAPOLATION_GROWTH
     rise = battery.extra.get("fit_temperature_rise_K") if isinstance(battery.extra, dict) \
@@ -301,25 +350,29 @@ def _growth(battery: Battery, source: str) -> float:
 
 def _model_error_info(battery: Battery, ratio: float) -> dict:
     """Model error for an (effective) extrapolation ratio: sd, source, label."""
-    base, source = _model_error_base(battery)
-    sd = base * (1.0 + _growth(battery, source) * math.log(max(ratio, 1.0)))
-    return {"relative_sd": sd, "base_relative_sd": base, "source": source,
+    base, source, dof = _model_error_base(battery)
+    sd = base * (1.0 + extrapolation_growth(battery, source) * math.log(max(ratio, 1.0)))
+    return {"relative_sd": sd, "base_relative_sd": base, "source": source, "dof": dof,
             "extrapolation_ratio": float(ratio),
             "label": f"model error ({source}, extrapolation x{ratio:.1f})"}
 
 
-def _z_level(level: float) -> float:
-    from scipy.stats import norm
+def _z_level(level: float, dof: float | None = None) -> float:
+    """Two-sided quantile of a normal (``dof`` None) or of Student's t."""
+    from scipy.stats import norm, t
 
-    return float(norm.ppf(0.5 + level / 2.0))
+    q = 0.5 + level / 2.0
+    return float(norm.ppf(q) if dof is None else t.ppf(q, dof))
 
 
-def _error_factors(n: int, sd: float, seed: int):
-    """``(rows, factor)``: each of ``n`` draws repeated, times ``exp(sd z)`` (seeded)."""
+def _error_factors(n: int, sd: float, seed: int, dof: float | None = None):
+    """``(rows, factor)``: each of ``n`` draws repeated, times ``exp(sd z)`` (seeded;
+    ``z`` normal, or Student's t with ``dof`` degrees of freedom)."""
     copies = max(1, math.ceil(MODEL_ERROR_SAMPLES / max(n, 1)))
     rng = np.random.default_rng([int(seed), 1])
     rows = np.repeat(np.arange(n), copies)
-    return rows, np.exp(sd * rng.standard_normal(rows.size))
+    z = rng.standard_normal(rows.size) if dof is None else rng.standard_t(dof, rows.size)
+    return rows, np.exp(sd * z)
 
 
 def _spread(samples: np.ndarray, nominal: float, level: float) -> dict:
@@ -331,8 +384,9 @@ def _spread(samples: np.ndarray, nominal: float, level: float) -> dict:
             "std": float(np.std(finite, ddof=1)) if finite.size > 1 else float("nan")}
 
 
-def _lognormal_spread(nominal: float, sd: float, level: float) -> dict:
-    z = _z_level(level)
+def _lognormal_spread(nominal: float, sd: float, level: float,
+                      dof: float | None = None) -> dict:
+    z = _z_level(level, dof)
     return {"nominal": float(nominal), "median": float(nominal),
             "low": float(nominal * math.exp(-z * sd)), "high": float(nominal * math.exp(z * sd)),
             "std": float(abs(nominal) * math.sqrt(math.expm1(sd * sd)) * math.exp(sd * sd / 2))}
@@ -377,8 +431,8 @@ def fly_draws(battery: Battery, params, steps, *, cutoff_pack_V: float,
     -------
     dict
         Arrays per draw: ``time_to_cutoff_s`` (0 where the draw cannot start, NaN
-        where the steps ended first), ``capacity_Ah``, ``energy_Wh``, ``ended_by``
-        and ``not_reaching`` (bool).
+        where the steps ended first), ``capacity_Ah``, ``energy_Wh``,
+        ``peak_temperature_C``, ``ended_by`` and ``not_reaching`` (bool).
 
     Raises
     ------
@@ -395,6 +449,7 @@ def fly_draws(battery: Battery, params, steps, *, cutoff_pack_V: float,
     time = np.where(ended == "end", np.nan, res.end_s)
     return {"time_to_cutoff_s": time, "capacity_Ah": res.charge_end_Ah - initial_charge_Ah,
             "energy_Wh": res.energy_Wh, "ended_by": ended,
+            "peak_temperature_C": np.asarray(res.peak_temperature_C, dtype=float),
             "not_reaching": (ended == "end") | (res.end_s <= 0.0)}
 
 
@@ -410,7 +465,8 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
     steps : sequence of dischargelab.engine.Step
         The load (the same steps as the point prediction).
     nominal : dict
-        Point values ``time_to_cutoff_s`` [s], ``capacity_Ah`` [Ah], ``energy_Wh`` [Wh].
+        Point values ``time_to_cutoff_s`` [s], ``capacity_Ah`` [Ah], ``energy_Wh`` [Wh]
+        (and ``peak_temperature_C`` [degC], used when no draws can be flown).
     cutoff_pack_V : float
         Pack cutoff [V].
     cell_current_A : float
@@ -428,7 +484,8 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
     -------
     dict
         ``level``, ``time_to_cutoff_s`` / ``capacity_Ah`` / ``energy_Wh`` as
-        ``[low, high]``, ``interval_includes`` (list of str), ``model_error``
+        ``[low, high]`` (and ``peak_temperature_C`` for thermal families, see
+        :func:`peak_temperature_interval`), ``interval_includes`` (list of str), ``model_error``
         (``relative_sd``, ``source``, ``extrapolation_ratio``), ``draws``,
         ``bootstrap_draws``, ``draws_not_reaching_cutoff``, ``method``, ``warnings``.
         Draws that cannot reach the cutoff count with 0 s (see the module docstring).
@@ -437,8 +494,16 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
     params, info = _parameter_draws(battery, draws, seed)
     out = {"level": level, "model_error": {k: v for k, v in error.items() if k != "label"},
            "draws": 0, "bootstrap_draws": 0, "draws_not_reaching_cutoff": 0, "warnings": []}
+    ambient = battery.ambient_C if ambient_C is None else float(ambient_C)
+
+    def peak_interval(peaks):
+        if battery.family.thermal and peaks is not None:
+            out["peak_temperature_C"] = peak_temperature_interval(
+                peaks, ambient, error["extrapolation_ratio"], level, seed)
+
     if params is None:
         out.update(_model_error_only(nominal, error, level, info))
+        peak_interval(nominal.get("peak_temperature_C"))
         return out
     try:
         flown = fly_draws(battery, params, steps, cutoff_pack_V=cutoff_pack_V,
@@ -446,11 +511,13 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
     except SimulationError as exc:
         out.update(_model_error_only(nominal, error, level, f"the parameter draws could not "
                                                             f"be flown: {exc}"))
+        peak_interval(nominal.get("peak_temperature_C"))
         return out
     n = len(flown["time_to_cutoff_s"])
-    rows, factor = _error_factors(n, error["relative_sd"], seed)
+    rows, factor = _error_factors(n, error["relative_sd"], seed, error["dof"])
     for key in PREDICTION_KEYS:
         out[key] = list(interval(flown[key][rows] * factor, level))
+    peak_interval(flown["peak_temperature_C"])
     missing = int(np.count_nonzero(flown["not_reaching"]))
     out.update({"draws": n, "bootstrap_draws": n if info["bootstrap"] else 0,
                 "draws_not_reaching_cutoff": missing, "method": info["method"],
@@ -463,8 +530,38 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
     return out
 
 
+def peak_temperature_interval(peaks_C, ambient_C: float, ratio: float, level: float = 0.95,
+                              seed: int = 0) -> list[float]:
+    """Interval [degC] of the peak cell temperature from the draws' peaks.
+
+    Each draw's rise above the ambient is multiplied by ``exp(s z1)`` with
+    ``s = THERMAL_RISE_SD (1 + THERMAL_RISE_GROWTH ln r)`` and
+    ``THERMAL_ABSOLUTE_SD_K z2`` is added (``z1``, ``z2`` standard normal, seeded).
+
+    Parameters
+    ----------
+    peaks_C : array_like
+        Peak temperature of each parameter draw [degC] (one value: the point prediction).
+    ambient_C : float
+        Ambient temperature [degC].
+    ratio : float
+        Extrapolation ratio of the load (>= 1).
+    level : float
+        Coverage of the central interval.
+    seed : int
+    """
+    peaks = np.atleast_1d(np.asarray(peaks_C, dtype=float))
+    sd = THERMAL_RISE_SD * (1.0 + THERMAL_RISE_GROWTH * math.log(max(float(ratio), 1.0)))
+    copies = max(1, math.ceil(MODEL_ERROR_SAMPLES / peaks.size))
+    rng = np.random.default_rng([int(seed), 2])
+    rise = np.repeat(np.maximum(peaks - ambient_C, 0.0), copies)
+    z = rng.standard_normal((2, rise.size))
+    samples = ambient_C + rise * np.exp(sd * z[0]) + THERMAL_ABSOLUTE_SD_K * z[1]
+    return list(interval(samples, level))
+
+
 def _model_error_only(nominal: dict, error: dict, level: float, reason: str) -> dict:
-    z = _z_level(level)
+    z = _z_level(level, error["dof"])
     sd = error["relative_sd"]
     out = {key: [float(nominal[key]) * math.exp(-z * sd), float(nominal[key]) * math.exp(z * sd)]
            for key in PREDICTION_KEYS if key in nominal}
@@ -497,7 +594,7 @@ def simulation_interval(battery: Battery, simulate_one, *, level: float = 0.95,
     mean_current = sim.capacity_Ah * 3600.0 / duration if duration > 0 else \
         float(sim.current_A[0])
     nominal = {"time_to_cutoff_s": sim.time_to_cutoff_s, "capacity_Ah": sim.capacity_Ah,
-               "energy_Wh": sim.energy_Wh_total}
+               "energy_Wh": sim.energy_Wh_total, "peak_temperature_C": sim.peak_temperature_C}
     return prediction_interval(
         battery, sim.steps, nominal=nominal, cutoff_pack_V=sim.cutoff_pack_V,
         cell_current_A=mean_current / battery.strings_parallel,
@@ -601,7 +698,7 @@ def mission_uncertainty(mission, *, draws: int = DEFAULT_DRAWS, seed: int = 0, l
     if outcome is None:
         out.update(_mission_model_error_only(nom, nominal.completed, error, level, info))
         return out
-    rows, factor = _error_factors(n, error["relative_sd"], seed)
+    rows, factor = _error_factors(n, error["relative_sd"], seed, error["dof"])
     samples = _mission_samples(outcome, rows, factor)
     alone = _mission_samples(outcome, np.arange(n), np.ones(n))
     not_completed = int(np.count_nonzero(~outcome["completed"]))
@@ -629,8 +726,8 @@ def _mission_model_error_only(nom: dict, completed: bool, error: dict, level: fl
            "draws": 0, "accepted": 0, "tried": 0, "rejected": 0, "rejected_fraction": 0.0,
            "completed_fraction": 1.0 if completed else 0.0, "draws_not_completed": 0,
            "warnings": []}
-    out["endurance_s"] = _lognormal_spread(nom["endurance_s"], sd, level)
-    z = _z_level(level)
+    out["endurance_s"] = _lognormal_spread(nom["endurance_s"], sd, level, error["dof"])
+    z = _z_level(level, error["dof"])
     factors = np.array([math.exp(-z * sd), 1.0, math.exp(z * sd)])
     used = 100.0 - nom["soc_end_pct"]
     soc = 100.0 - used / factors
@@ -648,4 +745,5 @@ def _mission_model_error_only(nom: dict, completed: bool, error: dict, level: fl
 __all__ = ["sample_parameters", "bootstrap_parameters", "has_parameter_draws", "interval",
            "model_error_sd", "fly_draws", "prediction_interval", "simulation_interval",
            "mission_extrapolation_ratio", "mission_uncertainty", "DEFAULT_DRAWS",
-           "PRIOR_RELATIVE_SD", "MIN_HELD_OUT_SD", "EXTRAPOLATION_GROWTH"]
+           "PRIOR_RELATIVE_SD", "MIN_HELD_OUT_SD", "EXTRAPOLATION_GROWTH", "held_out_posterior",
+           "extrapolation_growth", "peak_temperature_interval"]

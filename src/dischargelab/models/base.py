@@ -18,8 +18,9 @@ over a step of constant current ``i`` and length ``dt``:
 * ``"lowpass"``: ``dx/dt = (i - x) / tau`` with ``tau`` [s] a parameter; the
   exact solution ``x = i + (x0 - i) exp(-dt / tau)`` is used.
 * ``"thermal"``: lumped thermal mass, ``C_th dT/dt = i (U_ocv - V) - (T - T_amb) / R_th``
-  (heat from the overpotential times the current, Newton cooling), integrated
-  with Heun's method by the engine.
+  (heat from the overpotential times the current, Newton cooling), advanced by
+  the engine with the exact exponential solution for the step's mean heat
+  (predictor-corrector), stable for any thermal time constant.
 
 References
 ----------
@@ -348,6 +349,11 @@ class Family:
         }
 
 
+#: Smallest logged temperature rise [K] from which the heat capacity is fitted;
+#: below it only the thermal resistance is (the heat capacity keeps its value).
+MIN_HEATING_K = 2.0
+
+
 def fit_lumped_thermal(family: Family, p, data: Samples):
     """Heat capacity [J/K] and thermal resistance [K/W] from the logged cell temperature.
 
@@ -358,44 +364,59 @@ def fit_lumped_thermal(family: Family, p, data: Samples):
 
     with ``Q`` the irreversible heat of the fitted electrical model and
     ``T_amb`` the temperature of the cell at rest before the load (its first
-    sample). A linear least-squares fit in ``1/C_th`` and ``1/(R_th C_th)``.
+    sample). A linear least-squares fit in ``1/C_th`` and ``1/(R_th C_th)``
+    over the curves that heat by :data:`MIN_HEATING_K` or more. When none does,
+    the log still says that the cell hardly heats: ``C_th`` keeps its value in
+    ``p`` and only ``1/(R_th C_th)`` is fitted, so that the model does not
+    predict a heating the log does not show.
 
     Returns
     -------
     dict or None
-        ``{"Cth_J_per_K", "Rth_K_per_W", "rmse_K"}``; None when the data show too
-        little heating to determine them (less than 2 K rise).
+        ``{"Cth_J_per_K", "Rth_K_per_W", "rmse_K", "heat_capacity_fitted"}``; None
+        without a logged temperature.
     """
     if not data.has_temperature:
         return None
-    rows_x, rows_y = [], []
+    rows = {True: ([], []), False: ([], [])}
     for k in range(data.n_curves):
         sel = (data.curve == k) & ~data.is_rest
         t, temp = data.time[sel], data.temperature[sel]
-        if t.size < 10 or np.ptp(temp) < 2.0:
+        if t.size < 10:
             continue
         state = {s.name: (data.charge[sel] if s.kind == "charge" else
                           temp if s.kind == "thermal" else data.current[sel])
                  for s in family.states}
         heat = family.heat_W(p, state, data.current[sel])
         heat = np.where(np.isfinite(heat), heat, 0.0)
-        ambient = temp[0]
         dt = np.diff(t)
         x1 = np.r_[0.0, np.cumsum(0.5 * (heat[1:] + heat[:-1]) * dt)]
-        excess = temp - ambient
+        excess = temp - temp[0]
         x2 = np.r_[0.0, np.cumsum(0.5 * (excess[1:] + excess[:-1]) * dt)]
-        rows_x.append(np.column_stack([x1, -x2]))
-        rows_y.append(temp - temp[0])
-    if not rows_x:
-        return None
-    x, y = np.vstack(rows_x), np.concatenate(rows_y)
+        xs, ys = rows[bool(np.ptp(temp) >= MIN_HEATING_K)]
+        xs.append(np.column_stack([x1, -x2]))
+        ys.append(excess)
     from scipy.optimize import nnls
 
-    coef, _ = nnls(x, y)
-    a, b = coef
-    if a <= 0:
+    if rows[True][0]:
+        x, y = np.vstack(rows[True][0]), np.concatenate(rows[True][1])
+        coef, _ = nnls(x, y)
+        a, b = coef
+        if a > 0:
+            rmse = float(np.sqrt(np.mean((x @ coef - y) ** 2)))
+            return {"Cth_J_per_K": float(1.0 / a),
+                    "Rth_K_per_W": float(min(a / b if b > 0 else 1e4, 1e4)), "rmse_K": rmse,
+                    "heat_capacity_fitted": True}
+    if not rows[False][0]:
         return None
-    cth = 1.0 / a
-    rth = a / b if b > 0 else 1e4
-    rmse = float(np.sqrt(np.mean((x @ coef - y) ** 2)))
-    return {"Cth_J_per_K": float(cth), "Rth_K_per_W": float(min(rth, 1e4)), "rmse_K": rmse}
+    x, y = np.vstack(rows[False][0]), np.concatenate(rows[False][1])
+    cth = float(p["Cth_J_per_K"])
+    target = y - x[:, 0] / cth  # = -b x2, b = 1/(R_th C_th) >= 0
+    den = float(x[:, 1] @ x[:, 1])
+    if den <= 0:
+        return None
+    b = max(float(x[:, 1] @ target) / den, 0.0)
+    rmse = float(np.sqrt(np.mean((x[:, 0] / cth + b * x[:, 1] - y) ** 2)))
+    return {"Cth_J_per_K": cth, "Rth_K_per_W": float(min(1.0 / (b * cth) if b > 0 else 1e4,
+                                                             1e4)),
+            "rmse_K": rmse, "heat_capacity_fitted": False}
