@@ -978,8 +978,8 @@ def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=N
         ``relative_sd`` and ``dof``: the model error inside the fitted currents,
         the normalised errors pooled with the prior
         (:func:`dischargelab.uncertainty.held_out_posterior`); ``held_out_rms``:
-        RMS of the raw held-out errors; ``errors_pct``, ``extrapolation_ratios``, ``curves`` per left-out curve;
-        ``source = "held-out"``.
+        RMS of the raw held-out errors; ``errors_pct``, ``extrapolation_ratios``,
+        ``curves`` per left-out curve; ``source = "held-out"``.
     """
     from .errors import SimulationError
     from .simulate import simulate_current
