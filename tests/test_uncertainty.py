@@ -129,10 +129,13 @@ def test_held_out_errors_are_brought_back_to_the_fitted_currents():
     assert err["extrapolation_ratios"] == pytest.approx([10.0, 10.0], rel=0.02)
     raw = err["held_out_rms"]
     assert raw > 0.01
+    # the curve ends left out: every rate stays in the fit, the error is at r = 1
+    assert len(err["end_errors_pct"]) == 2 and err["end_rms"] is not None
     sd, dof = held_out_posterior([e / 100 / (1 + 2.0 * math.log(r))
                                   for e, r in zip(err["errors_pct"],
-                                                  err["extrapolation_ratios"])])
-    assert err["relative_sd"] == pytest.approx(sd) and err["dof"] == dof
+                                                  err["extrapolation_ratios"])]
+                                 + [e / 100 for e in err["end_errors_pct"]])
+    assert err["relative_sd"] == pytest.approx(sd) and err["dof"] == dof == 6
     assert err["relative_sd"] < raw
 
 

@@ -328,10 +328,10 @@ def _print_fit(result, battery_path=None):
     out.print(f"RMSE {result.rmse_V * 1000:.2f} mV per cell "
               f"({result.rmse_V * result.cells_series * 1000:.1f} mV pack)")
     if result.model_error:
-        err = result.model_error
-        out.print(f"held-out error (leave one curve out): "
-                  f"{100 * err.get('held_out_rms', err['relative_sd']):.2f} % RMS time to cutoff"
-                  f"; {100 * err['relative_sd']:.2f} % inside the fitted currents")
+        from .uncertainty import held_out_summary
+
+        out.print(f"held-out error of the time to cutoff: "
+                  f"{held_out_summary(result.model_error)}")
     if result.paper_mode:
         for c, fitted in zip(result.curves, result.fit_currents_A):
             out.print(f"paper mode: fitted current {fitted:.4g} A vs measured "

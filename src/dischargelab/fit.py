@@ -740,7 +740,7 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         best = None
         refine = family.n_best if n_best is None else n_best
         for k in np.argsort(cost)[:max(1, refine)]:
-            sol = _varpro_solve(coarse, starts[k], lo, hi)
+            sol = _varpro_solve(coarse, starts[k], lo, hi, ftol=COARSE_FTOL)
             nfev += sol.nfev
             if best is None or sol.cost < best.cost:
                 best = sol
@@ -832,12 +832,11 @@ def _several_rates(curves) -> bool:
 
 def selection_score(curve_rms: float | None, end_rms: float | None) -> float:
     """Score of a family for ``model="auto"`` [-]: the geometric mean of its two
-    held-out errors of the time to cutoff, whole curves left out
-    (:func:`held_out_error`, how the capacity and overpotentials change with rate)
-    and curve ends left out (:func:`held_out_tail_error`, the knee at every fitted
-    rate). A family must predict both; with two curves, leaving one out leaves a
-    one-rate fit, which scores priors more than the family. ``inf`` when either
-    could not be computed."""
+    held-out errors of the time to cutoff (:func:`held_out_error`), whole curves
+    left out (how capacity and overpotentials change with rate) and curve ends left
+    out (the knee at every fitted rate). A family must predict both; with two
+    curves, leaving one out leaves a one-rate fit, which scores priors more than
+    the family. ``inf`` when either could not be computed."""
     if curve_rms is None or end_rms is None:
         return float("inf")
     return float(np.sqrt(max(curve_rms, 1e-6) * max(end_rms, 1e-6)))
@@ -877,17 +876,14 @@ def _fit_auto(curves, t_start, **kw) -> FitResult:
         res = fit_battery(curves, model=names[0], **kw)
         res.notes.insert(0, f"model {names[0]!r} chosen automatically: {why}")
         return res
-    fits, scores, tails = {}, {}, {}
-    common = {k: kw[k] for k in ("cells_series", "strings_parallel", "fixed", "bounds",
-                                 "use_rest", "weighting") if k in kw}
+    fits, scores = {}, {}
     for name in names:
         try:
             fits[name] = fit_battery(curves, model=name, **dict(kw, bootstrap=0, progress=None))
         except FitError:
             continue
-        err = fits[name].model_error
-        tails[name] = held_out_tail_error(curves, model=name, **common)
-        scores[name] = selection_score(err["held_out_rms"] if err else None, tails[name])
+        err = fits[name].model_error or {}
+        scores[name] = selection_score(err.get("held_out_rms"), err.get("end_rms"))
     if not fits:
         raise FitError("no model family could be fitted to these data")
     order = sorted(fits, key=lambda n: (scores[n], list(fits).index(n)))
@@ -903,9 +899,9 @@ def _fit_auto(curves, t_start, **kw) -> FitResult:
         res = fit_battery(curves, model=best, model_error=False, **kw)
         res.model_error = fits[best].model_error
     def row(n):
-        err = fits[n].model_error
-        return (f"{n} {_pct(scores[n])} (curves {_pct(err and err['held_out_rms'])}, "
-                f"ends {_pct(tails[n])})"
+        err = fits[n].model_error or {}
+        return (f"{n} {_pct(scores[n])} (curves {_pct(err.get('held_out_rms'))}, "
+                f"ends {_pct(err.get('end_rms'))})"
                 + ("" if fits[n].physical else " implausible parameters"))
 
     table = ", ".join(row(n) for n in fits)
@@ -955,91 +951,62 @@ def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list
     return params, dict(fitted, source=source)
 
 
+#: Fraction of a curve's duration left out at its end by :func:`held_out_error`.
+HELD_OUT_TAIL = 0.2
+
+
 def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=None,
                    bounds=None, use_rest=True, weighting="equal") -> dict | None:
-    """The model's own error from leave-one-curve-out predictions.
+    """The model's own error of the time to cutoff, from data left out of the fit.
 
-    Each curve in turn is left out, the model is fitted to the others, and the
-    time to the left-out curve's last voltage is predicted at its mean current
-    (thermal families from its starting temperature). Needs two or more curves
-    whose currents differ by 20 % or more.
+    Two kinds of folds, each predicting the time to the left-out curve's last
+    voltage at its mean current (thermal families from its starting temperature):
 
-    Each held-out prediction is an extrapolation by the current ratio ``r_k``
-    between the left-out curve and the fitted ones, so its error is brought back
-    to the fitted currents by dividing it by ``1 + g_k ln r_k``, ``g_k`` being the
-    growth :func:`dischargelab.uncertainty.extrapolation_growth` of that smaller fit
-    (one rate: the prior's; several: the held-out one). Without this, two curves a
-    decade apart would give every prediction between them the error of a
-    ten-fold extrapolation.
+    * **whole curves**: each curve in turn is left out and the model fitted to the
+      others. The prediction is an extrapolation by the current ratio ``r_k``
+      between the left-out curve and the fitted ones, so its error is brought back
+      to the fitted currents by dividing it by ``1 + g_k ln r_k``, ``g_k`` being
+      the growth :func:`dischargelab.uncertainty.extrapolation_growth` of that
+      smaller fit (one rate: the prior's; several: the held-out one);
+    * **curve ends**: each curve in turn loses its last :data:`HELD_OUT_TAIL` of
+      duration (the knee and the cutoff) and the model is fitted to that and every
+      other curve. Every rate stays in the fit, so this is an error at the fitted
+      currents, the one a two-curve fit is used for (leaving one of two curves out
+      leaves a one-rate fit).
+
+    Needs two or more curves whose currents differ by 20 % or more.
 
     Returns
     -------
     dict or None
         ``relative_sd`` and ``dof``: the model error inside the fitted currents,
-        the normalised errors pooled with the prior
-        (:func:`dischargelab.uncertainty.held_out_posterior`); ``held_out_rms``:
-        RMS of the raw held-out errors; ``errors_pct``, ``extrapolation_ratios``,
-        ``curves`` per left-out curve; ``source = "held-out"``.
+        every normalised error pooled with the prior
+        (:func:`dischargelab.uncertainty.held_out_posterior`); ``held_out_rms`` /
+        ``end_rms``: RMS of the raw errors of each kind [-] (None when none could
+        be computed); ``errors_pct``, ``extrapolation_ratios``, ``curves``
+        (whole curves left out) and ``end_errors_pct``; ``source = "held-out"``.
     """
-    from .errors import SimulationError
-    from .simulate import simulate_current
+    from dataclasses import replace as _replace
+
     from .uncertainty import extrapolation_growth, held_out_posterior
 
     if not _several_rates(curves):
         return None
-    errors, ratios, normalised, names = [], [], [], []
+    common = dict(cells_series=cells_series, strings_parallel=strings_parallel, fixed=fixed,
+                  bounds=bounds, use_rest=use_rest, weighting=weighting, model=model)
+    errors, ratios, normalised, names, ends = [], [], [], [], []
     for k, left in enumerate(curves):
         rest = [c for j, c in enumerate(curves) if j != k]
-        try:
-            res = fit_battery(rest, cells_series=cells_series, strings_parallel=strings_parallel,
-                              fixed=fixed, bounds=bounds, use_rest=use_rest, weighting=weighting,
-                              model=model, model_error=False)
-            sim = simulate_current(res.battery, left.mean_current_A,
-                                   cutoff_pack_V=float(left.voltage_V[-1]),
-                                   ambient_C=left.ambient_C)
-        except (FitError, SimulationError, DataError):
-            continue
-        measured = float(left.time_s[-1] - left.time_s[0])
-        if np.isfinite(sim.time_to_cutoff_s) and measured > 0:
-            error = (sim.time_to_cutoff_s - measured) / measured
-            ratio = res.battery.extrapolation_ratio(left.mean_current_A / strings_parallel)
+        fold = _held_out_fold(rest, left, common)
+        if fold is not None:
+            error, battery = fold
+            ratio = battery.extrapolation_ratio(left.mean_current_A / strings_parallel)
             growth = extrapolation_growth(
-                res.battery, "held-out" if _several_rates(rest) else "prior")
+                battery, "held-out" if _several_rates(rest) else "prior")
             errors.append(100.0 * error)
             ratios.append(float(ratio))
             normalised.append(error / (1.0 + growth * np.log(ratio)))
             names.append(left.name)
-    if not errors:
-        return None
-    sd, dof = held_out_posterior(normalised)
-    return {"relative_sd": sd, "dof": dof,
-            "held_out_rms": float(np.sqrt(np.mean(np.square(errors)))) / 100.0,
-            "errors_pct": errors, "extrapolation_ratios": ratios, "curves": names,
-            "source": "held-out"}
-
-
-#: Fraction of a curve's duration held out by :func:`held_out_tail_error`.
-HELD_OUT_TAIL = 0.2
-
-
-def held_out_tail_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=None,
-                        bounds=None, use_rest=True, weighting="equal") -> float | None:
-    """RMS relative error of the time to cutoff with each curve's end held out [-].
-
-    Each curve in turn loses its last :data:`HELD_OUT_TAIL` of duration (the knee
-    and the cutoff), the model is fitted to that and to every other curve whole,
-    and the time to the curve's last voltage is predicted at its mean current.
-    Unlike leaving a whole curve out, every rate stays in the fit, so this scores
-    what a fit to all the curves is used for: the end of discharge between and at
-    the fitted rates. ``None`` when no prediction could be made.
-    """
-    from dataclasses import replace as _replace
-
-    from .errors import SimulationError
-    from .simulate import simulate_current
-
-    errors = []
-    for k, left in enumerate(curves):
         t = left.time_s
         keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
         cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
@@ -1047,19 +1014,44 @@ def held_out_tail_error(curves, *, model, cells_series=1, strings_parallel=1, fi
         if left.temperature_C is not None:
             cut["temperature_C"] = left.temperature_C[keep]
         try:
-            rest = [_replace(left, **cut) if j == k else c for j, c in enumerate(curves)]
-            res = fit_battery(rest, cells_series=cells_series, strings_parallel=strings_parallel,
-                              fixed=fixed, bounds=bounds, use_rest=use_rest, weighting=weighting,
-                              model=model, model_error=False)
-            sim = simulate_current(res.battery, left.mean_current_A,
-                                   cutoff_pack_V=float(left.voltage_V[-1]),
-                                   ambient_C=left.ambient_C)
-        except (FitError, SimulationError, DataError):
+            shortened = _replace(left, **cut)
+        except DataError:
             continue
-        measured = float(t[-1] - t[0])
-        if np.isfinite(sim.time_to_cutoff_s) and measured > 0:
-            errors.append((sim.time_to_cutoff_s - measured) / measured)
-    return float(np.sqrt(np.mean(np.square(errors)))) if errors else None
+        fold = _held_out_fold([shortened if j == k else c for j, c in enumerate(curves)],
+                              left, common)
+        if fold is not None:
+            ends.append(fold[0])
+    if not errors and not ends:
+        return None
+    sd, dof = held_out_posterior(normalised + ends)
+
+    def rms(values):
+        return float(np.sqrt(np.mean(np.square(values)))) if values else None
+
+    return {"relative_sd": sd, "dof": dof,
+            "held_out_rms": None if not errors else rms(errors) / 100.0,
+            "end_rms": rms(ends), "errors_pct": errors, "extrapolation_ratios": ratios,
+            "curves": names, "end_errors_pct": [100.0 * e for e in ends],
+            "source": "held-out"}
+
+
+def _held_out_fold(fitted, left, common):
+    """(relative error of the predicted time to ``left``'s last voltage, battery) of a
+    fit to ``fitted``; None when the fit or the prediction fails."""
+    from .errors import SimulationError
+    from .simulate import simulate_current
+
+    try:
+        res = fit_battery(fitted, model_error=False, **common)
+        sim = simulate_current(res.battery, left.mean_current_A,
+                               cutoff_pack_V=float(left.voltage_V[-1]),
+                               ambient_C=left.ambient_C)
+    except (FitError, SimulationError, DataError):
+        return None
+    measured = float(left.time_s[-1] - left.time_s[0])
+    if not np.isfinite(sim.time_to_cutoff_s) or measured <= 0:
+        return None
+    return (sim.time_to_cutoff_s - measured) / measured, res.battery
 
 
 def _lag1_correlation(residual, stack: Samples) -> float:
@@ -1138,6 +1130,11 @@ def _defined_start(model: _Model, theta, hi):
     return theta
 
 
+#: Relative cost decrease below which a start's search on the thinned data stops:
+#: it only has to pick the basin that the refinement on all samples then polishes.
+COARSE_FTOL = 1e-6
+
+
 @dataclass
 class _Solution:
     x: np.ndarray
@@ -1145,7 +1142,8 @@ class _Solution:
     nfev: int
 
 
-def _varpro_solve(model: _Model, theta0, lo, hi, max_iter: int = 200) -> _Solution:
+def _varpro_solve(model: _Model, theta0, lo, hi, max_iter: int = 200,
+                  ftol: float = 1e-12) -> _Solution:
     """Projected Levenberg-Marquardt on the reduced (variable-projection) problem.
 
     The reduced problem has at most three parameters, so each iteration is a
@@ -1196,7 +1194,7 @@ def _varpro_solve(model: _Model, theta0, lo, hi, max_iter: int = 200) -> _Soluti
         decrease = cost - cost_new
         x, r, cost = x_new, r_new, cost_new
         lam = max(lam / 3.0, 1e-12)
-        if decrease <= 1e-12 * cost or np.all(moved <= 1e-10 * (np.abs(x) + 1e-10)):
+        if decrease <= ftol * cost or np.all(moved <= 1e-10 * (np.abs(x) + 1e-10)):
             break
     model.varpro_residual(x)  # leave the cache at the solution
     return _Solution(x=x, cost=cost, nfev=nfev)

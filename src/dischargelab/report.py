@@ -22,6 +22,7 @@ import numpy as np
 
 from .errors import DataError, DischargelabError
 from .model import CUTOFF_CELL_VOLTAGE_V, Battery, load_battery
+from .uncertainty import held_out_summary
 
 CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#1d2430;
@@ -160,10 +161,7 @@ def _battery_section(battery: Battery) -> str:
         facts.append(["fit RMSE", f"{1000 * float(extra['rmse_V']):.2f} mV per cell"])
     error = extra.get("model_error")
     if isinstance(error, dict) and isinstance(error.get("relative_sd"), (int, float)):
-        raw = error.get("held_out_rms", error["relative_sd"])
-        facts.append(["held-out error (leave one curve out)",
-                      f"{100 * float(raw):.2f} % RMS time to cutoff; "
-                      f"{100 * float(error['relative_sd']):.2f} % inside the fitted currents"])
+        facts.append(["held-out error of the time to cutoff", held_out_summary(error)])
     thermal = extra.get("thermal")
     if isinstance(thermal, dict) and thermal.get("Cth_J_per_K") is not None:
         facts.append(["thermal model", f"heat capacity {float(thermal['Cth_J_per_K']):.3g} J/K, "

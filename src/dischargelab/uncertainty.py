@@ -281,6 +281,19 @@ def held_out_posterior(normalised_errors) -> tuple[float, int]:
     return math.sqrt(var), int(dof)
 
 
+def held_out_summary(model_error: dict) -> str:
+    """One line on a stored held-out model error (``FitResult.model_error``)."""
+    parts = []
+    for key, what in (("held_out_rms", "whole curves left out"),
+                      ("end_rms", "curve ends left out")):
+        value = model_error.get(key)
+        if isinstance(value, (int, float)):
+            parts.append(f"{100 * value:.2f} % RMS with {what}")
+    parts.append(f"{100 * float(model_error['relative_sd']):.2f} % inside the fitted currents "
+                 f"(the interval's model error)")
+    return "; ".join(parts)
+
+
 def _model_error_base(battery: Battery) -> tuple[float, str, float | None]:
     """(relative sd inside the fitted currents, "held-out" | "prior", Student-t degrees
     of freedom or None for a normal)."""
@@ -746,4 +759,4 @@ __all__ = ["sample_parameters", "bootstrap_parameters", "has_parameter_draws", "
            "model_error_sd", "fly_draws", "prediction_interval", "simulation_interval",
            "mission_extrapolation_ratio", "mission_uncertainty", "DEFAULT_DRAWS",
            "PRIOR_RELATIVE_SD", "MIN_HELD_OUT_SD", "EXTRAPOLATION_GROWTH", "held_out_posterior",
-           "extrapolation_growth", "peak_temperature_interval"]
+           "extrapolation_growth", "peak_temperature_interval", "held_out_summary"]

@@ -317,7 +317,7 @@ class EquivalentCircuit(Family):
         jac = self.jacobian(out, data, lin) * data.weight[:, None]
         lo = np.array([self.parameter(n).lower for n in lin])
         hi = np.array([self.parameter(n).upper for n in lin])
-        sol = lsq_linear(jac, data.voltage * data.weight, bounds=(lo, hi))
+        sol = lsq_linear(jac, data.voltage * data.weight, bounds=(lo, hi), method="bvls")
         out.update({n: float(v) for n, v in zip(lin, sol.x)})
         return out
 
