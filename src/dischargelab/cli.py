@@ -927,12 +927,16 @@ def convert_cmd(log, output, flight, battery, topic, fields, force, as_json):
               help="Cells in series [default: the log's count, else from the highest voltage].")
 @click.option("--parallel", type=click.IntRange(1), default=1, show_default=True,
               help="Strings in parallel of the flight pack.")
+@click.option("--low-timer", type=click.FloatRange(0), default=10.0, show_default=True,
+              metavar="S",
+              help="The pack has reached the cutoff when its voltage stays under it this long "
+                   "(ArduPilot BATT_LOW_TIMER); shorter dips are sags. 0 = the first sample.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="Save the three-panel plot (PNG, SVG or PDF).")
 @force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
 def flight_cmd(log, battery_model, flights, battery_index, capacity, chemistry, cutoff, cells,
-               parallel, output, force, as_json):
+               parallel, low_timer, output, force, as_json):
     """What each flight of a flight log did to the pack, and how long it had left.
 
     Per flight: duration, charge and energy used, loaded and resting voltages,
@@ -940,7 +944,8 @@ def flight_cmd(log, battery_model, flights, battery_index, capacity, chemistry, 
     beside the log's own estimate) and charge left at landing. With a battery
     model: the voltage predicted from the logged current, and every 5 s the
     remaining flight time by the model at the recent load next to the PX4 and
-    ArduPilot methods and, where the logged voltage reached the cutoff, the truth.
+    ArduPilot methods and, where the logged voltage stayed under the cutoff for the
+    low-voltage timer (not a sag at a current peak), the truth.
 
     \b
     Examples:
@@ -958,7 +963,7 @@ def flight_cmd(log, battery_model, flights, battery_index, capacity, chemistry, 
     with err.status("analysing the flights", spinner="dots"):
         report = analyse_flight(log, model, flights=numbers, battery=battery_index,
                                 capacity_Ah=capacity, chemistry=chemistry, cutoff=cutoff,
-                                cells=cells, parallel=parallel)
+                                cells=cells, parallel=parallel, low_timer_s=low_timer)
     if output:
         from .plot import save
 

@@ -32,6 +32,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from functools import cached_property
+
 import numpy as np
 
 from .errors import SimulationError
@@ -117,6 +119,12 @@ class Step:
             load = f"logged profile of {len(self.profile_time_s)} samples"
         until = "until cutoff" if self.duration_s is None else f"for {self.duration_s:g} s"
         return f"{load} {until}"
+
+    @cached_property
+    def profile_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(time_s, current_A)`` of a profile as arrays (converted once)."""
+        return (np.asarray(self.profile_time_s, dtype=float),
+                np.asarray(self.profile_current_A, dtype=float))
 
     @property
     def end_s(self) -> float | None:
@@ -352,9 +360,9 @@ def _current_at(pack, st, state, t_in_step):
         return np.full_like(state["charge_Ah"], float(st.value))
     if st.kind == "power":
         return pack.power_current(state, float(st.value))
-    t = np.asarray(st.profile_time_s, dtype=float)
+    t, current = st.profile_arrays
     idx = np.clip(np.searchsorted(t, t_in_step, side="right"), 0, t.size - 1)
-    return np.asarray(st.profile_current_A, dtype=float)[idx] * np.ones_like(state["charge_Ah"])
+    return current[idx] * np.ones_like(state["charge_Ah"])
 
 
 def _advance_step(pack, st, state, i0, dt):

@@ -161,6 +161,11 @@ REPLAY_EVERY_S = 5.0
 #: (since the load started, early in a flight).
 RECENT_LOAD_S = 30.0
 
+#: The pack has reached the cutoff when its voltage stays at or below it this long [s]:
+#: ArduPilot's default low-battery timer (``BATT_LOW_TIMER`` = 10 s), which keeps
+#: a sag at a current peak from ending the flight. Shorter dips are reported as sags.
+LOW_VOLTAGE_TIMER_S = 10.0
+
 #: Below this recent mean current [A] no remaining time is replayed (on the ground).
 MIN_REPLAY_CURRENT_A = 0.5
 
@@ -921,8 +926,10 @@ class FlightAnalysis:
     ``current_A``, cells, ``predicted_voltage_V`` with a model, ``in_flight``);
     ``resistance`` one row per regression window; ``replay`` one row per replay
     moment (``time_s``, ``recent_current_A``, ``model_s``,
-    ``model_logged_load_s``, ``px4_s``, ``ardupilot_s``, ``true_s``; remaining
-    time [s]). ``summary`` holds every scalar result.
+    ``model_logged_load_s``, ``px4_s``, ``ardupilot_s``, ``true_s`` (the logged
+    voltage stays under the cutoff for the low-voltage timer), ``first_dip_s``
+    (its first sample under it); remaining time [s]). ``summary`` holds every
+    scalar result.
     """
 
     number: int
@@ -997,7 +1004,8 @@ def analyse_flight(path, model=None, *, flights=None, battery: int | None = None
                    cutoff: float | None = None, cells: int | None = None, parallel: int = 1,
                    replay_every_s: float = REPLAY_EVERY_S,
                    recent_load_s: float = RECENT_LOAD_S,
-                   window_s: float = RESISTANCE_WINDOW_S) -> FlightReport:
+                   window_s: float = RESISTANCE_WINDOW_S,
+                   low_timer_s: float = LOW_VOLTAGE_TIMER_S) -> FlightReport:
     """Analyse the flights of a flight log, optionally against a battery model.
 
     Parameters
@@ -1031,6 +1039,10 @@ def analyse_flight(path, model=None, *, flights=None, battery: int | None = None
         Averaging window of the recent load [s].
     window_s : float
         Resistance regression window [s].
+    low_timer_s : float
+        The pack reaches the cutoff when its voltage stays at or below it this long
+        [s] (default 10 s, ArduPilot's ``BATT_LOW_TIMER``); 0 counts the first
+        sample under it. Applies to the truth and to every model replay alike.
 
     Returns
     -------
@@ -1049,6 +1061,8 @@ def analyse_flight(path, model=None, *, flights=None, battery: int | None = None
                         ("window_s", window_s)):
         if not value > 0:
             raise DataError(f"{name} must be a positive number of seconds, got {value}")
+    if not low_timer_s >= 0:
+        raise DataError(f"low_timer_s must be 0 or more seconds, got {low_timer_s}")
     if parallel < 1:
         raise DataError(f"parallel must be at least 1, got {parallel}")
     log = read_flight_log(path)
@@ -1066,7 +1080,7 @@ def analyse_flight(path, model=None, *, flights=None, battery: int | None = None
     capacity, capacity_source = _report_capacity(series, capacity_Ah, bat)
     cutoff = float(cutoff) if cutoff is not None else CUTOFF_CELL_VOLTAGE_V[chemistry]
     settings = _Settings(cells, parallel, capacity, chemistry, cutoff, replay_every_s,
-                         recent_load_s, window_s)
+                         recent_load_s, window_s, float(low_timer_s))
     if bat is not None and "fit_temperature_rise_K" not in bat.extra and bat.family.thermal:
         notes.append("the cell temperature is held at the ambient: the model was fitted to data "
                      "without heating, and the log has no battery temperature")
@@ -1090,6 +1104,7 @@ class _Settings:
     replay_every_s: float
     recent_load_s: float
     window_s: float
+    low_timer_s: float = LOW_VOLTAGE_TIMER_S
 
     @property
     def cutoff_pack_V(self) -> float:
@@ -1135,6 +1150,7 @@ def _analyse_part(part: FlightSamples, series, s: _Settings, bat) -> FlightAnaly
                                     if "log_resistance_ohm" in raw else None)
     summary.update(_resistance_summary(resistance, s))
     summary.update(_charge_left(part, s, notes))
+    summary.update(_cutoff_crossings(t, v, s, notes))
     samples = part.frame.assign(in_flight=part.in_flight)
     predicted = None
     if bat is not None:
@@ -1147,6 +1163,21 @@ def _analyse_part(part: FlightSamples, series, s: _Settings, bat) -> FlightAnaly
     summary["replay_mid_flight"] = _mid_flight(replay, part)
     return FlightAnalysis(part.number, summary, samples, resistance, replay,
                           notes + _rest_notes(part))
+
+
+def _cutoff_crossings(t, v, s: _Settings, notes: list) -> dict:
+    """When the logged voltage first went under the cutoff, and when it stayed there."""
+    dip = _time_to(t, v, s.cutoff_pack_V, 0.0)
+    reached = _time_to(t, v, s.cutoff_pack_V, 0.0, s.low_timer_s)
+    out = {"cutoff_dip_at_s": dip if np.isfinite(dip) else None,
+           "cutoff_reached_at_s": reached if np.isfinite(reached) else None}
+    if np.isfinite(dip) and not (np.isfinite(reached) and reached <= dip):
+        notes.append(f"the voltage dipped under the cutoff ({s.cutoff_cell_V:g} V/cell) at "
+                     f"{dip:.1f} s for less than {s.low_timer_s:g} s: a sag at a current peak, "
+                     f"which a low-voltage timer of {s.low_timer_s:g} s ignores"
+                     + (f"; it stayed under it from {reached:.1f} s" if np.isfinite(reached)
+                        else "; the pack did not reach the cutoff in this flight"))
+    return out
 
 
 def _rest_notes(part: FlightSamples) -> list[str]:
@@ -1364,6 +1395,23 @@ def _replay_rows(part: FlightSamples, s: _Settings) -> list[int]:
     return sorted({int(k) for k in rows if k < t.size})
 
 
+#: Most replay moments at which the recent load profile is flown (each one flies the
+#: profile bin by bin until the pack is empty): spread over the flight, mid-flight included.
+MAX_PROFILE_REPLAYS = 12
+
+
+def _profile_rows(rows: list[int], t, part: FlightSamples) -> set[int]:
+    """The replay rows that also get the repeated-profile replay."""
+    if not rows:
+        return set()
+    stride = int(np.ceil(len(rows) / MAX_PROFILE_REPLAYS))
+    chosen = set(rows[::stride])
+    if part.load_start_s is not None and part.load_end_s is not None:
+        middle = 0.5 * (part.load_start_s + part.load_end_s)
+        chosen.add(min(rows, key=lambda k: abs(t[k] - middle)))
+    return chosen
+
+
 def _recent_current(t, i, k: int, window_s: float) -> float:
     """Mean current [A] over the ``window_s`` up to sample ``k`` (trapezoid)."""
     sel = (t >= t[k] - window_s) & (t <= t[k])
@@ -1383,6 +1431,7 @@ def _replay(part: FlightSamples, series, s: _Settings, bat, states: dict,
     rows = _replay_rows(part, s)
     ok = inside & (np.isfinite(predicted) if predicted is not None else False)
     consumed = _consumed_Ah(series)
+    profiled = _profile_rows(rows, t, part)
     out = []
     for k in rows:
         load = _recent_current(t, i, k, min(s.recent_load_s, t[k] - part.load_start_s))
@@ -1390,12 +1439,17 @@ def _replay(part: FlightSamples, series, s: _Settings, bat, states: dict,
         row = {"time_s": float(t[k]), "recent_current_A": load, "model_s": float("nan"),
                "model_profile_s": float("nan"),
                "model_logged_load_s": _time_to(t[ok & after], None if predicted is None else
-                                               predicted[ok & after], s.cutoff_pack_V, t[k]),
+                                               predicted[ok & after], s.cutoff_pack_V, t[k],
+                                               s.low_timer_s),
                "px4_s": float("nan"), "ardupilot_s": float("nan"),
-               "true_s": _time_to(t[inside & after], v[inside & after], s.cutoff_pack_V, t[k])}
+               "true_s": _time_to(t[inside & after], v[inside & after], s.cutoff_pack_V, t[k],
+                                  s.low_timer_s),
+               "first_dip_s": _time_to(t[inside & after], v[inside & after], s.cutoff_pack_V,
+                                       t[k], 0.0)}
         if load >= MIN_REPLAY_CURRENT_A:
             if bat is not None and k in states:
                 row["model_s"] = _model_remaining(bat, states[k], load, s)
+            if bat is not None and k in states and k in profiled:
                 window = min(s.recent_load_s, t[k] - part.load_start_s)
                 row["model_profile_s"] = _model_remaining_profile(
                     bat, states[k], t[(t >= t[k] - window) & (t <= t[k])],
@@ -1407,8 +1461,7 @@ def _replay(part: FlightSamples, series, s: _Settings, bat, states: dict,
                 row["ardupilot_s"] = left * 3600.0 / load
         out.append(row)
     columns = ["time_s", "recent_current_A", "model_s", "model_profile_s", "model_logged_load_s",
-               "px4_s",
-               "ardupilot_s", "true_s"]
+               "px4_s", "ardupilot_s", "true_s", "first_dip_s"]
     return pd.DataFrame(out, columns=columns)
 
 
@@ -1422,8 +1475,9 @@ def _model_remaining_profile(bat, state: dict, t_window, i_window, load_A: float
 
     The last ``recent_load_s`` of logged current, averaged in :data:`PROFILE_BIN_S`
     bins, is flown again and again from the engine ``state`` (enough repetitions to
-    empty the pack at its mean current, twice over, bounded). A pack whose cutoff is
-    set by load peaks reaches it sooner than at the mean load.
+    empty the pack at its mean current, twice over, bounded), and the cutoff is
+    reached as in the log: the voltage stays at or below it ``low_timer_s``. A pack
+    whose cutoff is set by load peaks reaches it sooner than at the mean load.
     """
     from .engine import Step, run
 
@@ -1438,27 +1492,51 @@ def _model_remaining_profile(bat, state: dict, t_window, i_window, load_A: float
     left_Ah = float(bat.capacity_Ah) - float(state["charge_Ah"][0]) * bat.strings_parallel
     cycles = int(min(max(np.ceil(2.0 * left_Ah * 3600.0 / max(load_A, 1e-6) / period), 1), 2000))
     times = np.arange(binned.size * cycles) * PROFILE_BIN_S
-    try:
+    try:  # flown past the cutoff (to half of it) so that short dips can recover
         res = run(bat.family, _engine_params(bat),
                   [Step("profile", duration_s=float(times[-1] + PROFILE_BIN_S),
                         profile_time_s=tuple(times), profile_current_A=tuple(np.tile(binned,
                                                                                      cycles)))],
-                  cutoff_pack_V=s.cutoff_pack_V, cells_series=bat.cells_series,
+                  cutoff_pack_V=0.5 * s.cutoff_pack_V, cells_series=bat.cells_series,
                   strings_parallel=bat.strings_parallel, ambient_C=bat.ambient_C,
-                  initial_state=state)
+                  initial_state=state, record=True)
     except SimulationError:
         return float("nan")
-    return float(res.end_s[0]) if res.ended_by[0] == "cutoff" else float("nan")
+    series = res.series
+    return _time_to(np.asarray(series["time_s"], dtype=float),
+                    np.asarray(series["voltage_V"], dtype=float), s.cutoff_pack_V, 0.0,
+                    s.low_timer_s)
 
 
-def _time_to(t, v, cutoff_V: float, now_s: float) -> float:
-    """Time [s] from ``now_s`` to the first crossing of ``cutoff_V`` by ``v`` (NaN if none)."""
-    from .validate import measured_time_to_cutoff
+def _time_to(t, v, cutoff_V: float, now_s: float, hold_s: float = 0.0) -> float:
+    """Time [s] from ``now_s`` until ``v`` goes to or below ``cutoff_V`` and stays there
+    ``hold_s`` [s] (NaN if it never does within the samples).
 
+    The crossing is interpolated between the sample above and the one below; a
+    stretch under the cutoff lasts until the next sample above it. A stretch that
+    lasts to the last sample counts however short it is: the log (a test stopped
+    at the cutoff, a flight landed on the alarm) or the simulation ended there.
+    ``hold_s = 0``: the first sample under it.
+    """
     if v is None or np.size(t) == 0:
         return float("nan")
-    crossing = measured_time_to_cutoff(t, v, cutoff_V)
-    return crossing - now_s if np.isfinite(crossing) else float("nan")
+    t = np.asarray(t, dtype=float)
+    v = np.asarray(v, dtype=float)
+    below = v <= cutoff_V
+    if not below.any():
+        return float("nan")
+    edges = np.diff(np.r_[0, below.astype(np.int8), 0])
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    for a, b in zip(starts, ends):
+        if a == 0:
+            crossing = t[0]
+        else:
+            span = v[a - 1] - v[a]
+            frac = (v[a - 1] - cutoff_V) / span if span > 0 else 1.0
+            crossing = t[a - 1] + frac * (t[a] - t[a - 1])
+        if b >= t.size or t[b] - crossing >= hold_s:
+            return float(crossing - now_s)
+    return float("nan")
 
 
 def _model_remaining(bat, state: dict, load_A: float, s: _Settings) -> float:
@@ -1596,7 +1674,7 @@ def _plot_replay(ax, replay: pd.DataFrame, label) -> float | None:
     if replay.empty:
         return None
     t = replay["time_s"].to_numpy()
-    styles = [("true_s", "truth: logged voltage reaches the cutoff", "k", "-", None),
+    styles = [("true_s", "truth: logged voltage stays under the cutoff", "k", "-", None),
               ("model_profile_s", "model repeating the recent load (peaks kept)", "tab:red",
                "-", "D"),
               ("model_s", "model at the recent mean load", "tab:orange", "-", "o"),
@@ -1609,9 +1687,10 @@ def _plot_replay(ax, replay: pd.DataFrame, label) -> float | None:
     values = []
     for column, text, color, ls, marker in styles:
         y = replay[column].to_numpy(dtype=float)
-        if np.isfinite(y).any():
-            ax.plot(t, y, color=color, ls=ls, marker=marker, ms=3, lw=1.0, label=label(text))
-            values.append(y[np.isfinite(y)])
+        m = np.isfinite(y)
+        if m.any():
+            ax.plot(t[m], y[m], color=color, ls=ls, marker=marker, ms=3, lw=1.0, label=label(text))
+            values.append(y[m])
     if not values:
         return None
     every = np.concatenate(values)
