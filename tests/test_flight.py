@@ -169,7 +169,7 @@ def test_replay_of_a_drain_to_the_cutoff_by_the_true_model(tmp_path):
 
     battery = PRESETS["zippy-1100-2s"]
     log = tmp_path / "drain.csv"
-    rest_s = _spiky_drain_log(log, battery, 3.3)
+    _spiky_drain_log(log, battery, 3.3)
     report = analyse_flight(log, battery, cutoff=3.3, capacity_Ah=battery.capacity_Ah)
     (flight,) = report.flights
     s = flight.summary

@@ -31,7 +31,6 @@ Sign convention: current and power positive on discharge; the pack carries
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-
 from functools import cached_property
 
 import numpy as np
