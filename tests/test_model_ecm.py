@@ -382,3 +382,17 @@ def test_ecm_fits_curves_that_stop_before_the_knee(shared_data):
                     current_A=low.current_A[keep], temperature_C=low.temperature_C[keep])
     res = fit_battery([short, high], model="ecm", model_error=False)
     assert res.rmse_V < 0.03
+
+
+def test_a_log_whose_ambient_drifts_more_than_the_cell_heats_keeps_the_defaults(shared_data):
+    """C/10 of the Samsung 30Q: ten hours in which the room's temperature moves more than
+    the cell heats. No cooling can be seen, so the thermal defaults stay (an 'adiabatic'
+    cell would be predicted to boil at 4C)."""
+    import dischargelab as dl
+
+    d = dl.read(shared_data / "samsung30q_S001" / "Q30_S001_C10.csv",
+                columns="time_s=0,current_A=1,voltage_V=2,temperature_C=4")
+    res = dl.fit([d], model="shepherd-thermal", bootstrap=0)
+    assert any("thermal model: default (the logged temperature could not be used)" in n
+               for n in res.notes)
+    assert res.parameters["Rth_K_per_W"] < 100.0

@@ -57,6 +57,19 @@ def test_model_against_itself_has_zero_error():
                         "endurance_error_pct", "voltage_rmse_pct", "voltage_max_error_pct"}
 
 
+def test_validation_case_is_a_result_object():
+    data, t_cut = model_discharge(PACK, 6.0, 3.0)
+    case = compare_discharge(PACK, data, {"source": "self.csv"}, cutoff_cell_V=3.0)
+    row = case.to_dict()
+    assert row == case.summary and row is not case.summary
+    assert row["endurance_predicted_s"] == pytest.approx(t_cut, abs=1e-6)
+    frame = case.to_pandas()
+    assert list(frame.columns) == ["time_s", "voltage_measured_V", "voltage_predicted_V",
+                                   "current_A"]
+    assert len(frame) == len(data)
+    assert np.nanmax(np.abs(frame["voltage_measured_V"] - frame["voltage_predicted_V"])) < 1e-9
+
+
 def test_known_capacity_error_gives_known_endurance_error():
     # the 'measured' cell has 5 % more capacity than the model: errors follow by hand
     bigger = Battery(CELL.replace(C_Ah=CELL.C_Ah * 1.05), cells_series=3)

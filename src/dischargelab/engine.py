@@ -74,7 +74,8 @@ class Step:
         Label (flight phase name, ...).
     profile_time_s, profile_current_A : tuple of float
         For ``kind="profile"``: sample times [s from the step start] and pack
-        currents [A]; each current is held until the next sample time.
+        currents [A]; sample ``k``'s current is held over ``(t[k-1], t[k]]`` (a
+        logger's reading covers the interval before it).
     """
 
     kind: str

@@ -149,6 +149,20 @@ class ValidationCase:
         s = self.summary
         return f"{Path(s['file']).name} ({s['current_A']:.3g} A)"
 
+    def to_dict(self) -> dict:
+        """The JSON row (``validate --json``): errors, coverage, interval, warnings."""
+        return dict(self.summary)
+
+    def to_pandas(self):
+        """Measured and predicted voltage [V] and the current [A] against time [s]."""
+        import pandas as pd
+
+        frame = {"time_s": self.time_s, "voltage_measured_V": self.voltage_measured_V,
+                 "voltage_predicted_V": self.voltage_predicted_V}
+        if self.current_A is not None:
+            frame["current_A"] = self.current_A
+        return pd.DataFrame(frame)
+
     def plot(self, ax=None, **kwargs):
         """Measured and predicted voltage; returns the Axes."""
         from .plot import plot_validation

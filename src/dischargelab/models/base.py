@@ -368,13 +368,14 @@ def fit_lumped_thermal(family: Family, p, data: Samples):
     over the curves that heat by :data:`MIN_HEATING_K` or more. When none does,
     the log still says that the cell hardly heats: ``C_th`` keeps its value in
     ``p`` and only ``1/(R_th C_th)`` is fitted, so that the model does not
-    predict a heating the log does not show.
+    predict a heating the log does not show (None when that fit finds no cooling:
+    the ambient drifted more than the cell heated).
 
     Returns
     -------
     dict or None
         ``{"Cth_J_per_K", "Rth_K_per_W", "rmse_K", "heat_capacity_fitted"}``; None
-        without a logged temperature.
+        without a logged temperature or when it cannot be used.
     """
     if not data.has_temperature:
         return None
@@ -415,8 +416,9 @@ def fit_lumped_thermal(family: Family, p, data: Samples):
     den = float(x[:, 1] @ x[:, 1])
     if den <= 0:
         return None
-    b = max(float(x[:, 1] @ target) / den, 0.0)
+    b = float(x[:, 1] @ target) / den
+    if not b > 0:  # no cooling seen: the log's drift, not the cell, sets the temperature
+        return None
     rmse = float(np.sqrt(np.mean((x[:, 0] / cth + b * x[:, 1] - y) ** 2)))
-    return {"Cth_J_per_K": cth, "Rth_K_per_W": float(min(1.0 / (b * cth) if b > 0 else 1e4,
-                                                             1e4)),
+    return {"Cth_J_per_K": cth, "Rth_K_per_W": float(min(1.0 / (b * cth), 1e4)),
             "rmse_K": rmse, "heat_capacity_fitted": False}
