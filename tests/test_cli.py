@@ -145,3 +145,18 @@ def test_import_stays_light():
             "print(bad); sys.exit(1 if bad else 0)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_cutoff_defaults_to_the_chemistry_and_says_so(capsys):
+    code, out, err = run(capsys, "predict", "hacker-4100-4s-lifepo4", "--current", "20",
+                         "--json")
+    assert code == 0
+    assert json.loads(out)["cutoff_V"] == 2.5
+    assert "cutoff 2.5 V/cell, the usual one for lifepo4" in err
+
+
+def test_validate_without_cutoff_needs_a_chemistry(capsys, battery_file, bundled_data):
+    code, _, err = run(capsys, "validate", battery_file, bundled_data / "Q30_S001_2C.csv",
+                       "--columns", SAMSUNG_COLUMNS)
+    assert code == 2 and "give a cutoff" in err and "names no chemistry" in err
+    assert len(err.strip().splitlines()) == 1

@@ -541,8 +541,8 @@ def _cutoff_options(func):
     func = click.option("--cutoff-pack", type=float, metavar="V",
                         help="Cutoff voltage of the whole pack [V] (instead of --cutoff).")(func)
     func = click.option("--cutoff", type=float, metavar="V",
-                        help="Cutoff voltage per cell [V], e.g. 3.0 for LiPo, 2.5 for "
-                             "Li-ion.")(func)
+                        help="Cutoff voltage per cell [V] [default: the battery chemistry's "
+                             "usual one: LiPo 3.0, Li-ion and LiFePO4 2.5].")(func)
     func = click.option("--parallel", type=click.IntRange(1), default=None,
                         help="Strings in parallel (default: as in the battery file).")(func)
     func = click.option("--cells", type=click.IntRange(1), default=None,
@@ -552,12 +552,26 @@ def _cutoff_options(func):
 
 def _battery_and_cutoff(battery_arg, cells, parallel, cutoff, cutoff_pack):
     battery = load_battery_arg(battery_arg).with_pack(cells, parallel)
-    if cutoff is None and cutoff_pack is None:
-        raise DischargelabError("give a cutoff: --cutoff V per cell (e.g. 3.0 LiPo, 2.5 Li-ion) "
-                                "or --cutoff-pack V")
+    return battery, {"cutoff_cell_V": _cell_cutoff(battery, cutoff, cutoff_pack),
+                     "cutoff_pack_V": cutoff_pack}
+
+
+def _cell_cutoff(battery, cutoff, cutoff_pack=None):
+    """The per-cell cutoff: the given one, else the battery chemistry's usual one (said on
+    stderr), else a one-line error naming the options."""
+    from .model import CUTOFF_CELL_VOLTAGE_V
+
     if cutoff is not None and cutoff_pack is not None:
         raise DischargelabError("give either --cutoff (per cell) or --cutoff-pack, not both")
-    return battery, {"cutoff_cell_V": cutoff, "cutoff_pack_V": cutoff_pack}
+    if cutoff is not None or cutoff_pack is not None:
+        return cutoff
+    if battery.chemistry not in CUTOFF_CELL_VOLTAGE_V:
+        raise DischargelabError("give a cutoff: --cutoff V per cell (e.g. 3.0 LiPo, 2.5 Li-ion) "
+                                "or --cutoff-pack V (the battery file names no chemistry)")
+    value = CUTOFF_CELL_VOLTAGE_V[battery.chemistry]
+    err.print(f"cutoff {value:g} V/cell, the usual one for {battery.chemistry} "
+              f"(--cutoff to change it)", markup=False)
+    return value
 
 
 @app.command("predict")
@@ -1713,8 +1727,9 @@ def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, ambient, d
 @app.command("validate")
 @click.argument("battery")
 @click.argument("data", nargs=-1, required=True)
-@click.option("--cutoff", type=float, metavar="V", required=True,
-              help="Cutoff voltage per cell [V] at which endurance is measured.")
+@click.option("--cutoff", type=float, metavar="V", default=None,
+              help="Cutoff voltage per cell [V] at which endurance is measured [default: the "
+                   "battery chemistry's usual one: LiPo 3.0, Li-ion and LiFePO4 2.5].")
 @data_options
 @click.option("--cells", type=click.IntRange(1), default=None,
               help="Cells in series of the measured pack (default: as in the battery file).")
@@ -1748,6 +1763,7 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
     paths = expand_paths(data)
     guard_outputs([plot_path], battery_input(battery) + paths, force, figures=[plot_path])
     bat = load_battery_arg(battery).with_pack(cells, parallel)
+    cutoff = _cell_cutoff(bat, cutoff)
     chosen = {k: v for k, v in (("flight", flight), ("battery", battery_index)) if v is not None}
     with err.status("validating", spinner="dots") as status:
         cases = _validation_cases(bat, paths, cutoff, columns, current, sign, segment, units,
