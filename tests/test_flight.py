@@ -250,3 +250,22 @@ def test_fit_and_flight_commands_on_a_flight_log(logs, tmp_path, capsys):
 def test_flight_options_need_a_flight_log(bundled_data, capsys):
     code, _, err = run(capsys, "fit", bundled_data / "Q30_S001_1C.csv", "--capacity", "3")
     assert code == 2 and "flight logs" in err
+
+
+def test_validate_flies_a_flight_from_its_charge_at_take_off_at_the_ambient(fit29, logs):
+    """A thermal family fitted without a logged temperature keeps the cell at the ambient
+    (its resistances already hold the flight's heating), and validate starts the flight
+    from the charge the rest voltage before take-off gives: the same voltage as `flight`."""
+    from dischargelab.models.base import HELD_AT_AMBIENT_HEAT_CAPACITY
+
+    _, result = fit29
+    battery = result.battery
+    assert battery.parameters["Cth_J_per_K"] == HELD_AT_AMBIENT_HEAT_CAPACITY
+    (case,) = dl.validate(battery, [logs / INA29], cutoff=3.3)
+    row = case.to_dict()
+    report = analyse_flight(logs / INA29, battery, capacity_Ah=LABEL_29_AH, cutoff=3.3)
+    flown = report.flights[0].summary
+    assert row["initial_charge_Ah"] == pytest.approx(flown["initial_charge_model_Ah"], abs=0.005)
+    assert row["initial_charge_Ah"] > 0.01
+    assert "from the rest voltage" in row["notes"][0]
+    assert row["voltage_rmse_V"] < 0.15

@@ -53,7 +53,7 @@ from .errors import DataError, FitError
 from .identifiability import Identifiability, analyse, equilibrated_svd, plausibility, undetermined
 from .model import Battery, CellParameters, charge_from_current
 from .models import Family, Samples, get_family
-from .models.base import MIN_HEATING_K, fit_lumped_thermal
+from .models.base import HELD_AT_AMBIENT_HEAT_CAPACITY, MIN_HEATING_K, fit_lumped_thermal
 
 #: Name of the current-scale parameter fitted in paper mode.
 CURRENT_SCALE = "current_scale"
@@ -927,10 +927,19 @@ def _physical_limits(family: Family, ident: Identifiability, notes: list) -> Non
 
 def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list):
     """Heat capacity and thermal resistance from the logged temperature (else defaults)."""
+    if not stack.has_temperature:
+        # the fit took the cell at the ambient, so its resistances already hold whatever
+        # heating the runs had: predictions keep the cell at the ambient too
+        params = params.replace(Cth_J_per_K=HELD_AT_AMBIENT_HEAT_CAPACITY)
+        notes.append("thermal model: no temperature logged, so the cell is held at the "
+                     "ambient in predictions (its resistances are those of the fitted runs, "
+                     "heating included); give the ambient with --ambient")
+        return params, {"Cth_J_per_K": float(params["Cth_J_per_K"]),
+                        "Rth_K_per_W": float(params["Rth_K_per_W"]),
+                        "source": "held at the ambient (no logged temperature)"}
     fitted = fit_lumped_thermal(family, params, stack)
     if fitted is None:
-        source = ("default (no logged temperature)" if not stack.has_temperature
-                  else "default (the logged temperature could not be used)")
+        source = "default (the logged temperature could not be used)"
         notes.append(f"thermal model: {source}; heat capacity {params['Cth_J_per_K']:.3g} J/K, "
                      f"thermal resistance {params['Rth_K_per_W']:.3g} K/W")
         return params, {"Cth_J_per_K": float(params["Cth_J_per_K"]),

@@ -178,7 +178,9 @@ PX4_R_INTERNAL_OHM = 0.005
 #: Window of the voltage and current the PX4-style estimate reads [s] (its filter).
 PX4_VOLTAGE_WINDOW_S = 1.0
 
-#: A cell temperature held at the ambient: heat capacity given to the engine [J/K].
+#: A cell temperature held at the ambient: heat capacity given to the engine [J/K]
+#: for battery files written before the fit stored it (those of thermal families
+#: fitted without a logged temperature).
 ISOTHERMAL_HEAT_CAPACITY = 1e12
 
 

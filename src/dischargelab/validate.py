@@ -234,10 +234,32 @@ def _constant_current_voltage(battery: Battery, prediction: SimulationResult, t,
         return battery.cells_series * fam.voltage(prm, state, cell)
 
 
-def _predict_run(battery: Battery, t, i, inside, cutoff_pack: float, ambient: float):
+def _initial_charge(battery: Battery, meta: dict) -> tuple[float, str | None]:
+    """(pack charge already taken out at the start [Ah], a note or None).
+
+    A flight from a flight log need not start full: its charge comes from the
+    rest voltage just before take-off through the model's own open-circuit
+    voltage (:func:`dischargelab.flight.model_charge_at_rest`). Bench discharges
+    start full.
+    """
+    rest = meta.get("rest_sample")
+    if meta.get("flight") is None or not isinstance(rest, dict) or \
+            rest.get("voltage_V") is None:
+        return 0.0, None
+    from .flight import model_charge_at_rest
+
+    charge = model_charge_at_rest(battery, float(rest["voltage_V"]),
+                                  float(rest.get("current_A") or 0.0))
+    soc = 100.0 * (1.0 - charge / battery.capacity_Ah)
+    return charge, (f"the flight starts at {soc:.0f} % of the model's charge ({charge:.3g} Ah "
+                    f"out), from the rest voltage {rest['voltage_V']:.2f} V before take-off")
+
+
+def _predict_run(battery: Battery, t, i, inside, cutoff_pack: float, ambient: float,
+                 initial_charge_Ah: float = 0.0):
     """(steps, prediction, predicted voltage at the samples, profile label, mean current
-    [A], warnings) of one measured run."""
-    constant = _is_constant(i[inside])
+    [A], warnings) of one measured run, starting ``initial_charge_Ah`` [Ah] down."""
+    constant = _is_constant(i[inside]) and initial_charge_Ah == 0.0
     mean_current = float(np.trapezoid(i[inside], t[inside]) / max(t[inside][-1], 1e-12)) \
         if inside.sum() > 1 else float(i[0])
     warnings = []
@@ -254,7 +276,7 @@ def _predict_run(battery: Battery, t, i, inside, cutoff_pack: float, ambient: fl
     if tail_current > 0:
         steps.append(Step("current", tail_current, None, "extension"))
     prediction = simulate(battery, steps, cutoff_pack_V=cutoff_pack, ambient_C=ambient,
-                          points_per_step=PREDICTION_STEPS)
+                          points_per_step=PREDICTION_STEPS, initial_charge_Ah=initial_charge_Ah)
     if prediction.ended_by == "cutoff" and tail_current > 0 and \
             prediction.step[-1] == len(steps) - 1:
         warnings.append(f"the prediction reaches the cutoff after the measured profile "
@@ -301,8 +323,9 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
     q_meas = charge_from_current(t, i)
     q_total = float(np.interp(t_end, t, q_meas))
     ambient = _run_ambient_C(battery, data)
+    initial, start_note = _initial_charge(battery, meta)
     steps, prediction, v_pred, profile, mean_current, more = _predict_run(
-        battery, t, i, inside, cutoff_pack, ambient)
+        battery, t, i, inside, cutoff_pack, ambient, initial)
     warnings += more
     t_pred = prediction.time_to_cutoff_s
     v_pred = np.where(t <= (t_pred if np.isfinite(t_pred) else np.inf), v_pred, np.nan)
@@ -315,7 +338,7 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
         battery, steps, nominal={"time_to_cutoff_s": t_pred, "capacity_Ah":
                                  prediction.capacity_Ah, "energy_Wh": prediction.energy_Wh_total},
         cutoff_pack_V=cutoff_pack, cell_current_A=mean_current / battery.strings_parallel,
-        ambient_C=ambient, draws=draws, seed=seed, level=level)
+        initial_charge_Ah=initial, ambient_C=ambient, draws=draws, seed=seed, level=level)
     warnings += spread["warnings"]
     lo, hi = spread["time_to_cutoff_s"]
     covered = bool(lo <= t_meas <= hi) if reached and np.isfinite(lo) else None
@@ -358,6 +381,8 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
         "in_fit": None,
         "extrapolation": None,
         "warnings": warnings,
+        "initial_charge_Ah": initial,
+        "notes": [start_note] if start_note else [],
     }
     if battery.family.thermal:
         summary["ambient_C"] = ambient

@@ -349,6 +349,10 @@ class Family:
         }
 
 
+#: Heat capacity [J/K] of a thermal family fitted without a logged temperature: the
+#: cell stays at the ambient (1 MJ/K: 10 W for an hour warms it by 0.04 K).
+HELD_AT_AMBIENT_HEAT_CAPACITY = 1e6
+
 #: Smallest logged temperature rise [K] from which the heat capacity is fitted;
 #: below it only the thermal resistance is (the heat capacity keeps its value).
 MIN_HEATING_K = 2.0
