@@ -269,3 +269,23 @@ def test_validate_flies_a_flight_from_its_charge_at_take_off_at_the_ambient(fit2
     assert row["initial_charge_Ah"] > 0.01
     assert "from the rest voltage" in row["notes"][0]
     assert row["voltage_rmse_V"] < 0.15
+
+
+def test_validate_a_spiky_drain_by_when_the_pack_stays_under_the_cutoff(tmp_path):
+    """Under a varying current the measured and predicted times are both when the voltage
+    stays under the cutoff for the low-voltage timer, not the first peak's dip."""
+    from dischargelab.model import PRESETS
+    from dischargelab.validate import compare_discharge
+
+    battery = PRESETS["zippy-1100-2s"]
+    log = tmp_path / "drain.csv"
+    _spiky_drain_log(log, battery, 3.3)
+    (case,) = dl.validate(battery, [log], cutoff=3.3)
+    row = case.to_dict()
+    assert row["low_timer_s"] == 10.0 and row["profile"] == "measured"
+    assert abs(row["endurance_error_pct"]) < 1.0
+    assert row["covered"]
+    # the first dip under the cutoff comes at a current peak, well before
+    first = compare_discharge(battery, dl.read(log).to_pandas(), {"source": str(log)}, 3.3,
+                              low_timer_s=0.0)
+    assert first.summary["endurance_measured_s"] < 0.9 * row["endurance_measured_s"]

@@ -170,7 +170,7 @@ def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int 
 
 def validate(battery: Battery | str | Path,
              discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *,
-             cutoff: float | None = None):
+             cutoff: float | None = None, low_timer_s: float | None = None):
     """Compare predictions with measured discharges (endurance, voltage, interval coverage).
 
     Parameters
@@ -179,6 +179,9 @@ def validate(battery: Battery | str | Path,
     discharges : Discharge, path, or a sequence of them
     cutoff : float, optional
         Cutoff per cell [V]; default the chemistry's usual cutoff.
+    low_timer_s : float, optional
+        The cutoff is reached when the voltage stays under it this long [s]; default
+        10 s under a varying current (peaks dip under it early), 0 under a constant one.
 
     Returns
     -------
@@ -193,7 +196,8 @@ def validate(battery: Battery | str | Path,
     out = []
     for d in items:
         dis = _as_discharge(d)
-        out.append(compare_discharge(bat, dis.to_pandas(), dict(dis.meta), cut))
+        out.append(compare_discharge(bat, dis.to_pandas(), dict(dis.meta), cut,
+                                     low_timer_s=low_timer_s))
     return out
 
 

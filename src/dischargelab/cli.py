@@ -1604,10 +1604,10 @@ def _progress_callback(status, what: str):
 
 
 def _validation_cases(battery, paths, cutoff, columns, current, sign, segment, units,
-                      status=None, flight_options=None):
+                      status=None, flight_options=None, low_timer_s=None):
     from .validate import compare_discharge
 
-    return [compare_discharge(battery, data, meta, cutoff)
+    return [compare_discharge(battery, data, meta, cutoff, low_timer_s=low_timer_s)
             for data, meta in read_data_files(paths, columns, current, sign, segment, units,
                                               status=status, verb="validating",
                                               flight_options=flight_options)]
@@ -1737,6 +1737,11 @@ def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, ambient, d
               help="Strings in parallel of the measured pack (default: as in the battery file).")
 @click.option("--flight", type=click.IntRange(1), metavar="N",
               help="Flight logs: flight N (counting from 1) [default: the longest].")
+@click.option("--low-timer", type=click.FloatRange(0), default=None, metavar="S",
+              help="The cutoff is reached when the voltage stays under it S seconds, for the "
+                   "measurement and the model alike [default: 10 under a varying current, "
+                   "where peaks dip under it early (ArduPilot BATT_LOW_TIMER); 0 under a "
+                   "constant one].")
 @click.option("--battery", "battery_index", type=click.IntRange(0), metavar="N",
               help="Flight logs: battery instance N [default: the first with data].")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
@@ -1744,7 +1749,7 @@ def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, ambient, d
 @force_option
 @click.option("--json", "as_json", is_flag=True, help=JSON_HELP)
 def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, cells, parallel,
-                 flight, battery_index, plot_path, force, as_json):
+                 flight, low_timer, battery_index, plot_path, force, as_json):
     """Compare the model with measured discharges: endurance and voltage errors.
 
     Each DATA file is predicted with its own measured current (constant or the
@@ -1767,7 +1772,7 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
     chosen = {k: v for k, v in (("flight", flight), ("battery", battery_index)) if v is not None}
     with err.status("validating", spinner="dots") as status:
         cases = _validation_cases(bat, paths, cutoff, columns, current, sign, segment, units,
-                                  status, flight_options=chosen)
+                                  status, flight_options=chosen, low_timer_s=low_timer)
     if plot_path:
         from .plot import plot_validation, save
 

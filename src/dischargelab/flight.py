@@ -57,6 +57,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import DataError, FitError, SimulationError
+from .validate import LOW_VOLTAGE_TIMER_S
 
 # --------------------------------------------------------------------------- constants
 
@@ -161,10 +162,6 @@ REPLAY_EVERY_S = 5.0
 #: (since the load started, early in a flight).
 RECENT_LOAD_S = 30.0
 
-#: The pack has reached the cutoff when its voltage stays at or below it this long [s]:
-#: ArduPilot's default low-battery timer (``BATT_LOW_TIMER`` = 10 s), which keeps
-#: a sag at a current peak from ending the flight. Shorter dips are reported as sags.
-LOW_VOLTAGE_TIMER_S = 10.0
 
 #: Below this recent mean current [A] no remaining time is replayed (on the ground).
 MIN_REPLAY_CURRENT_A = 0.5
@@ -1512,33 +1509,12 @@ def _model_remaining_profile(bat, state: dict, t_window, i_window, load_A: float
 
 def _time_to(t, v, cutoff_V: float, now_s: float, hold_s: float = 0.0) -> float:
     """Time [s] from ``now_s`` until ``v`` goes to or below ``cutoff_V`` and stays there
-    ``hold_s`` [s] (NaN if it never does within the samples).
+    ``hold_s`` [s] (:func:`dischargelab.validate.measured_time_to_cutoff`; NaN if never)."""
+    from .validate import measured_time_to_cutoff
 
-    The crossing is interpolated between the sample above and the one below; a
-    stretch under the cutoff lasts until the next sample above it. A stretch that
-    lasts to the last sample counts however short it is: the log (a test stopped
-    at the cutoff, a flight landed on the alarm) or the simulation ended there.
-    ``hold_s = 0``: the first sample under it.
-    """
     if v is None or np.size(t) == 0:
         return float("nan")
-    t = np.asarray(t, dtype=float)
-    v = np.asarray(v, dtype=float)
-    below = v <= cutoff_V
-    if not below.any():
-        return float("nan")
-    edges = np.diff(np.r_[0, below.astype(np.int8), 0])
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    for a, b in zip(starts, ends):
-        if a == 0:
-            crossing = t[0]
-        else:
-            span = v[a - 1] - v[a]
-            frac = (v[a - 1] - cutoff_V) / span if span > 0 else 1.0
-            crossing = t[a - 1] + frac * (t[a] - t[a - 1])
-        if b >= t.size or t[b] - crossing >= hold_s:
-            return float(crossing - now_s)
-    return float("nan")
+    return measured_time_to_cutoff(t, v, cutoff_V, hold_s) - now_s
 
 
 def _model_remaining(bat, state: dict, load_A: float, s: _Settings) -> float:

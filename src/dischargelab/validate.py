@@ -59,19 +59,38 @@ MAX_PROFILE_SAMPLES = 5000
 PREDICTION_STEPS = 200
 
 
-def measured_time_to_cutoff(time_s, voltage_V, cutoff_V: float) -> float:
-    """Time [s] of the first crossing of ``cutoff_V``, linearly interpolated (NaN if never)."""
+#: Under a varying load the pack has reached the cutoff when its voltage stays at or
+#: below it this long [s]: ArduPilot's default low-battery timer (``BATT_LOW_TIMER``
+#: = 10 s), which keeps a sag at a current peak from ending the flight.
+LOW_VOLTAGE_TIMER_S = 10.0
+
+
+def measured_time_to_cutoff(time_s, voltage_V, cutoff_V: float, hold_s: float = 0.0) -> float:
+    """Time [s] at which ``voltage_V`` goes to or below ``cutoff_V`` and stays there
+    ``hold_s`` [s] (NaN if it never does); ``hold_s = 0``: the first crossing.
+
+    The crossing is interpolated linearly between the sample above and the one
+    below; a stretch under the cutoff lasts until the next sample above it. A
+    stretch that lasts to the last sample counts however short it is: the
+    measurement (a test stopped at the cutoff, a flight landed on the alarm) or
+    the simulation ended there.
+    """
     t = np.asarray(time_s, dtype=float)
     v = np.asarray(voltage_V, dtype=float)
-    below = np.flatnonzero(v <= cutoff_V)
-    if below.size == 0:
+    below = v <= cutoff_V
+    if not below.any():
         return float("nan")
-    k = int(below[0])
-    if k == 0:
-        return float(t[0])
-    v0, v1 = v[k - 1], v[k]
-    frac = (v0 - cutoff_V) / (v0 - v1) if v0 != v1 else 1.0
-    return float(t[k - 1] + frac * (t[k] - t[k - 1]))
+    edges = np.diff(np.r_[0, below.astype(np.int8), 0])
+    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        if a == 0:
+            crossing = float(t[0])
+        else:
+            v0, v1 = v[a - 1], v[a]
+            frac = (v0 - cutoff_V) / (v0 - v1) if v0 != v1 else 1.0
+            crossing = float(t[a - 1] + frac * (t[a] - t[a - 1]))
+        if b >= t.size or t[b] - crossing >= hold_s:
+            return crossing
+    return float("nan")
 
 
 def _is_constant(current: np.ndarray) -> bool:
@@ -256,9 +275,10 @@ def _initial_charge(battery: Battery, meta: dict) -> tuple[float, str | None]:
 
 
 def _predict_run(battery: Battery, t, i, inside, cutoff_pack: float, ambient: float,
-                 initial_charge_Ah: float = 0.0):
+                 initial_charge_Ah: float = 0.0, engine_cutoff_pack: float | None = None):
     """(steps, prediction, predicted voltage at the samples, profile label, mean current
-    [A], warnings) of one measured run, starting ``initial_charge_Ah`` [Ah] down."""
+    [A], warnings) of one measured run, starting ``initial_charge_Ah`` [Ah] down. A
+    measured profile is flown down to ``engine_cutoff_pack`` [V] (default the cutoff)."""
     constant = _is_constant(i[inside]) and initial_charge_Ah == 0.0
     mean_current = float(np.trapezoid(i[inside], t[inside]) / max(t[inside][-1], 1e-12)) \
         if inside.sum() > 1 else float(i[0])
@@ -275,8 +295,9 @@ def _predict_run(battery: Battery, t, i, inside, cutoff_pack: float, ambient: fl
     tail_current = float(np.mean(np.clip(i[tail], 0, None)))
     if tail_current > 0:
         steps.append(Step("current", tail_current, None, "extension"))
-    prediction = simulate(battery, steps, cutoff_pack_V=cutoff_pack, ambient_C=ambient,
-                          points_per_step=PREDICTION_STEPS, initial_charge_Ah=initial_charge_Ah)
+    prediction = simulate(battery, steps, cutoff_pack_V=engine_cutoff_pack or cutoff_pack,
+                          ambient_C=ambient, points_per_step=PREDICTION_STEPS,
+                          initial_charge_Ah=initial_charge_Ah)
     if prediction.ended_by == "cutoff" and tail_current > 0 and \
             prediction.step[-1] == len(steps) - 1:
         warnings.append(f"the prediction reaches the cutoff after the measured profile "
@@ -289,9 +310,16 @@ def _predict_run(battery: Battery, t, i, inside, cutoff_pack: float, ambient: fl
 
 
 def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
-                      draws: int = DEFAULT_DRAWS, seed: int = 0,
-                      level: float = 0.95) -> ValidationCase:
-    """Predict one measured discharge; see :func:`validate_discharge` for the numbers."""
+                      draws: int = DEFAULT_DRAWS, seed: int = 0, level: float = 0.95,
+                      low_timer_s: float | None = None) -> ValidationCase:
+    """Predict one measured discharge; see :func:`validate_discharge` for the numbers.
+
+    ``low_timer_s`` [s]: the cutoff is reached when the voltage stays under it this
+    long, for the measurement and the prediction alike (default
+    :data:`LOW_VOLTAGE_TIMER_S` under a varying current, where current peaks dip
+    under the cutoff long before the pack is empty; 0, the first crossing, under a
+    constant current).
+    """
     battery = load_battery(battery)
     meta = dict(meta or {})
     for col in ("time_s", "voltage_V", "current_A"):
@@ -312,7 +340,13 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
         raise DataError(f"{Path(name).name}: the measurement starts at {v[0]:.3f} V, at or "
                         f"below the cutoff {cutoff_pack:.3f} V; check --cutoff and the pack's "
                         f"cells in series ({battery.cells_series})")
-    t_meas = measured_time_to_cutoff(t, v, cutoff_pack)
+    first = measured_time_to_cutoff(t, v, cutoff_pack)
+    varying = not _is_constant(i[t <= first] if np.isfinite(first) else i)
+    hold = (LOW_VOLTAGE_TIMER_S if varying else 0.0) if low_timer_s is None \
+        else float(low_timer_s)
+    if not hold >= 0:
+        raise DataError(f"low_timer_s must be 0 or more seconds, got {low_timer_s}")
+    t_meas = measured_time_to_cutoff(t, v, cutoff_pack, hold)
     reached = np.isfinite(t_meas)
     t_end = t_meas if reached else float(t[-1])
     warnings = []
@@ -325,22 +359,32 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
     ambient = _run_ambient_C(battery, data)
     initial, start_note = _initial_charge(battery, meta)
     steps, prediction, v_pred, profile, mean_current, more = _predict_run(
-        battery, t, i, inside, cutoff_pack, ambient, initial)
+        battery, t, i, inside, cutoff_pack, ambient, initial,
+        engine_cutoff_pack=0.5 * cutoff_pack if hold > 0 else None)
     warnings += more
     t_pred = prediction.time_to_cutoff_s
+    stretch = 1.0  # the draws are flown to the first crossing: their spread is carried over
+    if hold > 0 and profile == "measured":
+        t_first = measured_time_to_cutoff(prediction.time_s, prediction.voltage_V, cutoff_pack)
+        t_pred = measured_time_to_cutoff(prediction.time_s, prediction.voltage_V, cutoff_pack,
+                                         hold)
+        if np.isfinite(t_pred) and np.isfinite(t_first) and t_first > 0:
+            stretch = t_pred / t_first
     v_pred = np.where(t <= (t_pred if np.isfinite(t_pred) else np.inf), v_pred, np.nan)
     compare = inside & np.isfinite(v_pred) & (v > 0)
     rel = (v_pred[compare] - v[compare]) / v[compare] * 100.0
     soc = 1.0 - q_meas / q_total if q_total > 0 else np.ones_like(q_meas)
     operational = compare & (soc > OPERATIONAL_SOC)
     rel_op = (v_pred[operational] - v[operational]) / v[operational] * 100.0
+    q_pred = float(np.interp(t_pred, prediction.time_s, prediction.charge_Ah)) \
+        - initial if np.isfinite(t_pred) else prediction.capacity_Ah
     spread = prediction_interval(
-        battery, steps, nominal={"time_to_cutoff_s": t_pred, "capacity_Ah":
-                                 prediction.capacity_Ah, "energy_Wh": prediction.energy_Wh_total},
+        battery, steps, nominal={"time_to_cutoff_s": t_pred / stretch, "capacity_Ah": q_pred,
+                                 "energy_Wh": prediction.energy_Wh_total},
         cutoff_pack_V=cutoff_pack, cell_current_A=mean_current / battery.strings_parallel,
         initial_charge_Ah=initial, ambient_C=ambient, draws=draws, seed=seed, level=level)
     warnings += spread["warnings"]
-    lo, hi = spread["time_to_cutoff_s"]
+    lo, hi = (stretch * x for x in spread["time_to_cutoff_s"])
     covered = bool(lo <= t_meas <= hi) if reached and np.isfinite(lo) else None
 
     def rms(x):
@@ -369,7 +413,8 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
         "interval_includes": spread["interval_includes"],
         "draws_not_reaching_cutoff": spread["draws_not_reaching_cutoff"],
         "capacity_measured_Ah": q_total if reached else None,
-        "capacity_predicted_Ah": prediction.capacity_Ah,
+        "capacity_predicted_Ah": q_pred,
+        "low_timer_s": hold,
         "voltage_rmse_pct": rms(rel),
         "voltage_max_error_pct": peak(rel),
         "voltage_mean_error_pct": float(np.mean(rel)) if rel.size else float("nan"),
@@ -437,7 +482,10 @@ def validate_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *
         ``voltage_max_error_pct`` (over the compared curve), plus
         ``endurance_error_s``, ``voltage_*_operational_pct`` (SOC > 20 %),
         ``capacity_measured_Ah``, ``capacity_predicted_Ah``, ``profile``
-        ("constant" | "measured"), ``in_fit``, ``extrapolation``, ``warnings``
+        ("constant" | "measured"), ``low_timer_s`` (how long the voltage stayed
+        under the cutoff to count, see :func:`compare_discharge`),
+        ``initial_charge_Ah`` (a flight log's flight: from the rest voltage before
+        take-off), ``notes``, ``in_fit``, ``extrapolation``, ``warnings``
         (and ``ambient_C``, ``peak_temperature_C`` for thermal families).
         Endurance keys and ``covered`` are None when the measurement never reaches
         the cutoff.
