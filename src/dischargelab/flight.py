@@ -57,6 +57,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import DataError, FitError, SimulationError
+from .models.ecm import TAU_D_BOUNDS_S
 from .validate import LOW_VOLTAGE_TIMER_S
 
 # --------------------------------------------------------------------------- constants
@@ -644,9 +645,9 @@ def flight_curves(path, flights=None, battery: int | None = None,
     series, battery_notes = choose_battery(log, battery)
     numbers = _flight_numbers(log, flights)
     cells = _cells(series, cells, chemistry, battery_notes)
-    capacity, capacity_source = _capacity(series, capacity_Ah, path)
-    bat = _model_pack(model, cells) if model is not None else None
     parts = flight_samples(series, log.spans, numbers)
+    capacity, capacity_source = _capacity(series, capacity_Ah, path, parts, cells, chemistry)
+    bat = _model_pack(model, cells) if model is not None else None
     curves, rows, notes = [], [], list(battery_notes)
     for part in parts:
         if part.load_start_s is None:
@@ -721,7 +722,16 @@ def _cells(series, cells, chemistry: str, notes: list) -> int:
     return count
 
 
-def _capacity(series, capacity_Ah, path: Path) -> tuple[float, str]:
+#: A flight that goes at least this deep in state of charge (rest voltages before
+#: and after, generic OCV) gives the capacity when no label capacity is known [-]: a
+#: near-full drain, so that the generic OCV's error at the ends matters little (29.csv,
+#: 79 % deep by the prior, would give 1.23 Ah for its 1.6 Ah label).
+CAPACITY_FROM_DRAIN_SOC = 0.85
+
+
+def _capacity(series, capacity_Ah, path: Path, parts=(), cells: int = 1,
+              chemistry: str = "lipo") -> tuple[float, str]:
+    """Pack capacity [Ah]: given, else the log's, else from a deep drain in the log."""
     if capacity_Ah is not None:
         if not np.isfinite(capacity_Ah) or capacity_Ah <= 0:
             raise DataError(f"capacity_Ah must be a positive number of Ah, got {capacity_Ah}")
@@ -731,8 +741,29 @@ def _capacity(series, capacity_Ah, path: Path) -> tuple[float, str]:
         return float(capacity_Ah), source
     if series.capacity_mAh:
         return float(series.capacity_mAh) / 1000.0, "the log's configured capacity"
-    raise DataError(f"{path.name} does not state the pack capacity; give the label capacity "
-                    "with capacity_Ah=AH (--capacity AH)")
+    best = None
+    for part in parts:
+        if part.rest_before is None:
+            continue
+        if part.rest_after is not None and part.rest_after.relaxed_s >= KNEE_REST_S:
+            end_V, how = part.rest_after.voltage_V, "rest voltages"
+        else:  # ends under load (a drain to the cutoff): the loaded voltage is below the OCV
+            end_V = float(part.frame["voltage_V"].iloc[-1])
+            how = "rest voltage before and last loaded voltage"
+        depth = soc_from_rest_voltage(part.rest_before.voltage_V / cells, chemistry) - \
+            soc_from_rest_voltage(end_V / cells, chemistry)
+        if depth >= CAPACITY_FROM_DRAIN_SOC and (best is None or depth > best[0]):
+            best = (depth, part, how)
+    if best is not None:
+        depth, part, how = best
+        drawn = part.charge_Ah()
+        return drawn / depth, (f"estimated from flight {part.number}: {drawn:.3g} Ah drawn "
+                               f"over {100 * depth:.0f} % of state of charge between its {how} "
+                               f"({OCV_SOURCE[chemistry]}); the fit refines it where the "
+                               f"flight reaches the knee")
+    raise DataError(f"{path.name} does not state the pack capacity and no flight drains the "
+                    f"pack deep enough to measure it; give the label capacity with "
+                    f"capacity_Ah=AH (--capacity AH)")
 
 
 def _model_pack(model, cells: int):
@@ -841,6 +872,21 @@ def _coulomb_checks(fc: FlightCurves) -> list[str]:
     return notes
 
 
+#: A flight's load current is steady when its coefficient of variation (over the
+#: samples above half the median current) is below this [-].
+STEADY_CURRENT_CV = 0.25
+
+#: ``ecm`` parameters held at "effect absent" for steady drains (``fit_flights``).
+STEADY_DRAIN_FIXED = {"R1_ohm": 0.0, "R2_ohm": 0.0, "tau_d_s": TAU_D_BOUNDS_S[0]}
+
+
+def steady_current(current_A) -> bool:
+    """True when a load current is a near-constant drain (:data:`STEADY_CURRENT_CV`)."""
+    i = np.asarray(current_A, dtype=float)
+    load = i[i > 0.5 * np.median(i)] if i.size else i
+    return bool(load.size > 1 and np.std(load) < STEADY_CURRENT_CV * np.mean(load))
+
+
 def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: int = 1,
                 cells: int | None = None, fixed: dict | None = None,
                 bounds: dict | None = None, bootstrap: int = 0, seed: int = 0,
@@ -856,8 +902,11 @@ def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: 
     ----------
     flights : FlightCurves
     model : str
-        Model family; ``"auto"`` means ``"ecm"`` for flights (RC pairs driven by
-        the logged current).
+        Model family; ``"auto"`` means ``"ecm"``: with its RC pairs and diffusion
+        state driven by the logged current when it varies, else (every flight a
+        near-constant drain, :func:`steady_current`) with those held absent (OCV
+        and series resistance only: one constant current cannot show the cell's
+        dynamics, and RC pairs fitted to it extrapolate to other currents badly).
     strings_parallel : int
         Strings in parallel of the pack.
     cells : int, optional
@@ -883,6 +932,9 @@ def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: 
         raise FitError("strings_parallel must be at least 1")
     name = "ecm" if model == AUTO else model
     family = get_family(name)
+    steady = model == AUTO and all(steady_current(c.current_A) for c in flights.curves)
+    if steady:
+        fixed = dict(STEADY_DRAIN_FIXED, **(fixed or {}))
     all_bounds = dict(flights.capacity_bounds(strings_parallel))
     all_bounds.update(bounds or {})
     c_bounds = all_bounds.get("C_Ah")
@@ -895,7 +947,11 @@ def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: 
                          strings_parallel=strings_parallel, fixed=all_fixed, bounds=all_bounds,
                          use_rest=use_rest, bootstrap=bootstrap, seed=seed, model=name)
     notes = list(flights.notes)
-    if model == AUTO:
+    if steady:
+        notes.insert(0, "model ecm chosen for flights, with its RC pairs and diffusion state "
+                        "held absent (OCV and series resistance only): every flight is a "
+                        "near-constant drain, which cannot show the cell's dynamics")
+    elif model == AUTO:
         notes.insert(0, "model ecm chosen for flights (RC pairs driven by the logged current)")
     prior = [n for n in all_fixed if n.startswith("ocv_d") and n not in (fixed or {})]
     if prior:
