@@ -1028,6 +1028,9 @@ def _print_flight_report(report) -> None:
                  ("voltage RMSE, cells [mV]",
                   lambda s: "-" if not s.get("rmse_cell_V") else
                   " / ".join(f"{1000 * x:.0f}" for x in s["rmse_cell_V"]))]
+    rows.append(("under the cutoff: first dip / for good [s]",
+                 lambda s: f"{f(s.get('cutoff_dip_at_s'), '.1f')} / "
+                           f"{f(s.get('cutoff_reached_at_s'), '.1f')}"))
     rows.append(("remaining at mid-flight [s]", _mid_flight_text))
     out.print(table(f"{Path(report.source).name}: {report.battery_label}, "
                     f"{report.cells_series} cells, capacity "
