@@ -342,9 +342,7 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     float
         Relative standard deviation [-] (e.g. 0.015 = 1.5 %).
     """
-    base, source, _ = _model_error_base(battery)
-    ratio = battery.extrapolation_ratio(cell_current_A)
-    return base * (1.0 + extrapolation_growth(battery, source) * math.log(ratio))
+    return _model_error_info(battery, battery.extrapolation_ratio(cell_current_A))["relative_sd"]
 
 
 def extrapolation_growth(battery: Battery, source: str) -> float:
