@@ -57,6 +57,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import DataError, FitError, SimulationError
+from .models.base import HELD_AT_AMBIENT_HEAT_CAPACITY
 from .models.ecm import TAU_D_BOUNDS_S
 from .validate import LOW_VOLTAGE_TIMER_S
 
@@ -176,10 +177,6 @@ PX4_R_INTERNAL_OHM = 0.005
 #: Window of the voltage and current the PX4-style estimate reads [s] (its filter).
 PX4_VOLTAGE_WINDOW_S = 1.0
 
-#: A cell temperature held at the ambient: heat capacity given to the engine [J/K]
-#: for battery files written before the fit stored it (those of thermal families
-#: fitted without a logged temperature).
-ISOTHERMAL_HEAT_CAPACITY = 1e12
 
 
 # --------------------------------------------------------------------------- OCV prior
@@ -1362,7 +1359,7 @@ def _charge_left(part: FlightSamples, s: _Settings, notes: list) -> dict:
 def _engine_params(bat) -> dict:
     params = {n: float(bat.parameters[n]) for n in bat.family.names}
     if bat.family.thermal and "fit_temperature_rise_K" not in bat.extra:
-        params["Cth_J_per_K"] = ISOTHERMAL_HEAT_CAPACITY
+        params["Cth_J_per_K"] = HELD_AT_AMBIENT_HEAT_CAPACITY
     return params
 
 
