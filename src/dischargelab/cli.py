@@ -557,18 +557,22 @@ def _battery_and_cutoff(battery_arg, cells, parallel, cutoff, cutoff_pack):
 
 
 def _cell_cutoff(battery, cutoff, cutoff_pack=None):
-    """The per-cell cutoff: the given one, else the battery chemistry's usual one (said on
-    stderr), else a one-line error naming the options."""
-    from .model import CUTOFF_CELL_VOLTAGE_V
+    """The per-cell cutoff: the given one, else the battery chemistry's usual one
+    (:func:`dischargelab.predict.default_cutoff`, said on stderr), else a one-line error
+    naming the options."""
+    from .errors import SimulationError
+    from .predict import default_cutoff
 
     if cutoff is not None and cutoff_pack is not None:
         raise DischargelabError("give either --cutoff (per cell) or --cutoff-pack, not both")
     if cutoff is not None or cutoff_pack is not None:
         return cutoff
-    if battery.chemistry not in CUTOFF_CELL_VOLTAGE_V:
-        raise DischargelabError("give a cutoff: --cutoff V per cell (e.g. 3.0 LiPo, 2.5 Li-ion) "
-                                "or --cutoff-pack V (the battery file names no chemistry)")
-    value = CUTOFF_CELL_VOLTAGE_V[battery.chemistry]
+    try:
+        value = default_cutoff(battery)["cutoff_cell_V"]
+    except SimulationError:
+        raise DischargelabError("give a cutoff: --cutoff V per cell (e.g. 3.0 LiPo, 2.5 "
+                                "Li-ion) or --cutoff-pack V (the battery file names no "
+                                "chemistry)") from None
     err.print(f"cutoff {value:g} V/cell, the usual one for {battery.chemistry} "
               f"(--cutoff to change it)", markup=False)
     return value
