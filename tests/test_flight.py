@@ -131,6 +131,17 @@ def test_29_replay_at_mid_flight_against_the_truth(fit29, logs):
     assert instant["model_logged_load_s"] == pytest.approx(instant["true_s"], abs=10.0)
 
 
+def _write_ina_csv(path, t, cell_V, current_A, cells, pack_V=None):
+    """An INA3221-style CSV: time [ms], pack [V], equal cell voltages [V], current [mA],
+    shunt voltage [mV] (0.5 mOhm shunt), a trailing comma; pack = cells x cell_V unless
+    given."""
+    pack = cells * np.asarray(cell_V) if pack_V is None else np.asarray(pack_V)
+    with open(path, "w", encoding="utf-8") as fh:
+        for k in range(len(t)):
+            fh.write(f"{t[k] * 1000:.0f},{pack[k]:.3f}," + ",".join([f"{cell_V[k]:.3f}"] * cells)
+                     + f",{current_A[k] * 1000:.1f},{current_A[k] * 0.5:.2f},\n")
+
+
 def _spiky_drain_log(path, battery, cutoff_cell_V):
     """An INA3221-style CSV of a known pack flown to its cutoff: 20 s at rest, then 3C
     with a 6C peak of 0.4 s every 6 s, 15 Hz; the voltage is the model's."""
@@ -152,12 +163,7 @@ def _spiky_drain_log(path, battery, cutoff_cell_V):
     i = np.r_[np.full(int(np.ceil(rest_s / dt)), 0.2), current[t_load <= end]][:t.size]
     v = np.interp(t - rest_s, t_sim, v_sim)
     v[t < rest_s] = float(battery.voltage(0.0, 0.0))
-    cells = np.repeat((v / battery.cells_series)[:, None], battery.cells_series, axis=1)
-    with open(path, "w", encoding="utf-8") as fh:
-        for k in range(t.size):
-            fh.write(f"{t[k] * 1000:.0f},{v[k]:.3f},"
-                     + ",".join(f"{c:.3f}" for c in cells[k])
-                     + f",{i[k] * 1000:.1f},{i[k] * 0.5:.2f},\n")
+    _write_ina_csv(path, t, v / battery.cells_series, i, battery.cells_series, pack_V=v)
     return rest_s
 
 
@@ -302,11 +308,7 @@ def _ocv_drain_log(path, capacity_Ah, current_A, *, end_soc=0.05, rest_after_s=6
               20.0 + t_load[-1] + np.arange(dt, rest_after_s, dt)]
     i = np.where((t >= 20.0) & (t <= 20.0 + t_load[-1]), current_A, 0.05)
     soc = 1.0 - np.r_[0.0, np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))] / 3600.0 / capacity_Ah
-    cell = ocv_from_soc(soc, "lipo") - r_cell * i
-    with open(path, "w", encoding="utf-8") as fh:
-        for k in range(t.size):
-            fh.write(f"{t[k] * 1000:.0f},{4 * cell[k]:.3f},"
-                     + ",".join([f"{cell[k]:.3f}"] * 4) + f",{i[k] * 1000:.1f},0.5,\n")
+    _write_ina_csv(path, t, ocv_from_soc(soc, "lipo") - r_cell * i, i, 4)
 
 
 def test_a_full_drain_gives_the_capacity_when_no_label_is_known(tmp_path):
@@ -338,11 +340,8 @@ def test_a_slow_drain_predicts_a_fast_spiky_drain_of_the_same_pack(tmp_path):
     i = np.r_[np.full(int(np.ceil(20.0 / dt)), 0.05), i_load][:t.size]
     soc = 1 - np.r_[0.0, np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))] / 3600 / cap
     cell = ocv_from_soc(soc, "lipo") - 0.008 * i
-    stop = int(np.argmax((cell <= 3.3) & (i < 5 * cap))) + int(15 / dt)
-    with open(fast, "w", encoding="utf-8") as fh:
-        for k in range(min(stop, t.size)):
-            fh.write(f"{t[k] * 1000:.0f},{4 * cell[k]:.3f}," + ",".join([f"{cell[k]:.3f}"] * 4)
-                     + f",{i[k] * 1000:.1f},0.5,\n")
+    stop = min(int(np.argmax((cell <= 3.3) & (i < 5 * cap))) + int(15 / dt), t.size)
+    _write_ina_csv(fast, t[:stop], cell[:stop], i[:stop], 4)
     result = dl.fit(flight_curves(slow), bootstrap=0)
     assert result.model == "ecm" and "held absent" in result.notes[0]
     assert result.parameters["R1_ohm"] == 0.0 and result.parameters["R2_ohm"] == 0.0
