@@ -26,7 +26,8 @@ from dischargelab.mission import (
 )
 from dischargelab.model import PRESETS, Battery, CellParameters
 from dischargelab.simulate import Step, simulate, simulate_current, simulate_power
-from dischargelab.uncertainty import mission_uncertainty, sample_parameters
+from dischargelab.mission import mission_uncertainty
+from dischargelab.uncertainty import sample_parameters
 
 REPO = Path(__file__).resolve().parents[1]
 MISSIONS = REPO / "src" / "dischargelab" / "data" / "missions"

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dischargelab import engine
-from dischargelab import mission as mission_module
+from dischargelab.mission import fly as mission_module
 from dischargelab.cli import main as cli_main
 from dischargelab.errors import DataError, SimulationError
 from dischargelab.mission import Mission, Phase, RepeatBlock, load_mission, run_mission

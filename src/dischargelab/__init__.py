@@ -4,19 +4,19 @@ Light on import: matplotlib, pyserial and other optional dependencies are only
 imported by the functions that need them.
 """
 
-__version__ = "0.2.0"
 
 # The submodules named like API functions are loaded first, so that the functions
 # bound below are what ``dischargelab.fit`` / ``.validate`` / ``.predict`` mean.
 from . import fit as _fit_module, predict as _predict_module, validate as _validate_module  # noqa: F401, I001
-from .api import endurance, fit, load, read, validate
+from .api import endurance, fit, load, predict, read, validate
 from .discharge import Discharge
 from .errors import DataError, DischargelabError, FitError, SimulationError
 from .model import (
     PARAMETER_NAMES, PRESETS, Battery, CellParameters, cell_voltage, load_battery,
 )
+from ._version import __version__
 from .models import FAMILIES
-from .predict import Prediction, predict
+from .predict import Prediction
 
 __all__ = [
     "read", "fit", "load", "predict", "endurance", "validate", "Discharge", "Battery",

@@ -135,7 +135,36 @@ def load(source: str | Path | Battery) -> Battery:
         Immutable: ``with_pack(...)`` and ``dataclasses.replace`` return copies, so a
         preset is never changed by its users.
     """
+    as_battery = getattr(source, "to_battery", None)
+    if callable(as_battery):  # a logbook pack: its model at today's health
+        return as_battery()
     return load_battery(source)
+
+
+def predict(battery: Battery | str | Path, *, current: float | None = None,
+            c_rate: float | None = None, power: float | None = None,
+            cutoff: float | None = None, cutoff_pack: float | None = None, soc: float = 100.0,
+            ambient: float | None = None, interval: bool = True):
+    """Constant-current or constant-power discharge until the cutoff, with its 95 % interval.
+
+    Parameters
+    ----------
+    battery : Battery, preset name, battery-file path or logbook pack
+        See :func:`load`.
+    current, c_rate, power, cutoff, cutoff_pack, soc, ambient, interval
+        As :func:`dischargelab.predict.predict`: pack current [A], C-rate or pack
+        power [W] (exactly one); cutoff per cell or per pack [V]; start charge [%];
+        ambient [degC]; whether to add the interval.
+
+    Returns
+    -------
+    dischargelab.predict.Prediction
+    """
+    from .predict import predict as predict_battery
+
+    return predict_battery(load(battery), current=current, c_rate=c_rate, power=power,
+                           cutoff=cutoff, cutoff_pack=cutoff_pack, soc=soc, ambient=ambient,
+                           interval=interval)
 
 
 def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int | None = None,
@@ -144,7 +173,7 @@ def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int 
 
     Parameters
     ----------
-    battery : Battery, preset name or battery-file path
+    battery : Battery, preset name, battery-file path or logbook pack (see :func:`load`)
     mission : str or path-like
         Mission file, or a bundled mission's name (``"paper-table5"``, ...).
     draws : int, optional
@@ -160,7 +189,7 @@ def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int 
     """
     from .mission import load_mission, run_mission
 
-    bat = load_battery(battery)
+    bat = load(battery)
     mis = load_mission(mission, battery=bat, **options)
     if draws is None:
         boot = bat.extra.get("bootstrap") or {}
@@ -175,7 +204,7 @@ def validate(battery: Battery | str | Path,
 
     Parameters
     ----------
-    battery : Battery, preset name or battery-file path
+    battery : Battery, preset name, battery-file path or logbook pack (see :func:`load`)
     discharges : Discharge, path, or a sequence of them
     cutoff : float, optional
         Cutoff per cell [V]; default the chemistry's usual cutoff.
@@ -190,7 +219,7 @@ def validate(battery: Battery | str | Path,
     from .predict import default_cutoff
     from .validate import compare_discharge
 
-    bat = load_battery(battery)
+    bat = load(battery)
     cut = default_cutoff(bat, cutoff)["cutoff_cell_V"]
     items = discharges if isinstance(discharges, (list, tuple)) else [discharges]
     out = []

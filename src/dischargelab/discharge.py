@@ -1,4 +1,4 @@
-"""The one type for a measured discharge: :class:`Discharge`.
+"""A measured discharge, :class:`Discharge`, and the fitter's view of it, :class:`Curve`.
 
 Every reader's output becomes a ``Discharge`` (time, voltage, current,
 temperature, per-cell voltages, the rest voltage before the load, where it came
@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .cell import charge_from_current
 from .errors import DataError
 
 
@@ -89,9 +90,7 @@ class Discharge:
         return self.charge_Ah * 3600.0 / self.duration_s if self.duration_s > 0 else 0.0
 
     def to_curve(self):
-        """The fitter's input (:class:`dischargelab.fit.Curve`)."""
-        from .fit import Curve
-
+        """The fitter's input (:class:`Curve`)."""
         return Curve(self.time_s, self.voltage_V, self.current_A, name=self.name,
                      rest_voltage_V=self.rest_voltage_V, meta=dict(self.meta),
                      temperature_C=self.temperature_C)
@@ -121,3 +120,98 @@ class Discharge:
         from .plot import plot_discharge
 
         return plot_discharge(self, ax=ax)
+
+
+@dataclass
+class Curve:
+    """One measured discharge at pack level (discharge current positive).
+
+    Parameters
+    ----------
+    time_s, voltage_V, current_A : array_like
+        Samples [s], [V], [A] from load start.
+    name : str
+        Label used in plots and tables (file name, rate).
+    temperature_C : array_like or None
+        Logged cell temperature [degC] at the same samples, when measured.
+    initial_charge_Ah : float
+        Pack charge already removed before the first sample [Ah] (0 = the curve
+        starts full; a flight that starts part-discharged has more).
+    rest_voltage_V : float or None
+        Pack voltage at rest (i = 0) just before the load step, at full charge of
+        this curve; separates E0 from R when present.
+    meta : dict
+        Source metadata (file, format, ...).
+    """
+
+    time_s: np.ndarray
+    voltage_V: np.ndarray
+    current_A: np.ndarray
+    name: str = ""
+    rest_voltage_V: float | None = None
+    meta: dict = field(default_factory=dict)
+    temperature_C: np.ndarray | None = None
+    initial_charge_Ah: float = 0.0
+
+    def __post_init__(self):
+        self.time_s = np.asarray(self.time_s, dtype=float)
+        self.voltage_V = np.asarray(self.voltage_V, dtype=float)
+        current = np.asarray(self.current_A, dtype=float)
+        if current.ndim == 0:
+            current = np.full(self.time_s.shape, float(current))
+        self.current_A = current
+        label = f"curve {self.name!r}" if self.name else "curve"
+        if not (self.time_s.shape == self.voltage_V.shape == self.current_A.shape):
+            raise DataError(f"{label}: time, voltage and current lengths differ "
+                            f"({self.time_s.size}, {self.voltage_V.size}, {self.current_A.size})")
+        if self.time_s.size < 10:
+            raise DataError(f"{label}: only {self.time_s.size} samples; a fit needs at least 10")
+        for column, values in (("time_s", self.time_s), ("voltage_V", self.voltage_V),
+                               ("current_A", self.current_A)):
+            bad = ~np.isfinite(values)
+            if bad.any():
+                raise DataError(f"{label}: {bad.sum()} NaN/inf values in {column} (first at "
+                                f"sample {int(np.argmax(bad))}); clean the file or let the "
+                                f"reader drop them")
+        back = np.flatnonzero(np.diff(self.time_s) <= 0)
+        if back.size:
+            k = int(back[0]) + 1
+            raise DataError(f"{label}: time does not increase at sample {k} "
+                            f"({self.time_s[k - 1]:g} s -> {self.time_s[k]:g} s)")
+        if np.median(self.current_A) <= 0:
+            raise DataError(f"{label}: the current is not a discharge (median "
+                            f"{np.median(self.current_A):g} A); discharge must be positive "
+                            f"(use --sign to flip it, or --current A for files without one)")
+        if self.rest_voltage_V is not None and not np.isfinite(self.rest_voltage_V):
+            self.rest_voltage_V = None
+        if self.temperature_C is not None:
+            temp = np.asarray(self.temperature_C, dtype=float)
+            ok = temp.shape == self.time_s.shape and np.all(np.isfinite(temp)) and \
+                np.all((temp > -60) & (temp < 150))
+            self.temperature_C = temp if ok else None
+
+    @classmethod
+    def from_frame(cls, data, meta: dict | None = None, name: str = "") -> Curve:
+        """Build from a canonical DataFrame (``time_s``, ``voltage_V``, ``current_A``)
+        and the reader's meta (see :meth:`dischargelab.Discharge.from_frame`)."""
+        meta = dict(meta or {})
+        label = name or str(meta.get("name") or meta.get("source", ""))
+        return Discharge.from_frame(data, meta, name=label).to_curve()
+
+    @property
+    def mean_current_A(self) -> float:
+        """Time-averaged current [A]."""
+        duration = self.time_s[-1] - self.time_s[0]
+        return float(np.trapezoid(self.current_A, self.time_s) / duration)
+
+    @property
+    def ambient_C(self) -> float | None:
+        """Cell temperature at the start [degC] (the ambient of a test from rest)."""
+        return None if self.temperature_C is None else float(self.temperature_C[0])
+
+    @property
+    def charge_Ah(self) -> np.ndarray:
+        """Discharged charge from the first sample [Ah] (computed once)."""
+        if getattr(self, "_charge", None) is None:
+            self._charge = charge_from_current(self.time_s, self.current_A)
+        return self._charge

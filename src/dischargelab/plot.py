@@ -270,7 +270,7 @@ def plot_validation(cases, ax=None, x: str = "auto"):
         Time [min] or discharged charge [Ah] on the horizontal axis; "auto" uses
         time unless the durations differ by more than 4x (then charge).
     """
-    from .model import charge_from_current
+    from .cell import charge_from_current
 
     ax = _axes(ax, figsize=(9, 5.5))
     cases = list(cases)

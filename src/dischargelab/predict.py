@@ -9,9 +9,14 @@ the extrapolation warning — the same everywhere.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
+from .cell import CUTOFF_CELL_VOLTAGE_V
 from .errors import SimulationError
-from .model import Battery, load_battery
+from .simulate import require_battery
+
+if TYPE_CHECKING:
+    from .model import Battery
 
 
 @dataclass
@@ -87,7 +92,7 @@ class Prediction:
         return twin
 
 
-def predict(battery: Battery | str, *, current: float | None = None, c_rate: float | None = None,
+def predict(battery: Battery, *, current: float | None = None, c_rate: float | None = None,
             power: float | None = None, cutoff: float | None = None,
             cutoff_pack: float | None = None, soc: float = 100.0, ambient: float | None = None,
             interval: bool = True) -> Prediction:
@@ -95,7 +100,9 @@ def predict(battery: Battery | str, *, current: float | None = None, c_rate: flo
 
     Parameters
     ----------
-    battery : Battery, preset name or battery-file path
+    battery : Battery
+        From :func:`dischargelab.load` (:func:`dischargelab.api.predict` also takes a
+        battery file or a preset name).
     current : float, optional
         Constant pack current [A].
     c_rate : float, optional
@@ -118,7 +125,8 @@ def predict(battery: Battery | str, *, current: float | None = None, c_rate: flo
     from .simulate import simulate_current, simulate_power
     from .uncertainty import simulation_interval
 
-    bat: Battery = load_battery(battery)
+    require_battery(battery)
+    bat: Battery = battery
     chosen = [x is not None for x in (current, c_rate, power)]
     if sum(chosen) != 1:
         raise SimulationError("give exactly one load: current (A), c_rate or power (W)")
@@ -183,7 +191,6 @@ def extrapolation_warning(battery: Battery, cell_current_A: float, side: str) ->
 
 def default_cutoff(battery: Battery, cutoff=None, cutoff_pack=None) -> dict:
     """Cutoff keywords for the simulators: the given one, else the chemistry's usual one."""
-    from .model import CUTOFF_CELL_VOLTAGE_V
 
     if cutoff is not None and cutoff_pack is not None:
         raise SimulationError("give one cutoff: per cell (cutoff) or per pack (cutoff_pack)")

@@ -462,7 +462,7 @@ def build_report(battery, *, mission_result=None, validation=None, title: str | 
     name = battery.name or label or "battery"
     title = title or f"Battery and endurance report: {name}"
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
-    from . import __version__
+    from ._version import __version__
 
     cards = []
     if mission_result is not None:

@@ -20,13 +20,28 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import engine
 from .engine import Step
 from .errors import SimulationError
-from .model import Battery, load_battery
+
+if TYPE_CHECKING:
+    from .model import Battery
+
+def require_battery(battery) -> None:
+    """Raise a clear error unless ``battery`` is a loaded battery model.
+
+    The simulation layer takes :class:`dischargelab.model.Battery` objects only;
+    :func:`dischargelab.load` turns a battery file or a preset name into one.
+    """
+    if not (hasattr(battery, "family") and hasattr(battery, "parameters")
+            and hasattr(battery, "cells_series")):
+        raise SimulationError(f"battery must be a Battery (dischargelab.load(path_or_preset)), "
+                              f"not {type(battery).__name__}")
+
 
 #: Points per simulated step on the output curve.
 POINTS_PER_STEP = 100
@@ -147,7 +162,8 @@ def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
 
     Parameters
     ----------
-    battery : Battery, preset name or battery-file path
+    battery : Battery
+        From :func:`dischargelab.load` (a battery file or a preset name).
     steps : sequence of Step
     cutoff_cell_V, cutoff_pack_V : float
         Cutoff voltage per cell or per pack [V]; give exactly one.
@@ -170,7 +186,7 @@ def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
     SimulationError
         Cutoff at or above the starting voltage, charge beyond the capacity, bad steps.
     """
-    battery = load_battery(battery)
+    require_battery(battery)
     steps = list(steps)
     if not steps:
         raise SimulationError("no load steps to simulate")
@@ -259,7 +275,7 @@ def simulate_power(battery, power_W: float, *, cutoff_cell_V: float | None = Non
 def curve_family(battery, currents_A=None, *, powers_W=None, cutoff_cell_V=None,
                  cutoff_pack_V=None, ambient_C=None) -> list[SimulationResult]:
     """Constant-current (or constant-power) discharges at several loads (paper Figs 5, 7, 10)."""
-    battery = load_battery(battery)
+    require_battery(battery)
     if (currents_A is None) == (powers_W is None):
         raise SimulationError("give either currents or powers for a curve family")
     kw = dict(cutoff_cell_V=cutoff_cell_V, cutoff_pack_V=cutoff_pack_V, ambient_C=ambient_C)

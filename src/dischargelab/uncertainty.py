@@ -39,12 +39,16 @@ References
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import engine
+from .cell import CellParameters
 from .errors import DataError, SimulationError
-from .model import Battery, CellParameters
+
+if TYPE_CHECKING:
+    from .model import Battery
 
 #: Default number of covariance draws.
 DEFAULT_DRAWS = 300
@@ -246,7 +250,7 @@ def _covariance_factor(cov: np.ndarray):
     return vectors * np.sqrt(np.clip(values, 0.0, None)), warnings
 
 
-def has_parameter_draws(battery: Battery) -> bool:
+def hasparameter_draws(battery: Battery) -> bool:
     """True when the battery carries bootstrap refits or a non-zero covariance."""
     if bootstrap_parameters(battery) is not None:
         return True
@@ -342,7 +346,7 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     float
         Relative standard deviation [-] (e.g. 0.015 = 1.5 %).
     """
-    return _model_error_info(battery, battery.extrapolation_ratio(cell_current_A))["relative_sd"]
+    return model_error_info(battery, battery.extrapolation_ratio(cell_current_A))["relative_sd"]
 
 
 def extrapolation_growth(battery: Battery, source: str) -> float:
@@ -359,7 +363,7 @@ def extrapolation_growth(battery: Battery, source: str) -> float:
     return PRIOR_EXTRAPOLATION_GROWTH
 
 
-def _model_error_info(battery: Battery, ratio: float) -> dict:
+def model_error_info(battery: Battery, ratio: float) -> dict:
     """Model error for an (effective) extrapolation ratio: sd, source, label."""
     base, source, dof = _model_error_base(battery)
     sd = base * (1.0 + extrapolation_growth(battery, source) * math.log(max(ratio, 1.0)))
@@ -368,7 +372,7 @@ def _model_error_info(battery: Battery, ratio: float) -> dict:
             "label": f"model error ({source}, extrapolation x{ratio:.1f})"}
 
 
-def _z_level(level: float, dof: float | None = None) -> float:
+def z_level(level: float, dof: float | None = None) -> float:
     """Two-sided quantile of a normal (``dof`` None) or of Student's t."""
     from scipy.stats import norm, t
 
@@ -376,7 +380,7 @@ def _z_level(level: float, dof: float | None = None) -> float:
     return float(norm.ppf(q) if dof is None else t.ppf(q, dof))
 
 
-def _error_factors(n: int, sd: float, seed: int, dof: float | None = None):
+def error_factors(n: int, sd: float, seed: int, dof: float | None = None):
     """``(rows, factor)``: each of ``n`` draws repeated, times ``exp(sd z)`` (seeded;
     ``z`` normal, or Student's t with ``dof`` degrees of freedom)."""
     copies = max(1, math.ceil(MODEL_ERROR_SAMPLES / max(n, 1)))
@@ -386,7 +390,7 @@ def _error_factors(n: int, sd: float, seed: int, dof: float | None = None):
     return rows, np.exp(sd * z)
 
 
-def _spread(samples: np.ndarray, nominal: float, level: float) -> dict:
+def spread(samples: np.ndarray, nominal: float, level: float) -> dict:
     lo, hi = interval(samples, level)
     finite = samples[np.isfinite(samples)]
     return {"nominal": float(nominal),
@@ -395,9 +399,9 @@ def _spread(samples: np.ndarray, nominal: float, level: float) -> dict:
             "std": float(np.std(finite, ddof=1)) if finite.size > 1 else float("nan")}
 
 
-def _lognormal_spread(nominal: float, sd: float, level: float,
+def lognormal_spread(nominal: float, sd: float, level: float,
                       dof: float | None = None) -> dict:
-    z = _z_level(level, dof)
+    z = z_level(level, dof)
     return {"nominal": float(nominal), "median": float(nominal),
             "low": float(nominal * math.exp(-z * sd)), "high": float(nominal * math.exp(z * sd)),
             "std": float(abs(nominal) * math.sqrt(math.expm1(sd * sd)) * math.exp(sd * sd / 2))}
@@ -407,9 +411,9 @@ def _lognormal_spread(nominal: float, sd: float, level: float,
 # Predictions (predict, validate)
 # ---------------------------------------------------------------------------------------------
 
-def _parameter_draws(battery: Battery, draws: int, seed: int):
+def parameter_draws(battery: Battery, draws: int, seed: int):
     """(params, info) of the battery's draws, or (None, reason) when it has none."""
-    if not has_parameter_draws(battery):
+    if not hasparameter_draws(battery):
         return None, ("the battery file holds no parameter draws or covariance (a preset or "
                       "a hand-written file)")
     try:
@@ -501,8 +505,8 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
         ``bootstrap_draws``, ``draws_not_reaching_cutoff``, ``method``, ``warnings``.
         Draws that cannot reach the cutoff count with 0 s (see the module docstring).
     """
-    error = _model_error_info(battery, battery.extrapolation_ratio(cell_current_A))
-    params, info = _parameter_draws(battery, draws, seed)
+    error = model_error_info(battery, battery.extrapolation_ratio(cell_current_A))
+    params, info = parameter_draws(battery, draws, seed)
     out = {"level": level, "model_error": {k: v for k, v in error.items() if k != "label"},
            "draws": 0, "bootstrap_draws": 0, "draws_not_reaching_cutoff": 0, "warnings": []}
     ambient = battery.ambient_C if ambient_C is None else float(ambient_C)
@@ -525,7 +529,7 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
         peak_interval(nominal.get("peak_temperature_C"))
         return out
     n = len(flown["time_to_cutoff_s"])
-    rows, factor = _error_factors(n, error["relative_sd"], seed, error["dof"])
+    rows, factor = error_factors(n, error["relative_sd"], seed, error["dof"])
     for key in PREDICTION_KEYS:
         out[key] = list(interval(flown[key][rows] * factor, level))
     peak_interval(flown["peak_temperature_C"])
@@ -572,7 +576,7 @@ def peak_temperature_interval(peaks_C, ambient_C: float, ratio: float, level: fl
 
 
 def _model_error_only(nominal: dict, error: dict, level: float, reason: str) -> dict:
-    z = _z_level(level, error["dof"])
+    z = z_level(level, error["dof"])
     sd = error["relative_sd"]
     out = {key: [float(nominal[key]) * math.exp(-z * sd), float(nominal[key]) * math.exp(z * sd)]
            for key in PREDICTION_KEYS if key in nominal}
@@ -613,148 +617,8 @@ def simulation_interval(battery: Battery, simulate_one, *, level: float = 0.95,
         seed=seed, level=level)
 
 
-# ---------------------------------------------------------------------------------------------
-# Missions
-# ---------------------------------------------------------------------------------------------
-
-def mission_extrapolation_ratio(battery: Battery, phase_rows: list[dict]) -> float:
-    """Effective extrapolation ratio of a mission: the charge-weighted geometric mean of
-    its phases' ratios (each phase at its mean cell current), so that
-    ``s0 (1 + 0.8 ln r_eff)`` is the charge-weighted mean of the phases' model error."""
-    weights, logs = [], []
-    for row in phase_rows:
-        charge = float(row.get("charge_Ah") or 0.0)
-        if charge > 0:
-            cell = row["mean_current_A"] / battery.strings_parallel
-            weights.append(charge)
-            logs.append(math.log(battery.extrapolation_ratio(cell)))
-    if not weights:
-        return 1.0
-    return float(math.exp(np.average(logs, weights=weights)))
-
-
-def _mission_samples(outcome: dict, rows: np.ndarray, factor: np.ndarray) -> dict:
-    """Outcome samples with the model error: endurance times the factor, the extra time
-    on the stretch phase, the charge used divided by it (the usable capacity scales)."""
-    endurance = outcome["endurance_s"][rows]
-    out = {"endurance_s": endurance * factor,
-           "soc_end_pct": 100.0 - (100.0 - outcome["soc_end_pct"][rows]) / factor}
-    if "max_stretch_s" in outcome:
-        out["max_stretch_s"] = np.maximum(outcome["max_stretch_s"][rows]
-                                          + endurance * (factor - 1.0), 0.0)
-    return out
-
-
-def mission_uncertainty(mission, *, draws: int = DEFAULT_DRAWS, seed: int = 0, level=0.95,
-                        progress=None, nominal=None, points_per_step: int | None = None) -> dict:
-    """95 % interval of a mission's endurance: parameter draws plus the model error.
-
-    The draws are flown all at once through the engine
-    (:func:`dischargelab.mission.mission_outcomes`, the longest stretch found per
-    draw). Each draw's endurance is multiplied by ``exp(sigma z)`` with ``sigma``
-    from :func:`model_error_sd` at the mission's effective extrapolation ratio
-    (:func:`mission_extrapolation_ratio`); the longest stretch takes the same extra
-    time, the state of charge at landing the same relative change of the usable
-    capacity. Without parameter draws the interval is the model error alone.
-
-    Parameters
-    ----------
-    mission : dischargelab.mission.Mission
-    draws : int
-        Covariance draws when the battery has no bootstrap refits (200-500 is plenty).
-    seed : int
-    level : float
-        Coverage of the central interval.
-    progress : callable, optional
-        ``progress(done, total)``.
-    nominal : MissionResult, optional
-        Nominal result (flown here when not given).
-    points_per_step : int, optional
-        Engine time steps per phase.
-
-    Returns
-    -------
-    dict
-        ``available``, ``interval_includes``, ``model_error``, ``method``, ``draws``,
-        ``accepted``, ``tried``, ``rejected``, ``rejected_fraction``, ``seed``, ``level``;
-        for ``endurance_s``, ``soc_end_pct`` (and ``max_stretch_s``): ``nominal``,
-        ``median``, ``low``, ``high``, ``std``; the same without the model error in
-        ``parameters_only`` (with parameter draws); ``completed_fraction``,
-        ``draws_not_completed`` and ``warnings``.
-    """
-    from .mission import mission_outcomes, run_mission
-
-    battery = mission.battery
-    if nominal is None:
-        nominal = run_mission(mission) if points_per_step is None else \
-            run_mission(mission, points_per_step=points_per_step)
-    error = _model_error_info(battery, mission_extrapolation_ratio(battery, nominal.phases))
-    nom = {"endurance_s": nominal.endurance_s, "soc_end_pct": nominal.soc_end_pct}
-    if nominal.stretch is not None:
-        nom["max_stretch_s"] = nominal.stretch["max_s"]
-    out = {"available": True, "seed": int(seed), "level": level,
-           "model_error": {k: v for k, v in error.items() if k != "label"}}
-    params, info = _parameter_draws(battery, draws, seed)
-    outcome = None
-    if params is not None:
-        n = len(params["C_Ah"])
-        if progress is not None:
-            progress(0, n)
-        try:
-            outcome = mission_outcomes(mission, params, points_per_step=points_per_step)
-        except SimulationError as exc:
-            info = f"the parameter draws could not be flown: {exc}"
-        if progress is not None:
-            progress(n, n)
-    if outcome is None:
-        out.update(_mission_model_error_only(nom, nominal.completed, error, level, info))
-        return out
-    rows, factor = _error_factors(n, error["relative_sd"], seed, error["dof"])
-    samples = _mission_samples(outcome, rows, factor)
-    alone = _mission_samples(outcome, np.arange(n), np.ones(n))
-    not_completed = int(np.count_nonzero(~outcome["completed"]))
-    out.update({"method": info["method"], "interval_includes": ["parameters", error["label"]],
-                "draws": info["requested"], "accepted": info["accepted"], "tried": info["tried"],
-                "rejected": info["rejected"], "rejected_fraction": info["rejected_fraction"],
-                "completed_fraction": float(np.mean(outcome["completed"])),
-                "draws_not_completed": not_completed})
-    for key, values in samples.items():
-        out[key] = _spread(values, nom[key], level)
-    out["parameters_only"] = {key: _spread(values, nom[key], level)
-                              for key, values in alone.items()}
-    warnings = list(info["warnings"])
-    if 0 < not_completed < n and out["completed_fraction"] < 0.975:
-        warnings.append(f"in {100 * (1 - out['completed_fraction']):.1f} % of the parameter "
-                        f"draws the mission does not complete")
-    out["warnings"] = warnings
-    return out
-
-
-def _mission_model_error_only(nom: dict, completed: bool, error: dict, level: float,
-                              reason: str) -> dict:
-    sd = error["relative_sd"]
-    out = {"method": f"model error only: {reason}", "interval_includes": [error["label"]],
-           "draws": 0, "accepted": 0, "tried": 0, "rejected": 0, "rejected_fraction": 0.0,
-           "completed_fraction": 1.0 if completed else 0.0, "draws_not_completed": 0,
-           "warnings": []}
-    out["endurance_s"] = _lognormal_spread(nom["endurance_s"], sd, level, error["dof"])
-    z = _z_level(level, error["dof"])
-    factors = np.array([math.exp(-z * sd), 1.0, math.exp(z * sd)])
-    used = 100.0 - nom["soc_end_pct"]
-    soc = 100.0 - used / factors
-    out["soc_end_pct"] = {"nominal": float(nom["soc_end_pct"]), "median": float(soc[1]),
-                          "low": float(soc[0]), "high": float(soc[2]),
-                          "std": float(used * sd)}
-    if "max_stretch_s" in nom:
-        stretch = np.maximum(nom["max_stretch_s"] + nom["endurance_s"] * (factors - 1.0), 0.0)
-        out["max_stretch_s"] = {"nominal": float(nom["max_stretch_s"]),
-                                "median": float(stretch[1]), "low": float(stretch[0]),
-                                "high": float(stretch[2]), "std": float(nom["endurance_s"] * sd)}
-    return out
-
-
-__all__ = ["sample_parameters", "bootstrap_parameters", "has_parameter_draws", "interval",
+__all__ = ["sample_parameters", "bootstrap_parameters", "hasparameter_draws", "interval",
            "model_error_sd", "fly_draws", "prediction_interval", "simulation_interval",
-           "mission_extrapolation_ratio", "mission_uncertainty", "DEFAULT_DRAWS",
+           "DEFAULT_DRAWS",
            "PRIOR_RELATIVE_SD", "MIN_HELD_OUT_SD", "EXTRAPOLATION_GROWTH", "held_out_posterior",
            "extrapolation_growth", "peak_temperature_interval", "held_out_summary"]

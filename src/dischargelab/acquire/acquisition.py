@@ -237,7 +237,7 @@ def prepare_acquisition(settings: AcquireSettings) -> Acquisition:
     SourceDisconnected
         The instrument cannot be reached.
     """
-    from .. import __version__
+    from .._version import __version__
     from .sources import open_source
 
     out = Path(settings.out)
