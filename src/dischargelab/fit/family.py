@@ -1,0 +1,356 @@
+"""Fitting one model family: starts, the bounded variable-projection fit, its
+thermal parameters, identifiability, and the model's own error from held-out data.
+
+See :mod:`dischargelab.fit` for the method and its references.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.special import stdtrit
+
+from ..cell import CellParameters
+from ..discharge import Curve
+from ..errors import DataError, FitError
+from ..identifiability import Identifiability, analyse, equilibrated_svd, plausibility, undetermined
+from ..models import Family, Samples, get_family
+from ..models.base import HELD_AT_AMBIENT_HEAT_CAPACITY, MIN_HEATING_K, fit_lumped_thermal
+from .problem import (
+    COARSE_FTOL,
+    CURRENT_SCALE,
+    MAX_SAMPLES_PER_CURVE,
+    SEARCH_SAMPLES_PER_CURVE,
+    _bootstrap,
+    _covariance,
+    _defined_start,
+    _Model,
+    _polish,
+    _resolve_e0_r,
+    _spec,
+    _stack,
+    _thin,
+    _varpro_solve,
+)
+from .result import FitResult
+
+
+def guess_parameters(curves, cells_series: int = 1, strings_parallel: int = 1,
+                     model="shepherd") -> dict:
+    """Starting values from the data (per cell), from the family's own ``guess``.
+
+    For ``shepherd``: C from the integrated Ah (a little above the largest
+    discharged charge), E0 + A from the rest voltage when present (else the first
+    sample), R + K from the voltage step at load start when a rest sample exists,
+    B from the length of the initial exponential drop.
+    """
+    curves = [curves] if isinstance(curves, Curve) else list(curves)
+    stack = _stack(curves, cells_series, strings_parallel, True, "equal")
+    return get_family(model).guess(stack)
+
+
+def _starts(model: _Model, bounds: dict, guess: dict | None):
+    """Grid of starting points for the nonlinear parameters (clipped into bounds)."""
+    grid = model.family.start_grid(model.s, model.nonlinear)
+    base = model.family.guess(model.s)
+    axes = []
+    for n in model.nonlinear:
+        values = list(grid.get(n, [1.0 if n == CURRENT_SCALE else base[n]]))
+        if guess and n in guess:
+            values = [guess[n]] + values
+        axes.append(values)
+    mesh = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T if axes else \
+        np.empty((1, 0))
+    lo = np.array([bounds[n][0] for n in model.nonlinear])
+    hi = np.array([bounds[n][1] for n in model.nonlinear])
+    span = hi - lo
+    return np.clip(mesh, lo + 1e-9 * span, hi - 1e-9 * span), lo, hi
+
+
+def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
+                fixed: dict | None = None, bounds: dict | None = None,
+                guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
+                weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
+                seed: int = 0, model="shepherd", model_error: bool = True,
+                progress=None) -> FitResult:
+    """Fit one model family (``model`` a family name, not ``"auto"``); see
+    :func:`dischargelab.fit.fit_battery` for the parameters."""
+    t_start = time.perf_counter()
+    curves = [curves] if isinstance(curves, Curve) else list(curves)
+    if not curves:
+        raise FitError("no discharge curves to fit")
+    family = get_family(model)
+    if cells_series < 1 or strings_parallel < 1:
+        raise FitError("cells in series and strings in parallel must be at least 1")
+    if weighting not in ("equal", "samples"):
+        raise FitError(f"weighting must be 'equal' or 'samples', got {weighting!r}")
+    stack = _stack(curves, cells_series, strings_parallel, use_rest, weighting)
+    requested_fixed = dict(fixed or {})
+    if paper_mode:
+        if "E0_V" not in requested_fixed:
+            raise FitError("paper mode needs E0 (the paper's only input): give E0_V in fixed")
+        if len(curves) != 1:
+            raise FitError("paper mode fits one curve (the paper's setup); give one curve")
+    fixed, bnds = _spec(family, requested_fixed, bounds, stack, paper_mode)
+    notes, warnings = [], []
+    _resolve_e0_r(family, stack, fixed, notes, warnings)
+    for c in curves:
+        used = _thin(c.time_s.size, MAX_SAMPLES_PER_CURVE).size
+        if used < c.time_s.size:
+            notes.append(f"curve {c.name or '?'}: {used} of {c.time_s.size} samples used "
+                         f"(evenly thinned in time)")
+    mdl = _Model(family, stack, fixed, bnds)
+    if not mdl.free:
+        raise FitError("every parameter is fixed; nothing to fit")
+
+    starts, lo, hi = _starts(mdl, bnds, guess)
+    nfev = 0
+    theta = np.empty(0)
+    if mdl.nonlinear:
+        # coarse to fine: search on a thinned copy of the data, refine on all of it
+        coarse = _Model(family, _stack(curves, cells_series, strings_parallel, use_rest,
+                                       weighting, max_samples=SEARCH_SAMPLES_PER_CURVE),
+                        fixed, bnds)
+        cost = coarse.grid_costs(starts)
+        nfev += len(starts)
+        if not np.any(np.isfinite(cost)):
+            raise FitError("the model cannot be evaluated on these data at any starting point; "
+                           "check the data (current sign, units) and the bounds")
+        best = None
+        refine = family.n_best if n_best is None else n_best
+        for k in np.argsort(cost)[:max(1, refine)]:
+            sol = _varpro_solve(coarse, starts[k], lo, hi, ftol=COARSE_FTOL)
+            nfev += sol.nfev
+            if best is None or sol.cost < best.cost:
+                best = sol
+        sol = _varpro_solve(mdl, _defined_start(mdl, best.x, hi), lo, hi)
+        nfev += sol.nfev
+        theta = sol.x
+    values = dict(mdl.project(theta)[0])
+    values = _polish(mdl, values, bnds)
+    nfev += 1
+
+    params, scale = mdl.params(values)
+    residual = mdl.voltage(values) - stack.voltage
+    if not np.all(np.isfinite(residual)):
+        raise FitError("the fit reached a region where the model is undefined (q >= C); "
+                       "check the data and the bounds on C_Ah")
+    w = stack.weight
+    jac = mdl.jacobian(values, mdl.free) * w[:, None]
+    svd = equilibrated_svd(jac)
+    cov_free, dof_eff = _covariance(svd, residual * w, stack)
+    names_all = list(family.names)
+    n_all = len(names_all)
+    cov = np.zeros((n_all, n_all))
+    idx = [names_all.index(n) for n in mdl.free if n in names_all]
+    sub = [k for k, n in enumerate(mdl.free) if n in names_all]
+    cov[np.ix_(idx, idx)] = cov_free[np.ix_(sub, sub)]
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sd, sd)
+    corr[~np.isfinite(corr)] = 0.0
+    np.fill_diagonal(corr, 1.0)
+    t_crit = float(stdtrit(max(dof_eff, 1.0), 0.975))  # Student t quantile
+    stderr, ci95 = {}, {}
+    for k, n in enumerate(names_all):
+        v = float(params[n])
+        if n in fixed:
+            stderr[n], ci95[n] = 0.0, (v, v)
+        else:
+            e = float(sd[k]) if np.isfinite(sd[k]) else float("nan")
+            stderr[n], ci95[n] = e, (v - t_crit * e, v + t_crit * e)
+
+    thermal = None
+    if family.thermal:
+        params, thermal = _thermal(family, params, stack, notes)
+    ident = analyse(jac, mdl.free, values, bnds, paper_mode=paper_mode, svd=svd)
+    _physical_limits(family, ident, notes)
+    warnings += ident.warnings
+    measured = ~stack.is_rest
+    rmse = float(np.sqrt(np.mean(residual[measured] ** 2)))
+    implausible = plausibility(family, params, ci95, fixed, stack, rmse)
+    warnings += implausible + undetermined(family, params, ci95, fixed)
+    samples = None
+    if bootstrap:
+        samples = _bootstrap(mdl, values, residual, bnds, int(bootstrap), seed, progress)
+        if thermal is not None:
+            for name in ("Cth_J_per_K", "Rth_K_per_W"):
+                samples[:, names_all.index(name)] = params[name]
+    result = FitResult(
+        parameters=params, stderr=stderr, ci95=ci95, covariance=cov, correlation=corr,
+        free=list(mdl.free), fixed=dict(fixed), bounds=bnds,
+        rmse_V=rmse, n_samples=int(measured.sum()), warnings=warnings, notes=notes,
+        identifiability=ident, curves=curves, cells_series=int(cells_series),
+        strings_parallel=int(strings_parallel), current_scale=float(scale),
+        paper_mode=paper_mode, elapsed_s=0.0, nfev=nfev,
+        n_starts=len(starts), bootstrap=samples, model=family.name,
+        ambient_C=float(stack.ambient_C), thermal=thermal, implausible=implausible,
+    )
+    if model_error and not paper_mode:
+        result.model_error = held_out_error(
+            curves, model=family.name, cells_series=cells_series,
+            strings_parallel=strings_parallel, fixed=requested_fixed, bounds=bounds,
+            use_rest=use_rest, weighting=weighting)
+    result.elapsed_s = time.perf_counter() - t_start
+    return result
+
+
+#: ``model`` value that picks the family by evidence.
+
+
+def _physical_limits(family: Family, ident: Identifiability, notes: list) -> None:
+    """Parameters at a bound that marks an absent effect become notes, not bound problems."""
+    keep = []
+    for name, side, bound in ident.at_bounds:
+        par = family.parameter(name) if name in family.names else None
+        if par is not None and par.limit_note:
+            notes.append(f"{name} = {bound:g} at its {side} bound: {par.limit_note}")
+            ident.warnings = [w for w in ident.warnings if not w.startswith(f"{name} = ")]
+        else:
+            keep.append((name, side, bound))
+    ident.at_bounds = keep
+
+
+def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list):
+    """Heat capacity and thermal resistance from the logged temperature (else defaults)."""
+    if not stack.has_temperature:
+        # the fit took the cell at the ambient, so its resistances already hold whatever
+        # heating the runs had: predictions keep the cell at the ambient too
+        params = params.replace(Cth_J_per_K=HELD_AT_AMBIENT_HEAT_CAPACITY)
+        notes.append("thermal model: no temperature logged, so the cell is held at the "
+                     "ambient in predictions (its resistances are those of the fitted runs, "
+                     "heating included); give the ambient with --ambient")
+        return params, {"Cth_J_per_K": float(params["Cth_J_per_K"]),
+                        "Rth_K_per_W": float(params["Rth_K_per_W"]),
+                        "source": "held at the ambient (no logged temperature)"}
+    fitted = fit_lumped_thermal(family, params, stack)
+    if fitted is None:
+        source = "default (the logged temperature could not be used)"
+        notes.append(f"thermal model: {source}; heat capacity {params['Cth_J_per_K']:.3g} J/K, "
+                     f"thermal resistance {params['Rth_K_per_W']:.3g} K/W")
+        return params, {"Cth_J_per_K": float(params["Cth_J_per_K"]),
+                        "Rth_K_per_W": float(params["Rth_K_per_W"]), "source": source}
+    params = params.replace(Cth_J_per_K=fitted["Cth_J_per_K"],
+                            Rth_K_per_W=fitted["Rth_K_per_W"])
+    if fitted["heat_capacity_fitted"]:
+        source = "logged temperature"
+        how = "heat capacity {:.3g} J/K, thermal resistance {:.3g} K/W"
+    else:
+        source = (f"logged temperature (less than {MIN_HEATING_K:g} K of self-heating: "
+                  f"heat capacity kept at its default)")
+        how = ("heat capacity {:.3g} J/K (default: the log shows less than "
+               f"{MIN_HEATING_K:g} K of self-heating), thermal resistance {{:.3g}} K/W")
+    notes.append("thermal model fitted to the logged cell temperature: "
+                 + how.format(fitted["Cth_J_per_K"], fitted["Rth_K_per_W"])
+                 + f" (RMSE {fitted['rmse_K']:.2f} K)")
+    return params, dict(fitted, source=source)
+
+
+def _several_rates(curves) -> bool:
+    """Two or more curves whose mean currents differ by 20 % or more."""
+    currents = [c.mean_current_A for c in curves]
+    return len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
+
+
+#: Fraction of a curve's duration left out at its end by :func:`held_out_error`.
+HELD_OUT_TAIL = 0.2
+
+
+def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=None,
+                   bounds=None, use_rest=True, weighting="equal") -> dict | None:
+    """The model's own error of the time to cutoff, from data left out of the fit.
+
+    Two kinds of folds, each predicting the time to the left-out curve's last
+    voltage at its mean current (thermal families from its starting temperature):
+
+    * **whole curves**: each curve in turn is left out and the model fitted to the
+      others. The prediction is an extrapolation by the current ratio ``r_k``
+      between the left-out curve and the fitted ones, so its error is brought back
+      to the fitted currents by dividing it by ``1 + g_k ln r_k``, ``g_k`` being
+      the growth :func:`dischargelab.uncertainty.extrapolation_growth` of that
+      smaller fit (one rate: the prior's; several: the held-out one);
+    * **curve ends**: each curve in turn loses its last :data:`HELD_OUT_TAIL` of
+      duration (the knee and the cutoff) and the model is fitted to that and every
+      other curve. Every rate stays in the fit, so this is an error at the fitted
+      currents, the one a two-curve fit is used for (leaving one of two curves out
+      leaves a one-rate fit).
+
+    Needs two or more curves whose currents differ by 20 % or more.
+
+    Returns
+    -------
+    dict or None
+        ``relative_sd`` and ``dof``: the model error inside the fitted currents,
+        every normalised error pooled with the prior
+        (:func:`dischargelab.uncertainty.held_out_posterior`); ``held_out_rms`` /
+        ``end_rms``: RMS of the raw errors of each kind [-] (None when none could
+        be computed); ``errors_pct``, ``extrapolation_ratios``, ``curves``
+        (whole curves left out) and ``end_errors_pct``; ``source = "held-out"``.
+    """
+    from dataclasses import replace as _replace
+
+    from ..uncertainty import extrapolation_growth, held_out_posterior
+
+    if not _several_rates(curves):
+        return None
+    common = dict(cells_series=cells_series, strings_parallel=strings_parallel, fixed=fixed,
+                  bounds=bounds, use_rest=use_rest, weighting=weighting, model=model)
+    errors, ratios, normalised, names, ends = [], [], [], [], []
+    for k, left in enumerate(curves):
+        rest = [c for j, c in enumerate(curves) if j != k]
+        fold = _held_out_fold(rest, left, common)
+        if fold is not None:
+            error, battery = fold
+            ratio = battery.extrapolation_ratio(left.mean_current_A / strings_parallel)
+            growth = extrapolation_growth(
+                battery, "held-out" if _several_rates(rest) else "prior")
+            errors.append(100.0 * error)
+            ratios.append(float(ratio))
+            normalised.append(error / (1.0 + growth * np.log(ratio)))
+            names.append(left.name)
+        t = left.time_s
+        keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
+        cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
+               "current_A": left.current_A[keep]}
+        if left.temperature_C is not None:
+            cut["temperature_C"] = left.temperature_C[keep]
+        try:
+            shortened = _replace(left, **cut)
+        except DataError:
+            continue
+        fold = _held_out_fold([shortened if j == k else c for j, c in enumerate(curves)],
+                              left, common)
+        if fold is not None:
+            ends.append(fold[0])
+    if not errors and not ends:
+        return None
+    sd, dof = held_out_posterior(normalised + ends)
+
+    def rms(values):
+        return float(np.sqrt(np.mean(np.square(values)))) if values else None
+
+    return {"relative_sd": sd, "dof": dof,
+            "held_out_rms": None if not errors else rms(errors) / 100.0,
+            "end_rms": rms(ends), "errors_pct": errors, "extrapolation_ratios": ratios,
+            "curves": names, "end_errors_pct": [100.0 * e for e in ends],
+            "source": "held-out"}
+
+
+def _held_out_fold(fitted, left, common):
+    """(relative error of the predicted time to ``left``'s last voltage, battery) of a
+    fit to ``fitted``; None when the fit or the prediction fails."""
+    from ..errors import SimulationError
+    from ..simulate import simulate_current
+
+    try:
+        res = fit_family(fitted, model_error=False, **common)
+        sim = simulate_current(res.battery, left.mean_current_A,
+                               cutoff_pack_V=float(left.voltage_V[-1]),
+                               ambient_C=left.ambient_C)
+    except (FitError, SimulationError, DataError):
+        return None
+    measured = float(left.time_s[-1] - left.time_s[0])
+    if not np.isfinite(sim.time_to_cutoff_s) or measured <= 0:
+        return None
+    return (sim.time_to_cutoff_s - measured) / measured, res.battery
