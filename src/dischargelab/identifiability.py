@@ -252,16 +252,29 @@ def plausibility(family, params, ci95: dict, fixed: dict, data, rmse_V: float) -
     return out
 
 
+#: Ratio of the upper to the lower end of a positive parameter's 95 % interval beyond
+#: which it is reported undetermined (``e**2``: a symmetric interval would reach zero).
+UNDETERMINED_SPAN = float(np.exp(2.0))
+
+
 def undetermined(family, params, ci95: dict, fixed: dict) -> list[str]:
-    """Warnings for positive parameters whose 95 % interval spans zero (undetermined)."""
+    """Warnings for positive parameters the data do not determine.
+
+    Their 95 % interval is on a log scale (it stays positive): a parameter whose
+    interval spans more than a factor ``e**2`` (about 7.4, i.e. a relative standard
+    error above ``1 / t``, where a symmetric interval would reach zero) is undetermined.
+    """
     out = []
     for p in family.parameters:
         if p.name in fixed or p.lower < 0 or p.limit_note:
             continue
         low, high = ci95.get(p.name, (np.nan, np.nan))
         value = float(params[p.name])
-        if np.isfinite(low) and low < 0 < value and high > 0:
-            out.append(f"{p.name}'s 95 % interval [{low:.3g}, {high:.3g}] {p.unit} spans zero: "
-                       "the data do not determine it; add a curve at another current (or log "
-                       "the rest voltage before the load) or fix it")
+        if not (np.isfinite(low) and np.isfinite(high) and value > 0):
+            continue
+        if low <= 0 or high / low > UNDETERMINED_SPAN:
+            out.append(f"{p.name}'s 95 % interval [{low:.3g}, {high:.3g}] {p.unit} spans more "
+                       f"than a factor {UNDETERMINED_SPAN:.1f}: the data do not determine it; "
+                       "add a curve at another current (or log the rest voltage before the "
+                       "load) or fix it")
     return out

@@ -159,7 +159,8 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             stderr[n], ci95[n] = 0.0, (v, v)
         else:
             e = float(sd[k]) if np.isfinite(sd[k]) else float("nan")
-            stderr[n], ci95[n] = e, (v - t_crit * e, v + t_crit * e)
+            positive = bnds.get(n, (-np.inf, 0.0))[0] >= 0
+            stderr[n], ci95[n] = e, _interval95(v, e, t_crit, positive)
 
     thermal = None
     if family.thermal:
@@ -197,6 +198,24 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
 
 
 #: ``model`` value that picks the family by evidence.
+
+
+def _interval95(value: float, stderr: float, t_crit: float, positive: bool) -> tuple:
+    """95 % interval of a fitted parameter from its standard error.
+
+    A parameter bounded below by zero (a resistance, a time constant, a capacity)
+    gets a log-scale interval, ``value * exp(+-t * stderr / value)`` (the delta method
+    on ``ln value``), which stays positive (one-sided from zero when the value sits
+    on that bound); the others are symmetric.
+    """
+    if not np.isfinite(stderr):
+        return float("nan"), float("nan")
+    if positive and value > 0:
+        factor = float(np.exp(min(t_crit * stderr / value, 700.0)))
+        return value / factor, value * factor
+    if positive and value <= 0:  # at its zero bound: one-sided
+        return 0.0, t_crit * stderr
+    return value - t_crit * stderr, value + t_crit * stderr
 
 
 def _physical_limits(family: Family, ident: Identifiability, notes: list) -> None:
