@@ -262,9 +262,11 @@ def crossing(trend: Trend, threshold: float, first_efc: float = 0.0, seed: int =
     rows = np.arange(values.shape[0])
     a, b = values[rows, prev], values[rows, k]
     frac = np.where(a > b, (a - threshold) / np.where(a > b, a - b, 1.0), 0.0)
-    when = np.where(crossed, grid[prev] + frac * (grid[k] - grid[prev]), np.inf)
+    never = 2.0 * horizon  # stands for "not within the horizon"
+    when = np.where(crossed, grid[prev] + frac * (grid[k] - grid[prev]), never)
     when = np.where(crossed & (k == 0), grid[0], when)
-    low, mid, high = np.percentile(when, [2.5, 50.0, 97.5])
+    low, mid, high = (float(v) if v <= horizon else np.inf
+                      for v in np.percentile(when, [2.5, 50.0, 97.5]))
     band = (grid, *np.percentile(values, [2.5, 97.5], axis=0))
     if hi_now <= threshold:  # already below at the last event: the line tells when
         central = max(float((threshold - trend.intercept) / trend.slope), first_efc)

@@ -295,7 +295,8 @@ def database_errors(url: str):
 # --------------------------------------------------------------------------- versions
 
 def _add_column(conn, table: str, column: str, sql_type: str) -> None:
-    conn.execute(text(f"ALTER TABLE {table} ADD COLUMN {column} {sql_type}"))
+    quote = conn.dialect.identifier_preparer.quote  # mixed case stays mixed case
+    conn.execute(text(f"ALTER TABLE {quote(table)} ADD COLUMN {quote(column)} {sql_type}"))
 
 
 def _migrate_1_to_2(conn) -> None:
