@@ -8,7 +8,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck docs min-versions bench browser clean
+.PHONY: demo test lint typecheck docs min-versions bench browser postgres clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/dischargelab demo --out demo-out --force
 
-test: $(STAMP) browser
+test: $(STAMP) browser postgres
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
@@ -48,6 +48,15 @@ browser:
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium \
 	      chromium-driver >/dev/null; \
 	  else echo "note: chromium/chromedriver not found; the browser tests will be skipped"; fi; }
+
+# The logbook tests also run against a throwaway PostgreSQL cluster (initdb + pg_ctl as the
+# `postgres` user, on 127.0.0.1): Debian's server package is installed when missing and we may.
+postgres:
+	@ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing postgresql (throwaway server for the logbook tests)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq postgresql >/dev/null; \
+	  else echo "note: postgresql not found; the logbook's PostgreSQL tests will be skipped"; fi; }
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fit_speed.py
