@@ -126,3 +126,34 @@ def test_start_settings_are_checked_like_the_command_line(demo_server, browser):
     kinds = browser.js("return window.__live.events.map(e => e.kind);")
     assert "cutoff" in kinds
     assert demo_server.alive
+
+
+@pytest.mark.slow
+def test_acquire_serve_shows_the_command_lines_test_and_stops_it(tmp_path, browser):
+    from dischargelab.acquire.virtual_device import VirtualDevice
+
+    log_path = tmp_path / "run.csv"
+    with VirtualDevice("zippy-1100-2s", speed=1, seed=21, current_A=1.1) as dev:
+        acq = ServerProcess(["acquire", "--port", dev.port, "--out", str(log_path), "--ke",
+                             "4.38", "--current", "1.1", "--cells", "2", "--rate", "5",
+                             "--quiet", "--serve", "--serve-port", "0"])
+        try:
+            browser.get(acq.url)
+            browser.wait_for("window.__live && window.__live.n.length >= 25", 30,
+                             "5 s of samples")
+            assert browser.js("return window.__live.status.mode;") == "watch"
+            assert browser.js("return document.getElementById('start').disabled;")
+            browser.driver.find_element("id", "stop").click()
+            assert acq.proc.wait(30) == 0                  # stopped like Ctrl-C: status 0
+            data = page_data(browser)
+        finally:
+            acq.stop()
+    assert "stopped from the web page" in "\n".join(acq.lines)
+    log, _ = read_log(log_path)
+    n = np.array(data["n"])
+    assert data["missing"] == 0
+    np.testing.assert_array_equal(n, np.arange(len(n)))
+    # the page may miss only the very last samples, sent while the server was closing
+    assert len(log) - 3 <= len(n) <= len(log)
+    np.testing.assert_allclose(np.array(data["v"], float), log["voltage_V"][:len(n)], atol=6e-5)
+    np.testing.assert_allclose(np.array(data["i"], float), log["current_A"][:len(n)], atol=6e-5)

@@ -41,8 +41,8 @@ def check_bind(host: str, token: str | None) -> None:
     """Refuse to listen beyond loopback without a token (one-line DischargelabError)."""
     if not is_loopback(host) and not token:
         raise DischargelabError(
-            f"listening on {host} lets other machines reach the server: give it a token "
-            "too (token=..., or --token on the command line), or keep the default 127.0.0.1")
+            f"listening on {host} lets other machines reach the server: give it a token too, "
+            "or keep the default host 127.0.0.1")
 
 
 @dataclass
@@ -100,11 +100,16 @@ class Server:
         uvicorn = require("uvicorn", "web")
         check_bind(host, token)
         self.sock = bind(host, port)
+        self.app = app
         self.listening = Listening(host, self.sock.getsockname()[1], token)
         config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="on",
                                 timeout_graceful_shutdown=SHUTDOWN_GRACE_S)
         self._server = uvicorn.Server(config)
         self._thread: threading.Thread | None = None
+
+    def app_state(self, name: str):
+        """An object the application keeps (``"bench"``, ``"packs"``)."""
+        return getattr(self.app.state, name)
 
     @property
     def started(self) -> bool:
