@@ -181,3 +181,41 @@ class Browser:
             self.driver.quit()
         finally:
             shutil.rmtree(self.profile, ignore_errors=True)
+
+
+class ThreadServer:
+    """A server in a thread of the test process on a free loopback port."""
+
+    def __init__(self, **options):
+        from dischargelab.web.server import build_server
+
+        self.server = build_server(port=0, **options).start()
+        self.host, self.port = "127.0.0.1", self.server.listening.port
+
+    def request(self, method, path, body=None, headers=None):
+        import http.client
+        import json
+
+        conn = http.client.HTTPConnection(self.host, self.port, timeout=20)
+        try:
+            conn.putrequest(method, path, skip_accept_encoding=True,
+                            skip_host="Host" in (headers or {}))
+            for key, value in {"Content-Length": str(len(body or b"")), **(headers or {})}.items():
+                conn.putheader(key, value)
+            conn.endheaders()
+            if body:
+                conn.send(body)
+            resp = conn.getresponse()
+            raw = resp.read()
+            cookie = resp.getheader("set-cookie")
+        finally:
+            conn.close()
+        try:
+            data = json.loads(raw)
+        except ValueError:
+            data = raw.decode("utf-8", "replace")
+        return resp.status, data, cookie
+
+    def alive(self) -> bool:
+        status, data, _ = self.request("GET", "/api/live")
+        return status == 200 and "active" in data

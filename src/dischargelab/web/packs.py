@@ -131,15 +131,17 @@ class PackPages:
                "reference_capacity_Ah": getattr(pack, "reference_capacity_Ah", None),
                "health": lb.health(name).to_dict(), "events": lb.events(name).to_dict(),
                "model": None, "model_note": None}
+        model = getattr(pack, "to_battery", None) or pack.battery
         try:
-            battery = pack.battery()
+            battery = model()
         except DischargelabError as exc:
             out["model_note"] = str(exc)
             return out
+        from ..predict import default_cutoff
         from ..simulate import curve_family
 
         currents = [c * battery.rated_capacity_Ah for c in CURVE_C_RATES]
-        curves = curve_family(battery, currents)
+        curves = curve_family(battery, currents, **default_cutoff(battery))
         out["model"] = {
             "name": battery.name, "family": battery.model,
             "cells_series": battery.cells_series, "strings_parallel": battery.strings_parallel,

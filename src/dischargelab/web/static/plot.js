@@ -84,6 +84,10 @@
         return;
       }
       if (xr[1] <= xr[0]) xr = [xr[0] - 1, xr[0] + 1];
+      if (series.some(s => s.points)) {                  // keep markers off the frame
+        const px = (xr[1] - xr[0]) * 0.04;
+        xr = [xr[0] - px, xr[1] + px];
+      }
       if (yr[1] <= yr[0]) yr = [yr[0] - 0.5, yr[0] + 0.5];
       const pad = (yr[1] - yr[0]) * this.opts.yPad;
       yr = [yr[0] - pad, yr[1] + pad];
