@@ -14,6 +14,7 @@ types, consoles, JSON, error lines) is in :mod:`.common`:
 - :mod:`.missions`: endurance, report, demo
 - :mod:`.flightlogs`: convert, flight, autopilot-params
 - :mod:`.acquisition`: calibrate, acquire, virtual-device, demo-acquire
+- :mod:`.serve`: serve (the web pages)
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import traceback
 import click
 
 from ..errors import DischargelabError
-from . import acquisition, flightlogs, missions, model
+from . import acquisition, flightlogs, missions, model, serve
 from .common import BUG_LINE, CONTEXT, cli_message, err, usage_line
 
 __all__ = ["BUG_LINE", "app", "main"]
@@ -45,7 +46,7 @@ def app() -> None:
     """
 
 
-for _group in (model, missions, flightlogs, acquisition):
+for _group in (model, missions, flightlogs, acquisition, serve):
     for _command in _group.COMMANDS:
         app.add_command(_command)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from pathlib import Path
 
 import click
@@ -257,11 +258,19 @@ def _report_acquisition(result, as_json: bool) -> None:
 @click.option("--give-up-after", "give_up_s", type=click.FloatRange(min=0, min_open=True),
               metavar="S", help="End the test if the link stays down this long [s] "
                                 "(default: keep reconnecting until stopped).")
+@click.option("--serve", is_flag=True,
+              help="Also show the test on a live web page (extra web; the address is printed).")
+@click.option("--serve-port", type=click.IntRange(0, 65535), default=8050, show_default=True,
+              metavar="PORT", help="TCP port of the live page (0 picks a free one).")
+@click.option("--serve-host", default="127.0.0.1", show_default=True, metavar="ADDR",
+              help="Address of the live page; anything but loopback needs --serve-token.")
+@click.option("--serve-token", is_flag=False, flag_value="auto", default=None,
+              metavar="[TOKEN]", help="Require this token on the live page (alone: a random one).")
 @json_option
 def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_temp, debounce,
                 rate_Hz, calibration_path, ke, current_A, current_sensor, thermistor,
                 switch_load, duration_s, plot, live, quiet, every_s, force, logview_path, baud,
-                parity, give_up_s, as_json):
+                parity, give_up_s, serve, serve_port, serve_host, serve_token, as_json):
     """Log a discharge test from a serial instrument, with live view and safety cutoff.
 
     The producer/consumer program of the paper (section 3.2): samples are
@@ -279,6 +288,7 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
           acs712-20a --thermistor --chemistry lifepo4 --cells 4 --quiet --every 30
       dischargelab acquire --source ebc-a20 --port /dev/ttyUSB0 --out run.csv --cells 2 \\
           --current 1.7
+      dischargelab acquire --port /dev/ttyACM0 --out run.csv --ke 4.38 --current 2 --serve
     """
     from ..acquire.acquisition import AcquireSettings, prepare_acquisition
     from ..acquire.sensors import Thermistor
@@ -311,12 +321,32 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
         thermistor=Thermistor() if thermistor else None, baudrate=baud, parity=parity,
         switch_load=switch_load, duration_s=duration_s, force=force, logview=logview_path,
         give_up_after_s=give_up_s)
+    web = _live_page_server(serve_host, serve_port, serve_token) if serve else None
     acquisition = prepare_acquisition(settings)
     console = err if as_json else out
+    if web is not None:
+        web.app_state("bench").attach(acquisition)
+        web.start()
+        console.print(f"live page: listening on {web.listening.page('live')}", markup=False)
     view = "live" if live and not quiet and console.is_terminal else "lines"
     result = acquisition.run(view=view, console=console, every_s=every_s, plot=plot)
+    if web is not None:
+        web.app_state("bench").finished(result)
+        time.sleep(1.0)                    # the page gets the end of the test
+        web.stop()
     _report_acquisition(result, as_json)
     sys.exit(result.exit_status)
+
+
+def _live_page_server(host, port, token):
+    """The live page's server, bound (a busy port fails here, before the test starts)."""
+    from ..web.bench import LiveBench
+    from ..web.server import build_server, is_loopback
+
+    if not is_loopback(host) and not token:
+        raise DischargelabError(f"--serve-host {host} lets other machines see the test: add "
+                                "--serve-token (or keep the default 127.0.0.1)")
+    return build_server(host=host, port=port, token=token, live=LiveBench())
 
 
 @click.command("virtual-device")
