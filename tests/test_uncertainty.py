@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from dischargelab import engine
-from dischargelab.mission import fly as mission_module
 from dischargelab.cli import main as cli_main
 from dischargelab.errors import DataError, SimulationError
 from dischargelab.mission import Mission, Phase, RepeatBlock, load_mission, run_mission
+from dischargelab.mission import fly as mission_module
 from dischargelab.model import PRESETS, Battery, CellParameters
 from dischargelab.models import FAMILIES
 from dischargelab.simulate import simulate_current
