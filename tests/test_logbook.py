@@ -81,6 +81,7 @@ def test_add_twice_health_and_outlier(url, shared_data):
     assert data["pack"] == "cell C"
     assert set(data["events"][0]) == {"source", "start", "kind", "discharged_Ah", "capacity_Ah",
                                       "capacity_interval95", "resistance_ohm", "efc", "outlier"}
+    assert {e["kind"] for e in data["events"]} == {"full"}
     by_name = {e["source"]: e for e in data["events"]}
     for path in files:
         event = by_name[path.name]
@@ -102,7 +103,10 @@ def test_add_twice_health_and_outlier(url, shared_data):
     assert efc[-1] == pytest.approx(total / caps[0], rel=1e-4)
     assert np.all(np.diff(efc) > 0)
     forecast = data["forecast"]
-    assert set(forecast) == {"threshold_Ah", "eol_efc", "eol_efc_interval95"}
+    assert set(forecast) == {"threshold_Ah", "eol_efc", "eol_efc_interval95", "band"}
+    band = forecast["band"]
+    assert len(band["efc"]) == len(band["lo"]) == len(band["hi"]) == len(band["capacity_Ah"])
+    assert all(lo <= m <= hi for lo, m, hi in zip(band["lo"], band["capacity_Ah"], band["hi"]))
     lo, hi = forecast["eol_efc_interval95"]
     assert lo < forecast["eol_efc"] and (hi is None or forecast["eol_efc"] < hi)
 
@@ -126,7 +130,7 @@ def test_bad_file_rejected_with_one_line_rest_goes_in(url, shared_data, tmp_path
         rejected = {Path(p).name: why for p, why in result.rejected}
         assert set(rejected) == {"broken.txt", "cut.txt", "noise.csv"}
         assert all("\n" not in why and why for why in rejected.values())
-        assert [r["name"] for r in lb.packs().rows] == ["pack A"]
+        assert [r["name"] for r in lb.packs().to_dict()["rows"]] == ["pack A"]
         assert len(lb.events("pack A").rows) == 3
         with pytest.raises(LogbookError, match="no pack named 'nope'.*packs"):
             lb.health("nope")
@@ -312,20 +316,23 @@ def test_endurance_with_a_pack_uses_todays_capacity(tmp_path, shared_data):
     with Logbook(tmp_path / "lb.sqlite") as lb:
         lb.add(cell_c_files(shared_data, [1, 100, 200, 300, 400, 500, 600, 664]), pack="C")
         lb.set_pack("C", chemistry="li-ion", cells=1)
-        fitted = lb.fit("C", bootstrap=0)
+        fitted = lb.fit("C", bootstrap=20)
         pack = lb.pack("C")
-    assert fitted["capacity_Ah"] == pytest.approx(integrated_Ah(
-        shared_data / CELL_C / "DischargeCycle664.txt"), rel=1e-3)
+    last = integrated_Ah(shared_data / CELL_C / "DischargeCycle664.txt")
+    assert fitted.extra["logbook_fit"]["capacity_Ah"] == pytest.approx(last, rel=1e-3)
     today = pack.battery()
-    assert "scaled to its health today" in today.extra["logbook"]["note"]
-    ratio = today.extra["logbook"]["capacity_factor"]
-    assert ratio == pytest.approx(pack.capacity_Ah / fitted["capacity_Ah"])
-    base = dl.load(today).capacity_Ah / ratio
-    assert today.capacity_Ah == pytest.approx(base * ratio)
-    predicted = dl.predict(pack, current=3.0, cutoff=2.5, interval=False).to_dict()
-    hours = predicted["time_to_cutoff_s"] / 3600
+    assert "scaled to its health today" in today.extra["note"]
+    factor = today.extra["logbook"]["capacity_factor"]
+    assert factor == pytest.approx(pack.capacity_Ah / last, rel=1e-3)
+    assert today.capacity_Ah == pytest.approx(fitted.capacity_Ah * factor)
+    hours = dl.predict(pack, current=3.0, cutoff=2.5, interval=False).to_dict()[
+        "time_to_cutoff_s"] / 3600
     # the model at today's capacity discharges about that capacity at 3 A
     assert hours * 3.0 == pytest.approx(pack.capacity_Ah, rel=0.05)
+    flown = dl.endurance(pack, "multirotor-hover", draws=10)
+    assert any("scaled to its health today" in n for n in flown.to_dict()["notes"])
+    fresh = dl.endurance(fitted, "multirotor-hover", draws=0)
+    assert flown.to_dict()["notes"] and not fresh.to_dict()["notes"]
 
 
 def test_export_csv(tmp_path, shared_data):

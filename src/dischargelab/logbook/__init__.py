@@ -134,7 +134,7 @@ class Logbook:
     def set_pack(self, name: str, *, label_capacity_Ah: float | None = None,
                  chemistry: str | None = None, cells: int | None = None) -> None:
         """Create a pack or store its label capacity [Ah], chemistry and cells in series."""
-        from ..flight import check_chemistry
+        from ..ocv import check_chemistry
         from . import schema, store
 
         if chemistry is not None:
@@ -227,9 +227,19 @@ class Logbook:
         """Fit the pack's model to its latest full discharge and store it.
 
         ``fit_options`` go to :func:`dischargelab.fit` (``model``, ``bootstrap``...).
-        Returns the fitted Battery.
+        Returns the fitted Battery; ``extra["logbook_fit"]`` holds the capacity [Ah] and
+        step resistance [ohm] of the discharge it was fitted to (what
+        :meth:`Pack.battery` scales from).
         """
-        return self._fit(name, self.health(name), **fit_options)
+        from dataclasses import replace
+
+        from ..model import Battery
+
+        model = self._fit(name, self.health(name), **fit_options)
+        bat = Battery.from_dict(model["battery"])
+        extra = dict(bat.extra, logbook_fit={"capacity_Ah": model["capacity_Ah"],
+                                             "resistance_ohm": model["resistance_ohm"]})
+        return replace(bat, extra=extra)
 
     def fit_all(self, **fit_options) -> dict:
         """Fit every pack that has a full discharge: ``{name: Battery or one-line reason}``."""
@@ -348,7 +358,7 @@ def _health(row: dict, events: list[dict], model: dict | None, eol: float) -> He
                 if len(with_r) >= 2 else None
             forecast = Forecast(eol=eol, threshold_Ah=threshold, eol_efc=central,
                                 eol_efc_interval95=interval, capacity=trend,
-                                resistance=r_trend, band=band)
+                                resistance=r_trend, band=band, first_efc=float(efc.min()))
     return Health(pack=row["name"], events=per_event, reference_capacity_Ah=reference,
                   reference=how, forecast=forecast, notes=notes)
 

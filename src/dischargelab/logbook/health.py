@@ -84,9 +84,16 @@ class EventHealth:
     outlier: bool = False
     notes: list[str] = field(default_factory=list)
 
+    @property
+    def health_kind(self) -> str:
+        """``"full"`` (a full discharge), ``"partial"`` (a bench discharge) or ``"flight"``."""
+        if self.kind == "flight":
+            return "flight"
+        return "full" if self.full else "partial"
+
     def to_dict(self) -> dict:
         """The keys of ``logbook health --json``."""
-        return {"source": self.source, "start": self.start, "kind": self.kind,
+        return {"source": self.source, "start": self.start, "kind": self.health_kind,
                 "discharged_Ah": self.discharged_Ah, "capacity_Ah": self.capacity_Ah,
                 "capacity_interval95": self.capacity_interval95,
                 "resistance_ohm": self.resistance_ohm, "efc": self.efc,
@@ -115,7 +122,7 @@ def pack_cells(event: dict, cells: int | None, chemistry: str | None) -> int:
 
 def starts_full(event: dict, cells: int, chemistry: str | None) -> bool:
     """Whether the event starts from a full charge (see the module docstring)."""
-    from ..flight import soc_from_rest_voltage
+    from ..ocv import soc_from_rest_voltage
 
     rest = event.get("rest_voltage_V")
     if rest is None:

@@ -60,10 +60,31 @@ class Forecast:
     capacity: Trend
     resistance: Trend | None = None
     band: tuple | None = None
+    first_efc: float = 0.0
+
+    def band_points(self, points: int = 120) -> dict:
+        """The capacity trend and its 95 % band from the first event to the forecast's end:
+        ``{"efc", "capacity_Ah", "lo", "hi"}`` (lists; for plots and pages)."""
+        trend = self.capacity
+        past = np.linspace(self.first_efc, trend.last_efc, points // 2)
+        lo_p, hi_p = trend.band(past)
+        efc, lo, hi = list(past), list(lo_p), list(hi_p)
+        mean = list(trend.mean(past))
+        if self.band is not None:
+            grid, blo, bhi = self.band
+            end = self.eol_efc_interval95[1] or self.eol_efc or grid[-1]
+            stop = max(int(np.searchsorted(grid, 1.1 * end)), 2)
+            idx = np.unique(np.linspace(1, min(stop, grid.size - 1), points // 2).astype(int))
+            efc += list(grid[idx])
+            lo += list(blo[idx])
+            hi += list(bhi[idx])
+            mean += list(trend.mean(grid[idx]))
+        return _clean({"efc": efc, "capacity_Ah": mean, "lo": lo, "hi": hi})
 
     def to_dict(self) -> dict:
         return _clean({"threshold_Ah": self.threshold_Ah, "eol_efc": self.eol_efc,
-                       "eol_efc_interval95": list(self.eol_efc_interval95)})
+                       "eol_efc_interval95": list(self.eol_efc_interval95),
+                       "band": self.band_points()})
 
 
 @dataclass
@@ -137,7 +158,7 @@ class PackTable:
     rows: list[dict]
 
     def to_dict(self) -> dict:
-        return {"packs": _clean(self.rows)}
+        return {"rows": _clean(self.rows)}
 
     def to_pandas(self):
         import pandas as pd
@@ -209,7 +230,7 @@ class Pack:
         Capacity: every charge parameter times ``capacity today / capacity at the
         fit``; resistance: the series resistance plus the change of the measured step
         resistance since the fit (per cell). The returned Battery's
-        ``extra["logbook"]["note"]`` says so; ``dl.endurance`` repeats it in its result.
+        ``extra["note"]`` says so; ``dl.endurance`` repeats it in its result's notes.
 
         Raises
         ------
@@ -252,7 +273,8 @@ class Pack:
                 f"(EFC {self.efc:.0f}): capacity x{factor:.3f} ({self.capacity_Ah:.3g} Ah), "
                 f"series resistance {shift * 1000:+.1f} mOhm per cell")
         extra["logbook"] = {"pack": self.name, "capacity_factor": factor,
-                            "resistance_shift_cell_ohm": shift, "note": note}
+                            "resistance_shift_cell_ohm": shift}
+        extra["note"] = note
         for key in ("measured_capacity_Ah", "nominal_capacity_Ah"):
             if extra.get(key):
                 extra[key] = float(extra[key]) * factor
