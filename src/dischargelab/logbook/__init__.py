@@ -333,7 +333,7 @@ def _health(row: dict, events: list[dict], model: dict | None, eol: float) -> He
 
     from ..model import Battery
     from .forecast import crossing, fit_trend
-    from .health import pack_health
+    from .health import observed_crossing, pack_health
 
     battery = Battery.from_dict(model["battery"]) if model else None
     per_event, reference, how = pack_health(
@@ -352,13 +352,19 @@ def _health(row: dict, events: list[dict], model: dict | None, eol: float) -> He
         if trend is not None:
             threshold = eol * reference
             central, interval, band = crossing(trend, threshold, first_efc=float(efc.min()))
+            seen = observed_crossing(efc, cap, threshold)
+            if seen is not None:
+                central, interval = seen
+                notes.append(f"end of life observed: the capacity fell below {threshold:.3g} Ah "
+                             f"between {interval[0]:.0f} and {interval[1]:.0f} EFC")
             with_r = [e for e in per_event if e.resistance_ohm is not None and not e.outlier
                       and e.efc is not None]
             r_trend = fit_trend([e.efc for e in with_r], [e.resistance_ohm for e in with_r]) \
                 if len(with_r) >= 2 else None
             forecast = Forecast(eol=eol, threshold_Ah=threshold, eol_efc=central,
                                 eol_efc_interval95=interval, capacity=trend,
-                                resistance=r_trend, band=band, first_efc=float(efc.min()))
+                                resistance=r_trend, band=band, first_efc=float(efc.min()),
+                                observed=seen is not None)
     return Health(pack=row["name"], events=per_event, reference_capacity_Ah=reference,
                   reference=how, forecast=forecast, notes=notes)
 

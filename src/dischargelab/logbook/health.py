@@ -279,6 +279,47 @@ def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
     return 0.6745 * np.abs(resid - np.median(resid)) / mad > threshold
 
 
+#: Events in the local line that gives a pack's capacity and resistance today.
+TODAY_EVENTS = 7
+
+
+def value_today(efc, values, events: int = TODAY_EVENTS) -> float | None:
+    """A quantity today: the Theil-Sen line through the last ``events`` values, at the last EFC.
+
+    Robust to one odd event, and local: the fade rate changes over a life, so the
+    capacity today is read from the latest events, not from the whole-life trend.
+    """
+    from scipy.stats import theilslopes
+
+    x = np.asarray(efc, dtype=float)[-events:]
+    y = np.asarray(values, dtype=float)[-events:]
+    if y.size == 0:
+        return None
+    if y.size < 3 or np.ptp(x) <= 0:
+        return float(np.median(y))
+    slope, intercept, *_ = theilslopes(y, x)
+    return float(intercept + slope * x[-1])
+
+
+def observed_crossing(efc, values, threshold: float) -> tuple[float, list] | None:
+    """Where logged values fell through ``threshold`` for good, when the last two are below it.
+
+    Returns ``(efc, [efc of the last value above, efc of the first below])`` with the
+    crossing interpolated between them, or None.
+    """
+    x = np.asarray(efc, dtype=float)
+    y = np.asarray(values, dtype=float)
+    if y.size < 3 or not np.all(y[-2:] <= threshold):
+        return None
+    above = np.flatnonzero(y > threshold)
+    if above.size == 0:
+        return None
+    k = int(above[-1])
+    a, b = y[k], y[k + 1]
+    at = float(x[k] + (a - threshold) / (a - b) * (x[k + 1] - x[k]))
+    return at, [float(x[k]), float(x[k + 1])]
+
+
 def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
                 cells: int | None = None, chemistry: str | None = None, model=None
                 ) -> tuple[list[EventHealth], float | None, str]:
@@ -346,6 +387,6 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
     return out, reference, why
 
 
-__all__ = ["EventHealth", "pack_health", "order_events", "equivalent_full_cycles",
-           "flag_outliers", "partial_capacity", "full_capacity", "ReferenceCurve",
-           "starts_full", "FULL_SOC", "VOLTAGE_SD_CELL_V", "OUTLIER_Z"]
+__all__ = ["EventHealth", "pack_health", "value_today", "observed_crossing", "order_events",
+           "equivalent_full_cycles", "flag_outliers", "partial_capacity", "full_capacity",
+           "ReferenceCurve", "starts_full", "FULL_SOC", "VOLTAGE_SD_CELL_V", "OUTLIER_Z"]

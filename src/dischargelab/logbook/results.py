@@ -51,6 +51,9 @@ class Forecast:
         Resistance trend [ohm] against EFC.
     band : tuple or None
         ``(efc, low, high)`` of the capacity's simulated futures past the last event.
+    observed : bool
+        The logged capacities already fell below the threshold: ``eol_efc`` is where
+        (interpolated), the interval the two events around it.
     """
 
     eol: float
@@ -61,6 +64,7 @@ class Forecast:
     resistance: Trend | None = None
     band: tuple | None = None
     first_efc: float = 0.0
+    observed: bool = False
 
     def band_points(self, points: int = 120) -> dict:
         """The capacity trend and its 95 % band from the first event to the forecast's end:
@@ -123,18 +127,22 @@ class Health:
 
     @property
     def capacity_now_Ah(self) -> float | None:
-        """The capacity trend at the last event [Ah] (None without a trend)."""
-        if self.forecast is None:
-            return None
-        return float(self.forecast.capacity.mean(self.forecast.capacity.last_efc))
+        """Capacity today [Ah]: robust line through the latest capacities (outliers left
+        out), at the last one (:func:`~dischargelab.logbook.health.value_today`)."""
+        from .health import value_today
+
+        sel = [e for e in self.events if e.capacity_Ah is not None and not e.outlier]
+        return value_today([e.efc if e.efc is not None else k for k, e in enumerate(sel)],
+                           [e.capacity_Ah for e in sel])
 
     @property
     def resistance_now_ohm(self) -> float | None:
-        """The resistance trend at the last event, else the last measured [ohm]."""
-        if self.forecast is not None and self.forecast.resistance is not None:
-            return float(self.forecast.resistance.mean(self.forecast.resistance.last_efc))
-        values = [e.resistance_ohm for e in self.events if e.resistance_ohm is not None]
-        return float(values[-1]) if values else None
+        """Resistance today [ohm], read like :attr:`capacity_now_Ah`."""
+        from .health import value_today
+
+        sel = [e for e in self.events if e.resistance_ohm is not None and not e.outlier]
+        return value_today([e.efc if e.efc is not None else k for k, e in enumerate(sel)],
+                           [e.resistance_ohm for e in sel])
 
     @property
     def efc_now(self) -> float | None:
