@@ -204,10 +204,7 @@ def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int 
     if draws is None:
         boot = bat.extra.get("bootstrap") or {}
         draws = len(boot.get("samples", [])) or (100 if bat.covariance is not None else 0)
-    result = run_mission(mis, draws=draws, seed=seed)
-    if bat.extra.get("logbook") and bat.extra.get("note"):  # a logbook pack at today's health
-        result.notes.append(str(bat.extra["note"]))
-    return result
+    return run_mission(mis, draws=draws, seed=seed)
 
 
 def validate(battery: Battery | str | Path,

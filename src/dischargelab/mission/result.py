@@ -303,6 +303,9 @@ def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
         soc_end_pct=soc_end, min_voltage_V=float(np.min(sim.voltage_V)), stretch=stretch,
         warnings=warnings,
     )
+    extra = mission.battery.extra
+    if extra.get("logbook") and extra.get("note"):  # a logbook pack at today's health
+        result.notes.append(str(extra["note"]))
     if draws:
         result.uncertainty = mission_uncertainty(mission, draws=draws, seed=seed,
                                                  progress=progress, nominal=result,
