@@ -251,9 +251,11 @@ def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
                   threshold: float = OUTLIER_Z) -> np.ndarray:
     """True where a value sits off the local trend of its neighbours (module docstring).
 
-    The local trend at each event is the Theil-Sen line (median of pairwise slopes,
-    robust to an outlier among them) through the :data:`OUTLIER_NEIGHBOURS` events on
-    each side (more on one side at the ends), the event itself left out.
+    The local trend at each event is the Theil-Sen line (median of pairwise slopes)
+    through the :data:`OUTLIER_NEIGHBOURS` nearest events on each side (more on one
+    side at the ends), the event itself left out. Events already flagged are left out
+    of their neighbours' lines and the test repeated (at most three passes), so one
+    odd cycle does not drag its neighbours out with it.
     """
     from scipy.stats import theilslopes
 
@@ -263,20 +265,30 @@ def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
     flags = np.zeros(n, dtype=bool)
     if n < 2 * neighbours + 1:
         return flags
-    resid = np.empty(n)
-    for k in range(n):
-        lo = min(max(0, k - neighbours), n - 2 * neighbours - 1)
-        hi = lo + 2 * neighbours + 1
-        idx = [j for j in range(lo, hi) if j != k]
-        if np.ptp(x[idx]) > 0:
-            slope, intercept, *_ = theilslopes(y[idx], x[idx])
-            resid[k] = y[k] - (intercept + slope * x[k])
-        else:
-            resid[k] = y[k] - np.median(y[idx])
-    mad = float(np.median(np.abs(resid - np.median(resid))))
-    if mad <= 0:
-        return flags
-    return 0.6745 * np.abs(resid - np.median(resid)) / mad > threshold
+    for _ in range(3):
+        good = np.flatnonzero(~flags)
+        if good.size < 2 * neighbours + 1:
+            break
+        resid = np.empty(n)
+        for k in range(n):
+            others = good[good != k]
+            pos = int(np.searchsorted(others, k))
+            lo = min(max(0, pos - neighbours), others.size - 2 * neighbours)
+            idx = others[lo:lo + 2 * neighbours]
+            if np.ptp(x[idx]) > 0:
+                slope, intercept, *_ = theilslopes(y[idx], x[idx])
+                resid[k] = y[k] - (intercept + slope * x[k])
+            else:
+                resid[k] = y[k] - np.median(y[idx])
+        centre = np.median(resid[~flags])
+        mad = float(np.median(np.abs(resid[~flags] - centre)))
+        if mad <= 0:
+            break
+        new = 0.6745 * np.abs(resid - centre) / mad > threshold
+        if np.array_equal(new, flags):
+            break
+        flags = new
+    return flags
 
 
 #: Events in the local line that gives a pack's capacity and resistance today.

@@ -321,9 +321,9 @@ def step_resistance(time_s, voltage_V, current_A, rest: dict | None = None,
     resistance of the FreedomCAR Battery Test Manual's hybrid pulse power test, with
     a shorter pulse).
 
-    95 % interval: from the spread of the steps when there are three or more
-    (standard error of the median, 1.2533 sd/sqrt(n), sd from the MAD); from the
-    sample noise of voltage and current otherwise.
+    95 % interval: from the sample noise of voltage and current (second differences),
+    widened to the spread of the steps when there are three or more (standard error
+    of the median, 1.2533 sd/sqrt(n), sd from the MAD).
 
     Returns
     -------
@@ -354,13 +354,12 @@ def step_resistance(time_s, voltage_V, current_A, rest: dict | None = None,
     if arr.size == 0:
         return None, None
     r = float(np.median(arr))
+    sv, si = _noise(v), _noise(i)
+    d_i = float(np.median(steps))
+    half = 1.96 * np.sqrt(2.0 * sv ** 2 + 2.0 * (r * si) ** 2) / d_i / np.sqrt(arr.size)
     if arr.size >= 3:
         sd = 1.4826 * float(np.median(np.abs(arr - r)))
-        half = 1.96 * 1.2533 * sd / np.sqrt(arr.size)
-    else:
-        sv, si = _noise(v), _noise(i)
-        d_i = float(np.median(steps))
-        half = 1.96 * np.sqrt(2.0 * sv ** 2 + 2.0 * (r * si) ** 2) / d_i / np.sqrt(arr.size)
+        half = max(half, 1.96 * 1.2533 * sd / np.sqrt(arr.size))
     return r, [max(0.0, r - half), r + half]
 
 
