@@ -256,6 +256,8 @@ class Logbook:
         return out
 
     def _fit(self, name: str, health: Health, **fit_options):
+        from dataclasses import replace
+
         from ..api import fit as fit_discharges
         from ..api import read
         from . import schema, store
@@ -277,10 +279,20 @@ class Logbook:
         fit_options.setdefault("cells", row["cells"])
         result = fit_discharges(discharge, **fit_options)
         battery = result.battery
-        if row["chemistry"] and battery.chemistry is None:
-            from dataclasses import replace
+        chemistry = row["chemistry"]
+        if chemistry is None:  # the pack's full discharge says which cutoff it was run to
+            from .health import infer_chemistry
 
-            battery = replace(battery, chemistry=row["chemistry"])
+            cells = battery.cells_series
+            full = discharge.rest_voltage_V or float(discharge.voltage_V[0])
+            chemistry = infer_chemistry(full / cells, float(discharge.voltage_V[-1]) / cells)
+            notes = list(battery.extra.get("notes", [])) + [
+                f"chemistry taken as {chemistry}: nearest to the full discharge's "
+                f"{full / cells:.2f} V and {discharge.voltage_V[-1] / cells:.2f} V per cell "
+                "(set it with Logbook.set_pack)"]
+            battery = replace(battery, extra=dict(battery.extra, notes=notes))
+        if battery.chemistry is None:
+            battery = replace(battery, chemistry=chemistry)
         model = {"battery": battery.to_dict(), "capacity_Ah": last.capacity_Ah,
                  "resistance_ohm": last.resistance_ohm}
         with self._errors(), schema.writing(self._engine) as conn:

@@ -291,6 +291,17 @@ def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
     return flags
 
 
+def infer_chemistry(full_cell_V: float, end_cell_V: float) -> str:
+    """The chemistry whose charge and cutoff voltages per cell lie nearest to a full
+    discharge's rest (or first) voltage and end voltage [V] (tables
+    :data:`dischargelab.ocv.CHARGE_CELL_V`, :data:`dischargelab.cell.CUTOFF_CELL_VOLTAGE_V`)."""
+    from ..cell import CUTOFF_CELL_VOLTAGE_V
+    from ..ocv import CHARGE_CELL_V
+
+    return min(CHARGE_CELL_V, key=lambda c: abs(CHARGE_CELL_V[c] - full_cell_V)
+               + abs(CUTOFF_CELL_VOLTAGE_V[c] - end_cell_V))
+
+
 #: Events in the local line that gives a pack's capacity and resistance today.
 TODAY_EVENTS = 7
 
@@ -399,6 +410,7 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
     return out, reference, why
 
 
-__all__ = ["EventHealth", "pack_health", "value_today", "observed_crossing", "order_events",
-           "equivalent_full_cycles", "flag_outliers", "partial_capacity", "full_capacity",
-           "ReferenceCurve", "starts_full", "FULL_SOC", "VOLTAGE_SD_CELL_V", "OUTLIER_Z"]
+__all__ = ["EventHealth", "pack_health", "value_today", "infer_chemistry", "observed_crossing",
+           "order_events", "equivalent_full_cycles", "flag_outliers", "partial_capacity",
+           "full_capacity", "ReferenceCurve", "starts_full", "FULL_SOC", "VOLTAGE_SD_CELL_V",
+           "OUTLIER_Z"]
