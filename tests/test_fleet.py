@@ -30,15 +30,14 @@ def test_no_flag_runs_in_process_without_importing_dask():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60, env=dict(os.environ, DISCHARGELAB_SCHEDULER=""))
     assert out.returncode == 0, out.stderr
-    assert "(-1, 1, None)" in out.stdout
+    assert "(-1, 1)" in out.stdout
 
 
 def test_in_process_returns_errors_with_their_items():
     with InProcessExecutor() as ex:
-        got = {item: (result, error) for item, result, error in
-               ex.map_unordered(refuse_odd, range(4))}
-    assert got[0] == (0, None) and got[2] == (2, None)
-    assert isinstance(got[1][1], DataError) and got[1][0] is None
+        got = dict(ex.map_unordered(refuse_odd, range(4)))
+    assert got[0] == 0 and got[2] == 2
+    assert isinstance(got[1], DataError) and isinstance(got[3], DataError)
 
 
 def test_executor_arguments():
@@ -71,25 +70,26 @@ def test_local_cluster_same_results_bounded_submission_and_a_crashing_task():
             pulled.append(n)
             yield n
 
-    with DaskExecutor(workers=2, in_flight=4) as ex:
+    with DaskExecutor(workers=2, max_in_flight=4) as ex:
         assert ex.workers == 2 and ex.shares_files
         seen = []
-        for k, (item, result, error) in enumerate(ex.map_unordered(square_slowly, feed())):
-            assert error is None
+        for k, (item, result) in enumerate(ex.map_unordered(square_slowly, feed())):
             assert result["square"] == item * item
             # bounded: never more than in_flight items taken ahead of the results
             assert len(pulled) <= k + 1 + 4
             seen.append(item)
         assert sorted(seen) == items
-        pids = {r["pid"] for _, r, _ in ex.map_unordered(square_slowly, range(20))}
+        pids = {r["pid"] for _, r in ex.map_unordered(square_slowly, range(20))}
         assert os.getpid() not in pids
+        refused = dict(ex.map_unordered(refuse_odd, range(4)))
+        assert refused[2] == 2 and isinstance(refused[1], DataError)
+        assert "item 1 is odd" in str(refused[1])
 
-        outcomes = {item: (result, error) for item, result, error in
-                    ex.map_unordered(crash_on_seven, range(12))}
+        outcomes = dict(ex.map_unordered(crash_on_seven, range(12)))
     assert sorted(outcomes) == list(range(12))
-    assert isinstance(outcomes[7][1], WorkerCrash)
-    assert "died twice" in str(outcomes[7][1])
-    assert all(outcomes[n] == (n, None) for n in range(12) if n != 7)
+    assert isinstance(outcomes[7], WorkerCrash)
+    assert "died twice" in str(outcomes[7])
+    assert all(outcomes[n] == n for n in range(12) if n != 7)
 
 
 @pytest.mark.slow
@@ -107,9 +107,8 @@ def test_real_scheduler_and_workers_kill_one_worker_mid_run():
             assert ex.sees(__file__)
             results = []
             killer = None
-            for item, result, error in ex.map_unordered(square_slowly, range(120)):
+            for item, result in ex.map_unordered(square_slowly, range(120)):
                 assert result["square"] == item * item
-                assert error is None, error
                 results.append(item)
                 if len(results) == 10:
                     killer = threading.Thread(target=cluster.kill, args=(cluster.workers[0],))

@@ -1,10 +1,12 @@
 """One executor interface for fleet-scale work: in this process, or on a Dask cluster.
 
 A task is a pure function of one item (a file path, or a file's name and bytes) that
-returns a small, serialisable summary; it never touches the database. The client
-submits tasks as results come back (never all at once, so memory stays bounded),
-receives ``(item, result, error)`` in completion order, and is the only writer of
-whatever stores the results.
+returns a small, serialisable summary; it never touches the database. An executor
+maps it over items and yields ``(item, outcome)`` as each finishes, in any order;
+``outcome`` is the task's result or the exception it raised (the caller decides
+which exceptions are rejections and which are bugs). At most ``max_in_flight``
+items are submitted and not yet collected, so a big folder never floods memory
+or a scheduler, and the client is the only writer of whatever stores the results.
 
 * :class:`InProcessExecutor` runs the tasks one after the other here, with no Dask
   import at all (``workers=1`` or nothing given).
@@ -29,15 +31,18 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable, Iterator
-from typing import Any
+from typing import Any, Protocol
 
 from .errors import DischargelabError, require
 
 #: Environment variable naming the scheduler of an existing cluster.
 SCHEDULER_ENV = "DISCHARGELAB_SCHEDULER"
 
-#: Tasks in flight per worker: enough to keep every worker busy while results travel
-#: back, few enough that the client holds only a handful of payloads at a time.
+#: Items submitted and not yet collected, by default, in process.
+DEFAULT_MAX_IN_FLIGHT = 64
+
+#: Tasks in flight per Dask worker: enough to keep every worker busy while results
+#: travel back, few enough that the client holds only a handful of payloads at a time.
 IN_FLIGHT_PER_WORKER = 4
 
 #: Deaths of a task's worker after which the task counts as failed (the first death
@@ -56,29 +61,51 @@ class WorkerCrash(DischargelabError):
     """A task's worker process died twice while running it (the task kills workers)."""
 
 
-Outcome = tuple[Any, Any, BaseException | None]
+class Executor(Protocol):
+    """What the logbook's ingest and fleet analysis need from an executor."""
+
+    workers: int
+    shares_files: bool
+
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
+                      ) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, result or exception)`` for every item, in completion order."""
+        ...
+
+    def describe(self) -> str:
+        """Where the tasks run, for progress lines."""
+        ...
+
+    def close(self) -> None:
+        ...
 
 
 class InProcessExecutor:
-    """Run tasks one after the other in this process (no Dask import).
+    """Runs every task in this process, one after the other (no Dask import).
 
-    Errors a task raises are returned with its item, not raised, like on a
-    cluster; :class:`KeyboardInterrupt` and errors that are bugs of the task
-    (anything but :class:`~dischargelab.errors.DischargelabError` and ``OSError``)
-    propagate.
+    Parameters
+    ----------
+    max_in_flight : int
+        Kept for the interface; in process one item is in flight at a time.
     """
 
     workers = 1
     shares_files = True
 
-    def map_unordered(self, func: Callable, items: Iterable) -> Iterator[Outcome]:
+    def __init__(self, max_in_flight: int = DEFAULT_MAX_IN_FLIGHT):
+        if max_in_flight < 1:
+            raise FleetError("max_in_flight must be at least 1")
+        self.max_in_flight = int(max_in_flight)
+
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
+                      ) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, func(item))``, or ``(item, exception)`` when ``func`` raised one."""
         for item in items:
             try:
-                result = func(item)
-            except (DischargelabError, OSError) as exc:
-                yield item, None, exc
-                continue
-            yield item, result, None
+                outcome = func(item)
+            except Exception as exc:  # handed to the caller, which re-raises what is a bug
+                outcome = exc
+            yield item, outcome
 
     def describe(self) -> str:
         return "in this process"
@@ -107,12 +134,13 @@ class DaskExecutor:
         worker dies is retried; start it with
         ``DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=1`` to fail a task at its
         second worker death as a local cluster does.
-    in_flight : int, optional
-        Tasks submitted at once [default: :data:`IN_FLIGHT_PER_WORKER` per worker].
+    max_in_flight : int, optional
+        Tasks submitted and not yet collected [default: :data:`IN_FLIGHT_PER_WORKER`
+        per worker].
     """
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None,
-                 in_flight: int | None = None):
+                 max_in_flight: int | None = None):
         if (workers is None) == (scheduler is None):
             raise FleetError("give either workers (a local cluster) or scheduler (an "
                              "existing one)")
@@ -139,7 +167,7 @@ class DaskExecutor:
                              "the address and that its workers run") from None
         self.scheduler = scheduler
         n = self.workers
-        self.in_flight = int(in_flight or IN_FLIGHT_PER_WORKER * max(1, n))
+        self.max_in_flight = int(max_in_flight or IN_FLIGHT_PER_WORKER * max(1, n))
 
     @property
     def workers(self) -> int:
@@ -164,8 +192,11 @@ class DaskExecutor:
         where = self.scheduler or "a local cluster on 127.0.0.1"
         return f"{self.workers} Dask worker(s) at {where}"
 
-    def map_unordered(self, func: Callable, items: Iterable) -> Iterator[Outcome]:
-        """Yield ``(item, result, error)`` as tasks finish; at most ``in_flight`` pending.
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
+                      ) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, result or exception)`` as tasks finish; at most
+        ``max_in_flight`` pending. A task whose worker died twice yields
+        :class:`WorkerCrash`.
 
         Stopping the iteration early (or Ctrl-C) cancels what is still pending.
         """
@@ -185,22 +216,20 @@ class DaskExecutor:
             return False
 
         try:
-            for _ in range(self.in_flight):
+            for _ in range(self.max_in_flight):
                 if not submit_next():
                     break
             for future in done:
                 _, item = pending.pop(future.key)
-                error: BaseException | None = None
-                result = None
                 try:
-                    result = future.result()
+                    outcome = future.result()
                 except KilledWorker:
-                    error = WorkerCrash(f"{_label(item)}: the worker process died twice while "
-                                        "working on it (it crashes its reader); skipped")
-                except (DischargelabError, OSError) as exc:
-                    error = exc
+                    outcome = WorkerCrash(f"{_label(item)}: the worker process died twice while "
+                                          "working on it (it crashes its reader); skipped")
+                except Exception as exc:  # handed to the caller, like InProcessExecutor
+                    outcome = exc
                 future.release()
-                yield item, result, error
+                yield item, outcome
                 submit_next()
         finally:
             if pending:
