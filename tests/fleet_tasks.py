@@ -25,3 +25,12 @@ def crash_on_seven(n: int) -> int:
         os._exit(3)
     time.sleep(0.02)
     return n
+
+
+def crash_on_file(task, file_name: str, item):
+    """Run ``task(item)``, but kill the worker process when ``item`` is ``file_name``
+    (a file that crashes its reader)."""
+    name = item[0] if isinstance(item, tuple) else item
+    if os.path.basename(str(name)) == file_name:
+        os._exit(3)
+    return task(item)

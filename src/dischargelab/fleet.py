@@ -153,9 +153,13 @@ class DaskExecutor:
             if scheduler is None:
                 with dask.config.set({"distributed.scheduler.allowed-failures":
                                       WORKER_DEATHS_ALLOWED}):
+                    # no dashboard; the status servers Dask always runs listen on
+                    # loopback only, on free ports
                     self.cluster = LocalCluster(
                         n_workers=int(workers), threads_per_worker=1, processes=True,
-                        host="127.0.0.1", dashboard_address=None, silence_logs=50)
+                        host="127.0.0.1", dashboard_address=None, silence_logs=50,
+                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                        worker_dashboard_address="127.0.0.1:0")
                 self.client = Client(self.cluster, timeout=START_TIMEOUT_S)
             else:
                 self.client = Client(scheduler, timeout=START_TIMEOUT_S)

@@ -11,11 +11,14 @@ from ..errors import DischargelabError
 from .common import (
     CONTEXT,
     err,
+    executor_options,
     force_option,
     guard_outputs,
     json_option,
+    open_executor,
     out,
     print_json,
+    progress_bar,
     table,
 )
 
@@ -62,6 +65,8 @@ def logbook_group() -> None:
       dischargelab logbook health zippy-a --plot zippy-a.png
       dischargelab logbook events zippy-a --json
       dischargelab logbook export all.csv
+      dischargelab logbook fit --all --workers 4
+      dischargelab logbook report --fleet -o fleet.html
       dischargelab endurance --pack zippy-a paper-table5
     """
 
@@ -85,10 +90,11 @@ def logbook_group() -> None:
 @click.option("--chemistry", type=click.Choice(["lipo", "li-ion", "lifepo4"]),
               help="The pack's chemistry (for rest-voltage states of charge).")
 @click.option("--cells", type=click.IntRange(1), help="The pack's cells in series.")
+@executor_options
 @db_option
 @json_option
 def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
-            label_capacity_Ah, chemistry, cells, db, as_json):
+            label_capacity_Ah, chemistry, cells, workers, scheduler, db, as_json):
     """Add test files, logger files and flight logs to a pack.
 
     Each file is kept by its SHA-256 (adding it again adds nothing and says so);
@@ -97,14 +103,18 @@ def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
     (.csv .txt .tsv .lvm .log .bin .ulg .bbl .bfl .dat). Exit status 2 when every
     file was rejected.
 
+    With --workers N or --scheduler the files are read on Dask workers; this
+    process alone writes the database, in batches. Ctrl-C keeps what is done:
+    run the same command again and only what is missing is read.
+
     \b
     Examples:
       dischargelab logbook add DischargeCycle*.txt --pack cell-C
       dischargelab logbook add flights/ --pack zippy-a --capacity 5.0 --cells 6
       dischargelab logbook add bench/ --pack-from parent --recursive
+      dischargelab logbook add fleet-logs/ --pack-from parent -r --workers 8
+      dischargelab logbook add fleet-logs/ --pack-from parent -r --scheduler tcp://10.0.0.5:8786
     """
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
     options = {"columns": columns, "current_A": current_A, "units": units,
                "sign": None if sign == "auto" else sign}
     with open_logbook(db) as lb:
@@ -114,16 +124,11 @@ def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
             if not pack:
                 raise DischargelabError("--capacity, --chemistry and --cells need --pack NAME")
             lb.set_pack(pack, **settings)
-        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                      console=err, transient=True) as bar:
-            task = bar.add_task("adding", total=None)
-
-            def progress(done, total, message):
-                bar.update(task, completed=done, total=total,
-                           description=f"adding {message[:40]}")
-
+        bar, progress = progress_bar("adding")
+        with open_executor(workers, scheduler) as executor, bar:
             result = lb.add(list(paths), pack=pack, pack_from=pack_from, recursive=recursive,
-                            progress=progress, **{k: v for k, v in options.items() if v})
+                            executor=executor, progress=progress,
+                            **{k: v for k, v in options.items() if v})
     if as_json:
         print_json(result.to_dict())
     else:
@@ -265,26 +270,90 @@ def export_cmd(output, fmt, force, db):
 
 
 @logbook_group.command("fit", context_settings=CONTEXT)
-@click.argument("name")
+@click.argument("name", required=False)
+@click.option("--all", "every", is_flag=True, help="Refit every pack (on the executor).")
 @click.option("--bootstrap", default=100, show_default=True, type=click.IntRange(0),
               help="Bootstrap refits kept for the intervals of later predictions.")
+@executor_options
 @db_option
 @json_option
-def fit_cmd(name, bootstrap, db, as_json):
+def fit_cmd(name, every, bootstrap, workers, scheduler, db, as_json):
     """Fit a pack's model to its latest full discharge (what `endurance --pack` scales).
+
+    With --all every pack is refitted from its latest data, on Dask workers with
+    --workers N or --scheduler; packs without a full discharge are listed with why.
 
     \b
     Examples:
       dischargelab logbook fit cell-C
+      dischargelab logbook fit --all --workers 4
     """
-    with open_logbook(db) as lb, err.status(f"fitting {name}", spinner="dots"):
-        battery = lb.fit(name, bootstrap=bootstrap)
-    if as_json:
-        print_json(battery.to_dict())
+    if every == (name is not None):
+        raise DischargelabError("give a pack NAME or --all")
+    if not every:
+        with open_logbook(db) as lb, err.status(f"fitting {name}", spinner="dots"):
+            battery = lb.fit(name, bootstrap=bootstrap)
+        if as_json:
+            print_json(battery.to_dict())
+            return
+        ref = battery.extra["logbook_fit"]
+        out.print(f"{name}: {battery.model} model fitted to a full discharge of "
+                  f"{_num(ref['capacity_Ah'])} Ah", markup=False)
         return
-    ref = battery.extra["logbook_fit"]
-    out.print(f"{name}: {battery.model} model fitted to a full discharge of "
-              f"{_num(ref['capacity_Ah'])} Ah", markup=False)
+    bar, progress = progress_bar("fitting")
+    with open_logbook(db) as lb, open_executor(workers, scheduler) as executor, bar:
+        results = lb.fit_all(executor=executor, progress=progress, bootstrap=bootstrap)
+    fitted = {k: v for k, v in results.items() if not isinstance(v, str)}
+    if as_json:
+        print_json({"fitted": {k: v.to_dict() for k, v in fitted.items()},
+                    "not_fitted": {k: v for k, v in results.items() if isinstance(v, str)}})
+        return
+    rows = [[k, v.model, _num(v.extra["logbook_fit"]["capacity_Ah"])]
+            if not isinstance(v, str) else [k, "-", v] for k, v in results.items()]
+    out.print(table(f"Refitted {len(fitted)} of {len(results)} pack(s)",
+                    ["pack", "model", "full discharge [Ah] / why not"], rows))
+
+
+@logbook_group.command("report", context_settings=CONTEXT)
+@click.option("--fleet", "fleet", is_flag=True, required=True,
+              help="Every pack, soonest end of life first (the only report so far).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default="fleet.html",
+              show_default=True, help="HTML page to write.")
+@click.option("--within", type=click.FloatRange(0), default=50.0, show_default=True,
+              metavar="EFC", help="List packs with at most this many EFC left as due.")
+@eol_option
+@force_option
+@executor_options
+@db_option
+@json_option
+def report_cmd(fleet, output, within, eol, force, workers, scheduler, db, as_json):
+    """The fleet at a glance: packs sorted by end of life, with their trends (HTML).
+
+    Each pack's health is computed on the executor (--workers / --scheduler); the
+    page holds capacity and resistance against EFC per pack and opens offline.
+
+    \b
+    Examples:
+      dischargelab logbook report --fleet -o fleet.html
+      dischargelab logbook report --fleet --workers 4 --within 100 --json
+    """
+    guard_outputs([output], [], force)
+    bar, progress = progress_bar("packs")
+    with open_logbook(db) as lb, open_executor(workers, scheduler) as executor, bar:
+        report = lb.fleet(eol=eol, executor=executor, progress=progress)
+    path = report.save(output, force=force, within_efc=within)
+    due = report.retire_soon(within)
+    if as_json:
+        doc = report.to_dict()
+        doc.update(report=str(path), retire_soon=due)
+        print_json(doc)
+        return
+    out.print(f"fleet report: {path} ({len(report.rows)} pack(s))", markup=False)
+    if due:
+        out.print(f"retire soon (end of life logged or within {within:g} EFC): "
+                  f"{', '.join(due)}", markup=False)
+    for pack, reason in report.failed:
+        err.print(f"{pack}: {reason}", markup=False)
 
 
 COMMANDS = [logbook_group]

@@ -22,11 +22,18 @@ summarise, write).
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
-from ..errors import LogbookError
-from .results import DEFAULT_EOL, EventTable, Forecast, Health, Pack, PackTable
+from ..errors import DischargelabError, LogbookError
+from .results import (
+    DEFAULT_EOL,
+    EventTable,
+    Forecast,
+    Health,
+    Pack,
+    PackTable,
+    build_health,
+)
 
 #: Event columns listed by :meth:`Logbook.events` (in this order).
 EVENT_COLUMNS = ("id", "source", "idx", "kind", "start_time", "cycle", "duration_s",
@@ -167,11 +174,8 @@ class Logbook:
         eol : float
             End of life as a share of the reference capacity (0 < eol < 1).
         """
-        if not 0 < float(eol) < 1:
-            raise LogbookError(f"eol must lie between 0 and 1 (a share of the reference "
-                               f"capacity), got {eol!r}")
         row, events, model = self._pack_data(name)
-        return _health(row, events, model, float(eol))
+        return build_health(row, events, model, _check_eol(eol))
 
     def events(self, name: str) -> EventTable:
         """The stored events of a pack (without their curves)."""
@@ -183,28 +187,59 @@ class Logbook:
 
     def packs(self, eol: float = DEFAULT_EOL) -> PackTable:
         """One row per pack: events, EFC, capacity today, resistance, end of life."""
-        from . import store
+        from .fleet_report import pack_summary
 
-        with self._errors(), self._read() as conn:
-            names = store.pack_names(conn)
+        keys = ("name", "events", "efc", "capacity_Ah", "capacity_fraction", "resistance_ohm",
+                "eol_efc", "eol_efc_interval95")
+        eol = _check_eol(eol)
         rows = []
-        for name in names:
-            h = self.health(name, eol)
-            ref = h.reference_capacity_Ah
-            cap = h.capacity_now_Ah
-            f = h.forecast
-            rows.append({"name": name, "events": len(h.events), "efc": h.efc_now,
-                         "capacity_Ah": cap,
-                         "capacity_fraction": cap / ref if cap is not None and ref else None,
-                         "resistance_ohm": h.resistance_now_ohm,
-                         "eol_efc": None if f is None else f.eol_efc,
-                         "eol_efc_interval95": None if f is None else f.eol_efc_interval95})
+        for name in self.pack_names():
+            summary = pack_summary((*self._pack_data(name), eol))
+            rows.append({k: summary[k] for k in keys})
         return PackTable(rows=rows)
+
+    def fleet(self, eol: float = DEFAULT_EOL, executor=None, progress=None):
+        """Every pack's health, soonest end of life first (the fleet report).
+
+        Parameters
+        ----------
+        eol : float
+            End of life as a share of each pack's reference capacity.
+        executor : optional
+            Where each pack's figures are made (:func:`dischargelab.fleet.executor`; in
+            this process by default). The client reads the rows and sends them.
+        progress : callable, optional
+            ``progress(done, total, pack name)`` after each pack.
+
+        Returns
+        -------
+        dischargelab.logbook.fleet_report.FleetReport
+            ``.rows``, ``.retire_soon(efc)``, ``.to_html()``, ``.save(path)``.
+        """
+        from ..fleet import InProcessExecutor
+        from .fleet_report import FleetReport, pack_summary, retire_order
+
+        eol = _check_eol(eol)
+        names = self.pack_names()
+        jobs = ((*self._pack_data(name), eol) for name in names)
+        executor = executor or InProcessExecutor()
+        rows, failed = [], []
+        for done, (job, outcome) in enumerate(executor.map_unordered(pack_summary, jobs), 1):
+            if isinstance(outcome, DischargelabError):
+                failed.append((job[0]["name"], str(outcome).splitlines()[0]))
+            elif isinstance(outcome, BaseException):
+                raise outcome
+            else:
+                rows.append(outcome)
+            if progress is not None:
+                progress(done, len(names), job[0]["name"])
+        return FleetReport(rows=sorted(rows, key=retire_order), eol=eol,
+                           failed=sorted(failed))
 
     def pack(self, name: str) -> Pack:
         """A pack with its health today; ``.battery()`` is its model scaled to it."""
         row, events, model = self._pack_data(name)
-        h = _health(row, events, model, DEFAULT_EOL)
+        h = build_health(row, events, model, DEFAULT_EOL)
         cap = h.capacity_now_Ah
         if cap is None:
             caps = [e.capacity_Ah for e in h.events if e.capacity_Ah is not None and not e.outlier]
@@ -231,73 +266,89 @@ class Logbook:
         step resistance [ohm] of the discharge it was fitted to (what
         :meth:`Pack.battery` scales from).
         """
+        from .refit import fit_job
+
+        return self._store_model(fit_job(self._job(name, self.health(name), fit_options)))
+
+    def fit_all(self, executor=None, progress=None, **fit_options) -> dict:
+        """Refit every pack from its latest full discharge: ``{name: Battery or reason}``.
+
+        Parameters
+        ----------
+        executor : optional
+            Where the fits run (:func:`dischargelab.fleet.executor`; in this process by
+            default). The client reads the jobs and stores each model as it comes back.
+        progress : callable, optional
+            ``progress(done, total, pack name)`` after each pack.
+        **fit_options
+            As :func:`dischargelab.fit` (``model``, ``bootstrap``...).
+        """
+        from ..fleet import InProcessExecutor
+        from .refit import fit_job
+
+        out: dict = {}
+        jobs = []
+        for name in self.pack_names():
+            try:
+                jobs.append(self._job(name, self.health(name), fit_options))
+            except LogbookError as exc:
+                out[name] = str(exc)
+        executor = executor or InProcessExecutor()
+        done = len(out)
+        total = len(out) + len(jobs)
+        for job, outcome in executor.map_unordered(fit_job, jobs):
+            done += 1
+            if isinstance(outcome, DischargelabError):
+                out[job["pack"]] = f"cannot fit it: {str(outcome).splitlines()[0]}"
+            elif isinstance(outcome, BaseException):
+                raise outcome
+            else:
+                out[job["pack"]] = self._store_model(outcome)
+            if progress is not None:
+                progress(done, total, job["pack"])
+        return dict(sorted(out.items()))
+
+    def pack_names(self) -> list[str]:
+        """Every pack's name, sorted."""
+        from . import store
+
+        with self._errors(), self._read() as conn:
+            return store.pack_names(conn)
+
+    def _job(self, name: str, health: Health, fit_options: dict) -> dict:
+        """The refit job of a pack (see :mod:`.refit`)."""
+        from . import store
+        from .refit import build_job, latest_full
+
+        last = latest_full(name, health)
+        with self._errors(), self._read() as conn:
+            source = store.source_of_event(conn, last.event_id)
+            data = store.raw_file(conn, source["sha256"])
+            row = store.pack_row(conn, name)
+        return build_job(name, health, source, data, row, fit_options)
+
+    def _store_model(self, model: dict):
+        """Store a fitted model (a :func:`.refit.fit_job` result); returns its Battery."""
         from dataclasses import replace
 
         from ..model import Battery
+        from . import schema, store
 
-        model = self._fit(name, self.health(name), **fit_options)
+        with self._errors(), schema.writing(self._engine) as conn:
+            row = store.pack_row(conn, model["pack"])
+            store.save_model(conn, row["id"], model["battery"], model["event_id"],
+                             model["capacity_Ah"], model["resistance_ohm"])
         bat = Battery.from_dict(model["battery"])
         extra = dict(bat.extra, logbook_fit={"capacity_Ah": model["capacity_Ah"],
                                              "resistance_ohm": model["resistance_ohm"]})
         return replace(bat, extra=extra)
 
-    def fit_all(self, **fit_options) -> dict:
-        """Fit every pack that has a full discharge: ``{name: Battery or one-line reason}``."""
-        from . import store
-
-        with self._errors(), self._read() as conn:
-            names = store.pack_names(conn)
-        out: dict = {}
-        for name in names:
-            try:
-                out[name] = self.fit(name, **fit_options)
-            except LogbookError as exc:
-                out[name] = str(exc)
-        return out
-
     def _fit(self, name: str, health: Health, **fit_options):
-        from dataclasses import replace
+        """Fit and store the model of one pack here; returns the stored model dict."""
+        from .refit import fit_job
 
-        from ..api import fit as fit_discharges
-        from ..api import read
-        from . import schema, store
-
-        fulls = [e for e in health.events if e.full and not e.outlier]
-        if not fulls:
-            raise LogbookError(f"pack {name!r} has no full discharge to fit its model to; add "
-                               "a discharge from full charge to the cutoff")
-        last = fulls[-1]
-        with self._errors(), self._read() as conn:
-            source = store.source_of_event(conn, last.event_id)
-            data = store.raw_file(conn, source["sha256"])
-            row = store.pack_row(conn, name)
-        options = dict(source["options"])
-        with tempfile.TemporaryDirectory(prefix="dischargelab-") as folder:
-            path = Path(folder) / source["file_name"]
-            path.write_bytes(data)
-            discharge = read(path, segment=source["segment"], **options)
-        fit_options.setdefault("cells", row["cells"])
-        result = fit_discharges(discharge, **fit_options)
-        battery = result.battery
-        chemistry = row["chemistry"]
-        if chemistry is None:  # the pack's full discharge says which cutoff it was run to
-            from .health import infer_chemistry
-
-            cells = battery.cells_series
-            full = discharge.rest_voltage_V or float(discharge.voltage_V[0])
-            chemistry = infer_chemistry(full / cells, float(discharge.voltage_V[-1]) / cells)
-            notes = list(battery.extra.get("notes", [])) + [
-                f"chemistry taken as {chemistry}: nearest to the full discharge's "
-                f"{full / cells:.2f} V and {discharge.voltage_V[-1] / cells:.2f} V per cell "
-                "(set it with Logbook.set_pack)"]
-            battery = replace(battery, extra=dict(battery.extra, notes=notes))
-        if battery.chemistry is None:
-            battery = replace(battery, chemistry=chemistry)
-        model = {"battery": battery.to_dict(), "capacity_Ah": last.capacity_Ah,
-                 "resistance_ohm": last.resistance_ohm}
-        with self._errors(), schema.writing(self._engine) as conn:
-            store.save_model(conn, row["id"], model["battery"], last.event_id,
-                             last.capacity_Ah, last.resistance_ohm)
+        model = fit_job(self._job(name, health, fit_options))
+        self._store_model(model)
         return model
 
     # ------------------------------------------------------------------ export
@@ -339,46 +390,13 @@ class Logbook:
         return out
 
 
-def _health(row: dict, events: list[dict], model: dict | None, eol: float) -> Health:
-    """Health of one pack from its stored rows (pure; see :mod:`.health`)."""
-    import numpy as np
 
-    from ..model import Battery
-    from .forecast import crossing, fit_trend
-    from .health import observed_crossing, pack_health
 
-    battery = Battery.from_dict(model["battery"]) if model else None
-    per_event, reference, how = pack_health(
-        events, label_capacity_Ah=row["label_capacity_Ah"], cells=row["cells"],
-        chemistry=row["chemistry"], model=battery)
-    notes = [f"reference capacity: {how}"]
-    usable = [e for e in per_event if e.capacity_Ah is not None and not e.outlier
-              and e.efc is not None]
-    forecast = None
-    if reference and len(usable) >= 2:
-        efc = np.array([e.efc for e in usable])
-        cap = np.array([e.capacity_Ah for e in usable])
-        sd = np.array([(e.capacity_interval95[1] - e.capacity_interval95[0]) / 3.92
-                       for e in usable])
-        trend = fit_trend(efc, cap, sd)
-        if trend is not None:
-            threshold = eol * reference
-            central, interval, band = crossing(trend, threshold, first_efc=float(efc.min()))
-            seen = observed_crossing(efc, cap, threshold)
-            if seen is not None:
-                central, interval = seen
-                notes.append(f"end of life observed: the capacity fell below {threshold:.3g} Ah "
-                             f"between {interval[0]:.0f} and {interval[1]:.0f} EFC")
-            with_r = [e for e in per_event if e.resistance_ohm is not None and not e.outlier
-                      and e.efc is not None]
-            r_trend = fit_trend([e.efc for e in with_r], [e.resistance_ohm for e in with_r]) \
-                if len(with_r) >= 2 else None
-            forecast = Forecast(eol=eol, threshold_Ah=threshold, eol_efc=central,
-                                eol_efc_interval95=interval, capacity=trend,
-                                resistance=r_trend, band=band, first_efc=float(efc.min()),
-                                observed=seen is not None)
-    return Health(pack=row["name"], events=per_event, reference_capacity_Ah=reference,
-                  reference=how, forecast=forecast, notes=notes)
 
+def _check_eol(eol) -> float:
+    if not 0 < float(eol) < 1:
+        raise LogbookError(f"eol must lie between 0 and 1 (a share of the reference "
+                           f"capacity), got {eol!r}")
+    return float(eol)
 
 __all__ = ["Logbook", "Health", "Forecast", "Pack", "PackTable", "EventTable", "DEFAULT_EOL"]

@@ -6,8 +6,8 @@ The client is the only writer of the database. For a list of files and folders i
 2. hashes each file (SHA-256) and drops those whose hash the logbook already
    holds, before any work is sent,
 3. runs :func:`~dischargelab.logbook.summarise.summarise_source` on the rest
-   through an executor (:class:`dischargelab.fleet.InProcessExecutor` by default;
-   any object with ``map_unordered``),
+   through an executor (:mod:`dischargelab.fleet`: in this process by default, or
+   Dask workers, which get each file's path when they see it, else its bytes),
 4. writes the summaries in batches of :data:`BATCH_SOURCES`, one transaction each:
    the raw file (zlib) in ``blobs``, the source, its events. ``sources.sha256`` and
    ``(events.source_id, events.idx)`` are unique and inserts skip conflicts, so two
@@ -15,14 +15,14 @@ The client is the only writer of the database. For a list of files and folders i
 
 A file a reader cannot use is rejected with one line and the others go in; an
 error that is not a data problem (a bug) is raised after the finished batches are
-written, so nothing already read is lost.
+written, so nothing already read is lost. Ctrl-C writes what is summarised and
+stops: every transaction is whole, and a rerun skips the hashes already stored.
 """
 
 from __future__ import annotations
 
 import functools
 import json
-import zlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -169,17 +169,18 @@ def event_row(event: dict) -> dict:
             for k, v in row.items()}
 
 
-def write_summaries(engine, batch: list[tuple[SourceSummary, str, bytes, str | None]],
+def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
                     result: AddResult) -> None:
-    """Store ``(summary, pack, raw bytes, original path)`` items in one transaction."""
+    """Store ``(summary, pack, original path)`` items in one transaction (the raw file
+    as the summary carries it, compressed)."""
     if not batch:
         return
     with schema.writing(engine) as conn:
-        ids = pack_ids(conn, [pack for _, pack, _, _ in batch])
-        for summary, pack, data, path in batch:
+        ids = pack_ids(conn, [pack for _, pack, _ in batch])
+        for summary, pack, path in batch:
             conn.execute(_insert(conn, schema.blobs).values(
-                sha256=summary.sha256, compression="zlib", size_bytes=len(data),
-                data=zlib.compress(data, 6)).on_conflict_do_nothing(index_elements=["sha256"]))
+                sha256=summary.sha256, compression="zlib", size_bytes=summary.size_bytes,
+                data=summary.raw_zlib).on_conflict_do_nothing(index_elements=["sha256"]))
             source_id = conn.execute(_insert(conn, schema.sources).values(
                 sha256=summary.sha256, pack_id=ids[pack], file_name=summary.file_name,
                 path=path, size_bytes=summary.size_bytes, format=summary.format,
@@ -231,30 +232,47 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
     executor = executor or InProcessExecutor()
     batch: list = []
     failure: BaseException | None = None
-    for item, outcome in executor.map_unordered(task, list(by_path)):
-        path, pack_name, sha = by_path[item]
-        done += 1
-        if isinstance(outcome, DischargelabError):
-            result.rejected.append((str(path), str(outcome).splitlines()[0]))
-        elif isinstance(outcome, BaseException):
-            failure = outcome
-            break
-        else:
-            data = path.read_bytes()
-            if outcome.sha256 != sha or sha256_bytes(data) != sha:
-                result.rejected.append((str(path), "the file changed while it was being added; "
-                                                   "add it again"))
+    try:
+        for item, outcome in executor.map_unordered(task, _payloads(executor, by_path)):
+            key = item[0] if isinstance(item, tuple) else item
+            path, pack_name, sha = by_path[key]
+            done += 1
+            if isinstance(outcome, DischargelabError):
+                result.rejected.append((str(path), str(outcome).splitlines()[0]))
+            elif isinstance(outcome, BaseException):
+                failure = outcome
+                break
+            elif outcome.sha256 != sha:     # the worker read other bytes than were hashed
+                result.rejected.append((str(path), "the file changed while it was being "
+                                                   "added; add it again"))
             else:
-                batch.append((outcome, pack_name, data, str(path.resolve())))
-        if progress is not None:
-            progress(done, total, path.name)
-        if len(batch) >= BATCH_SOURCES:
-            write_summaries(engine, batch, result)
-            batch = []
+                batch.append((outcome, pack_name, str(path.resolve())))
+            if progress is not None:
+                progress(done, total, path.name)
+            if len(batch) >= BATCH_SOURCES:
+                write_summaries(engine, batch, result)
+                batch = []
+    except KeyboardInterrupt:
+        # keep what is summarised (one transaction): a rerun only does what is missing
+        write_summaries(engine, batch, result)
+        raise
     write_summaries(engine, batch, result)
     if failure is not None:
         raise failure
     return result
+
+
+def _payloads(executor, by_path: dict):
+    """What the tasks get: each file's path when the executor's workers see this machine's
+    files (in process, a local cluster, a shared folder), else ``(path, bytes)`` read one at a
+    time as the executor asks for the next (so only the files in flight are in memory)."""
+    paths = list(by_path)
+    if not paths:
+        return iter(())
+    sees = getattr(executor, "sees", None)
+    if executor.shares_files or (sees is not None and sees(paths[0])):
+        return iter(paths)
+    return ((path, Path(path).read_bytes()) for path in paths)
 
 
 def add_upload(engine, file_name: str, data: bytes, pack: str,
@@ -274,7 +292,7 @@ def add_upload(engine, file_name: str, data: bytes, pack: str,
     except DischargelabError as exc:
         result.rejected.append((name, str(exc).splitlines()[0]))
         return result
-    write_summaries(engine, [(summary, str(pack).strip(), data, None)], result)
+    write_summaries(engine, [(summary, str(pack).strip(), None)], result)
     return result
 
 

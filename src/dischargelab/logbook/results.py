@@ -303,5 +303,48 @@ class Pack:
                        "resistance_ohm": self.resistance_ohm})
 
 
+def build_health(row: dict, events: list[dict], model: dict | None, eol: float) -> Health:
+    """Health of one pack from its stored rows ``(pack row, event rows, model row or None)``
+    (pure; see :mod:`.health` and :mod:`.forecast`)."""
+    import numpy as np
+
+    from ..model import Battery
+    from .forecast import crossing, fit_trend
+    from .health import observed_crossing, pack_health
+
+    battery = Battery.from_dict(model["battery"]) if model else None
+    per_event, reference, how = pack_health(
+        events, label_capacity_Ah=row["label_capacity_Ah"], cells=row["cells"],
+        chemistry=row["chemistry"], model=battery)
+    notes = [f"reference capacity: {how}"]
+    usable = [e for e in per_event if e.capacity_Ah is not None and not e.outlier
+              and e.efc is not None]
+    forecast = None
+    if reference and len(usable) >= 2:
+        efc = np.array([e.efc for e in usable])
+        cap = np.array([e.capacity_Ah for e in usable])
+        sd = np.array([(e.capacity_interval95[1] - e.capacity_interval95[0]) / 3.92
+                       for e in usable])
+        trend = fit_trend(efc, cap, sd)
+        if trend is not None:
+            threshold = eol * reference
+            central, interval, band = crossing(trend, threshold, first_efc=float(efc.min()))
+            seen = observed_crossing(efc, cap, threshold)
+            if seen is not None:
+                central, interval = seen
+                notes.append(f"end of life observed: the capacity fell below {threshold:.3g} Ah "
+                             f"between {interval[0]:.0f} and {interval[1]:.0f} EFC")
+            with_r = [e for e in per_event if e.resistance_ohm is not None and not e.outlier
+                      and e.efc is not None]
+            r_trend = fit_trend([e.efc for e in with_r], [e.resistance_ohm for e in with_r]) \
+                if len(with_r) >= 2 else None
+            forecast = Forecast(eol=eol, threshold_Ah=threshold, eol_efc=central,
+                                eol_efc_interval95=interval, capacity=trend,
+                                resistance=r_trend, band=band, first_efc=float(efc.min()),
+                                observed=seen is not None)
+    return Health(pack=row["name"], events=per_event, reference_capacity_Ah=reference,
+                  reference=how, forecast=forecast, notes=notes)
+
+
 __all__ = ["Health", "Forecast", "PackTable", "EventTable", "Pack", "scale_parameters",
-           "DEFAULT_EOL"]
+           "build_health", "DEFAULT_EOL"]

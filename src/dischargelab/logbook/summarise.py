@@ -30,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import re
 import tempfile
+import zlib
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -37,6 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
+
+#: zlib level of the kept raw file (6: about a third of a text log's size).
+RAW_ZLIB_LEVEL = 6
 
 #: Points of the compact charge-voltage curve kept per event.
 CURVE_POINTS = 101
@@ -88,6 +92,9 @@ class SourceSummary:
         One per discharge or flight, in file order (keys in the module docstring).
     options : dict
         Reader options used.
+    raw_zlib : bytes
+        The file's bytes, zlib-compressed (what the logbook keeps to recompute any
+        figure; compressed here, on the worker, so the client only writes it).
     """
 
     sha256: str
@@ -97,9 +104,12 @@ class SourceSummary:
     notes: list[str] = field(default_factory=list)
     events: list[dict] = field(default_factory=list)
     options: dict = field(default_factory=dict)
+    raw_zlib: bytes = b""
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        out.pop("raw_zlib")
+        return out
 
 
 def sha256_bytes(data: bytes) -> str:
@@ -189,7 +199,8 @@ def _summarise_path(path: Path, name: str, data: bytes, options: dict) -> Source
         events.append(event)
     notes = list(dict.fromkeys(n for _, meta in reads for n in meta.get("notes", [])))
     return SourceSummary(sha256=sha256_bytes(data), file_name=name, size_bytes=len(data),
-                         format=fmt, notes=notes, events=events, options=options)
+                         format=fmt, notes=notes, events=events, options=options,
+                         raw_zlib=zlib.compress(data, RAW_ZLIB_LEVEL))
 
 
 def _start_time(meta: dict) -> str | None:
