@@ -36,7 +36,8 @@ class Cluster:
         self.address = f"tcp://127.0.0.1:{self.port}"
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(
             [str(TESTS)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]),
-            DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=str(allowed_failures))
+            DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=str(allowed_failures),
+            DASK_DISTRIBUTED__SCHEDULER__WORKER_SATURATION="1.0")
         self.env = env
         self.processes: list[subprocess.Popen] = []
         self.scheduler = self._start(["scheduler", "--host", "127.0.0.1", "--port",

@@ -107,14 +107,16 @@ def test_real_cluster_bytes_when_workers_cannot_see_and_a_worker_killed(packs, i
             ex.client.wait_for_workers(2, timeout=60)
             ex.sees = lambda path: False          # as if the cluster were elsewhere
             sent = []
+            killer = threading.Thread(target=cluster.kill, args=(cluster.workers[0],))
 
             def progress(done, total, name):
                 sent.append(name)
                 if len(sent) == 5:              # kill one worker mid-run
-                    threading.Thread(target=cluster.kill, args=(cluster.workers[0],)).start()
+                    killer.start()
 
             result = lb.add(packs, pack_from="parent", recursive=True, executor=ex,
                             progress=progress)
+            killer.join(timeout=30)
         assert cluster.workers[0].poll() is not None
         assert len(result.added) == n_files(packs) and not result.rejected
         assert stored(url) == in_process        # nothing lost, nothing twice

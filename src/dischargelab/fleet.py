@@ -132,8 +132,9 @@ class DaskExecutor:
         Address of an existing scheduler (``tcp://host:port``) instead. Its
         ``distributed.scheduler.allowed-failures`` decides how often a task whose
         worker dies is retried; start it with
-        ``DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=1`` to fail a task at its
-        second worker death as a local cluster does.
+        ``DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=1`` and
+        ``DASK_DISTRIBUTED__SCHEDULER__WORKER_SATURATION=1.0`` to fail a task at its
+        second worker death, and only that task, as a local cluster does.
     max_in_flight : int, optional
         Tasks submitted and not yet collected [default: :data:`IN_FLIGHT_PER_WORKER`
         per worker].
@@ -151,8 +152,11 @@ class DaskExecutor:
         self.cluster = None
         try:
             if scheduler is None:
+                # one task per worker at a time: a worker that dies takes only the task it
+                # was running with it (queued ones would count a death too)
                 with dask.config.set({"distributed.scheduler.allowed-failures":
-                                      WORKER_DEATHS_ALLOWED}):
+                                      WORKER_DEATHS_ALLOWED,
+                                      "distributed.scheduler.worker-saturation": 1.0}):
                     # no dashboard; the status servers Dask always runs listen on
                     # loopback only, on free ports
                     self.cluster = LocalCluster(
