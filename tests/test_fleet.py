@@ -86,6 +86,13 @@ def test_local_cluster_same_results_bounded_submission_and_a_crashing_task():
         assert "item 1 is odd" in str(refused[1])
 
         outcomes = dict(ex.map_unordered(crash_on_seven, range(12)))
+        batched = dict(ex.map_unordered(crash_on_seven, range(12), per_task=4))
+        grouped = dict(ex.map_unordered(square_slowly, range(30), per_task=4))
+    assert sorted(grouped) == list(range(30))
+    assert all(r["square"] == n * n for n, r in grouped.items())
+    assert sorted(batched) == list(range(12))   # 4-7 crashed together, then ran alone
+    assert isinstance(batched[7], WorkerCrash)
+    assert all(batched[n] == n for n in range(12) if n != 7)
     assert sorted(outcomes) == list(range(12))
     assert isinstance(outcomes[7], WorkerCrash)
     assert "died twice" in str(outcomes[7])

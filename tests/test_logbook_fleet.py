@@ -136,8 +136,10 @@ def test_a_file_that_kills_workers_twice_is_rejected_and_the_rest_goes_in(packs,
     victim = sorted((packs / "pack-b").glob("*.txt"))[2].name
 
     class Crashing(DaskExecutor):
-        def map_unordered(self, func, items):
-            return super().map_unordered(functools.partial(crash_on_file, func, victim), items)
+        def map_unordered(self, func, items, per_task=1):
+            assert per_task > 1          # the crashing file first fails with its batch
+            return super().map_unordered(functools.partial(crash_on_file, func, victim), items,
+                                         per_task=per_task)
 
     url = str(tmp_path / "lb.sqlite")
     with Crashing(workers=2) as ex, Logbook(url) as lb:

@@ -30,7 +30,9 @@ results, pure functions).
 from __future__ import annotations
 
 import os
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
+from itertools import islice
 from typing import Any, Protocol
 
 from .errors import DischargelabError, require
@@ -43,7 +45,7 @@ DEFAULT_MAX_IN_FLIGHT = 64
 
 #: Tasks in flight per Dask worker: enough to keep every worker busy while results
 #: travel back, few enough that the client holds only a handful of payloads at a time.
-IN_FLIGHT_PER_WORKER = 4
+IN_FLIGHT_PER_WORKER = 2
 
 #: Deaths of a task's worker after which the task counts as failed (the first death
 #: is retried elsewhere, the second is the task's fault).
@@ -67,9 +69,10 @@ class Executor(Protocol):
     workers: int
     shares_files: bool
 
-    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
-                      ) -> Iterator[tuple[Any, Any]]:
-        """Yield ``(item, result or exception)`` for every item, in completion order."""
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any],
+                      per_task: int = 1) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, result or exception)`` for every item, in completion order;
+        ``per_task`` items may share one task."""
         ...
 
     def describe(self) -> str:
@@ -97,9 +100,10 @@ class InProcessExecutor:
             raise FleetError("max_in_flight must be at least 1")
         self.max_in_flight = int(max_in_flight)
 
-    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
-                      ) -> Iterator[tuple[Any, Any]]:
-        """Yield ``(item, func(item))``, or ``(item, exception)`` when ``func`` raised one."""
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any],
+                      per_task: int = 1) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, func(item))``, or ``(item, exception)`` when ``func`` raised one
+        (``per_task`` is for the interface: here every item is its own call)."""
         for item in items:
             try:
                 outcome = func(item)
@@ -174,13 +178,18 @@ class DaskExecutor:
             raise FleetError(f"cannot start or reach {where} ({_first_line(exc)}); check "
                              "the address and that its workers run") from None
         self.scheduler = scheduler
-        n = self.workers
-        self.max_in_flight = int(max_in_flight or IN_FLIGHT_PER_WORKER * max(1, n))
+        self._max_in_flight = max_in_flight
 
     @property
     def workers(self) -> int:
         """Workers connected now."""
         return len(self.client.scheduler_info(n_workers=-1).get("workers", {}))
+
+    @property
+    def max_in_flight(self) -> int:
+        """Tasks pending at most: as given, else :data:`IN_FLIGHT_PER_WORKER` per worker
+        connected now (a cluster that grows gets more)."""
+        return int(self._max_in_flight or IN_FLIGHT_PER_WORKER * max(1, self.workers))
 
     @property
     def shares_files(self) -> bool:
@@ -200,45 +209,63 @@ class DaskExecutor:
         where = self.scheduler or "a local cluster on 127.0.0.1"
         return f"{self.workers} Dask worker(s) at {where}"
 
-    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
-                      ) -> Iterator[tuple[Any, Any]]:
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any],
+                      per_task: int = 1) -> Iterator[tuple[Any, Any]]:
         """Yield ``(item, result or exception)`` as tasks finish; at most
-        ``max_in_flight`` pending. A task whose worker died twice yields
-        :class:`WorkerCrash`.
+        ``max_in_flight`` tasks pending.
 
-        Stopping the iteration early (or Ctrl-C) cancels what is still pending.
+        ``per_task`` items go to one task (the per-task cost of the cluster, a few
+        milliseconds, is then shared: worth it when an item takes tens of
+        milliseconds). When the workers running a task of several items die twice,
+        its items are run again one per task, and an item whose own task's worker
+        dies twice yields :class:`WorkerCrash`. Stopping the iteration early (or
+        Ctrl-C) cancels what is still pending.
         """
         from distributed import as_completed
         from distributed.scheduler import KilledWorker
 
         source = iter(items)
-        pending: dict = {}          # future key -> (future, item)
+        alone: deque = deque()      # items of a crashed task, to run one per task
+        pending: dict = {}          # future key -> (future, items of the task)
         done = as_completed()
 
         def submit_next() -> bool:
-            for item in source:
-                future = self.client.submit(func, item, pure=False)
-                pending[future.key] = (future, item)
-                done.add(future)
-                return True
-            return False
+            group = [alone.popleft()] if alone else list(islice(source, max(1, per_task)))
+            if not group:
+                return False
+            if len(group) == 1:
+                future = self.client.submit(func, group[0], pure=False)
+            else:
+                future = self.client.submit(run_batch, func, group, pure=False)
+            pending[future.key] = (future, group)
+            done.add(future)
+            return True
 
+        limit = self.max_in_flight
         try:
-            for _ in range(self.max_in_flight):
+            for _ in range(limit):
                 if not submit_next():
                     break
             for future in done:
-                _, item = pending.pop(future.key)
+                _, group = pending.pop(future.key)
                 try:
-                    outcome = future.result()
+                    outcomes = future.result()
+                    if len(group) == 1:
+                        outcomes = [outcomes]
                 except KilledWorker:
-                    outcome = WorkerCrash(f"{_label(item)}: the worker process died twice while "
-                                          "working on it (it crashes its reader); skipped")
+                    if len(group) > 1:   # one of them crashes its reader: find which
+                        alone.extend(group)
+                        outcomes = []
+                    else:
+                        outcomes = [WorkerCrash(
+                            f"{_label(group[0])}: the worker process died twice while working "
+                            "on it (it crashes its reader); skipped")]
                 except Exception as exc:  # handed to the caller, like InProcessExecutor
-                    outcome = exc
+                    outcomes = [exc] * len(group)
                 future.release()
-                yield item, outcome
-                submit_next()
+                yield from zip(group, outcomes)
+                while len(pending) < limit and submit_next():
+                    pass
         finally:
             if pending:
                 self.client.cancel([f for f, _ in pending.values()])
@@ -277,6 +304,17 @@ def executor(workers: int | None = None, scheduler: str | None = None):
     if workers and workers > 1:
         return DaskExecutor(workers=workers)
     return InProcessExecutor()
+
+
+def run_batch(func: Callable[[Any], Any], items: list) -> list:
+    """``func`` over ``items`` on a worker: each result, or the exception it raised."""
+    out = []
+    for item in items:
+        try:
+            out.append(func(item))
+        except Exception as exc:  # travels back with its item, like InProcessExecutor
+            out.append(exc)
+    return out
 
 
 def _file_size(path: str) -> int:

@@ -27,6 +27,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from sqlalchemy import select
 
 from ..errors import DischargelabError, LogbookError
@@ -41,6 +42,12 @@ from .summarise import (
 
 #: Summaries written per transaction.
 BATCH_SOURCES = 25
+
+#: Files per task on a cluster: up to this many bytes (at least one file, at most
+#: :data:`TASK_FILES`), so a task lasts long enough to pay for its few milliseconds of
+#: cluster overhead and short enough to spread the work evenly.
+TASK_BYTES = 2_000_000
+TASK_FILES = 8
 
 #: File suffixes taken from folders (a file named on its own is always tried).
 DATA_SUFFIXES = (".csv", ".txt", ".tsv", ".lvm", ".log", ".bin", ".ulg", ".bbl", ".bfl",
@@ -233,7 +240,11 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
     batch: list = []
     failure: BaseException | None = None
     try:
-        for item, outcome in executor.map_unordered(task, _payloads(executor, by_path)):
+        sizes = [path.stat().st_size for path, _, _ in by_path.values()]
+        per_task = int(min(TASK_FILES, max(1, TASK_BYTES // max(1, int(np.mean(sizes))))))\
+            if sizes else 1
+        for item, outcome in executor.map_unordered(task, _payloads(executor, by_path),
+                                                    per_task=per_task):
             key = item[0] if isinstance(item, tuple) else item
             path, pack_name, sha = by_path[key]
             done += 1
