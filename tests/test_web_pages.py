@@ -138,6 +138,9 @@ def test_pack_list_shows_the_databases_numbers(server, browser, db):
     assert expected[0]["eol_efc"] is not None and expected[1]["eol_efc"] is None
     assert rows[0][2] != "–" and rows[1][6] == "–"
     assert browser.text("count") == "2 packs"
+    fill = browser.js("const f = document.querySelector('#packs .bar > span'); return f."
+                      "getBoundingClientRect().width / f.parentNode.getBoundingClientRect().width;")
+    assert fill == pytest.approx(round(expected[0]["capacity_fraction"] * 100) / 100, abs=0.005)
     href = browser.js("return document.querySelector('#packs tbody a').getAttribute('href');")
     assert href == "/packs/cell%20C"
 

@@ -18,7 +18,7 @@
     const withCap = events.filter(e => e.capacity_Ah !== null && e.capacity_Ah !== undefined);
     const withR = events.filter(e => e.resistance_ohm !== null && e.resistance_ohm !== undefined);
     $("pack-summary").textContent = [s.events + (s.events === 1 ? " event" : " events"),
-      s.chemistry, s.cells ? s.cells + " cells in series" : null].filter(Boolean).join(" · ");
+      s.chemistry, s.cells ? s.cells + (s.cells === 1 ? " cell" : " cells") + " in series" : null].filter(Boolean).join(" · ");
     $("m-capacity").textContent = DL.num(s.capacity_Ah, 3);
     $("m-health").textContent = s.capacity_fraction === null || s.capacity_fraction === undefined ? "Ah" : "Ah (" + DL.num(s.capacity_fraction * 100, 0) + " %)";
     $("m-reference").textContent = DL.num(s.reference_capacity_Ah, 3);
@@ -31,8 +31,9 @@
     const bands = [], series = [], vlines = [], hlines = [];
     const band = fc && fc.band;
     if (band && band.efc) {
-      bands.push({x: band.efc, lo: band.lo, hi: band.hi, color: "rgba(37,99,235,0.13)"});
-      series.push({x: band.efc, y: band.capacity_Ah, color: "#2563eb", width: 1.2, dash: [5, 3], label: "trend and 95 % band"});
+      // the band's far end can fall steeply: it is clipped to the measured capacities' range
+      bands.push({x: band.efc, lo: band.lo, hi: band.hi, color: "rgba(37,99,235,0.13)", yFit: false});
+      series.push({x: band.efc, y: band.capacity_Ah, color: "#2563eb", width: 1.2, dash: [5, 3], label: "trend and 95 % band", yFit: false});
     }
     const ivs = withCap.filter(e => e.capacity_interval95);
     for (const e of ivs) series.push({x: [e.efc, e.efc], y: e.capacity_interval95, color: "#93c5fd", width: 1});
