@@ -118,7 +118,11 @@ def test_start_settings_are_checked_like_the_command_line(demo_server, browser):
     assert "at or below the cutoff" in message
     # a fast run to the cutoff: the page ends with the cutoff, as the command line does
     browser.js("document.querySelector('#start-form [name=cutoff_cell_V]').value = '';")
-    start_from_the_page(browser, rate_Hz=2, speed=600, c_rate=2)
+    start_from_the_page(browser, rate_Hz=2, speed=300, c_rate=2)
+    # the demo knows its battery model: the time to cutoff is the model's
+    browser.wait_for("window.__live.status && window.__live.status.time_to_cutoff_method === "
+                     "'model'", 20, "the model's time to cutoff")
+    assert browser.text("m-eta-method") == "(model)"
     browser.wait_for("window.__live.status && window.__live.status.ended_by === 'cutoff'", 60,
                      "the cutoff")
     assert "CUTOFF" in browser.text("message")
@@ -136,12 +140,15 @@ def test_acquire_serve_shows_the_command_lines_test_and_stops_it(tmp_path, brows
     with VirtualDevice("zippy-1100-2s", speed=1, seed=21, current_A=1.1) as dev:
         acq = ServerProcess(["acquire", "--port", dev.port, "--out", str(log_path), "--ke",
                              "4.38", "--current", "1.1", "--cells", "2", "--rate", "5",
-                             "--quiet", "--serve", "--serve-port", "0"])
+                             "--quiet", "--serve", "--serve-port", "0",
+                             "--battery-model", "zippy-1100-2s"])
         try:
             browser.get(acq.url)
             browser.wait_for("window.__live && window.__live.n.length >= 25", 30,
                              "5 s of samples")
             assert browser.js("return window.__live.status.mode;") == "watch"
+            browser.wait_for("window.__live.status.time_to_cutoff_method === 'model'", 10,
+                             "the model's time to cutoff (--battery-model)")
             assert browser.js("return document.getElementById('start').disabled;")
             browser.driver.find_element("id", "stop").click()
             assert acq.proc.wait(30) == 0                  # stopped like Ctrl-C: status 0

@@ -1,91 +1,114 @@
-"""The pack list and pack page in headless Chromium, and the upload form.
+"""The pack list and pack page in headless Chromium, on a real logbook database.
 
-The pages are fed through the logbook API of the agreed contract (``Logbook.packs``,
-``pack``, ``health``, ``events``, ``add_bytes``). Until the logbook package is available in
-this tree the tests run against :class:`ContractLogbook`, an in-memory logbook with that
-interface and fixed numbers, so they check that every number on the page is the one the
-API returned.
+A SQLite logbook is built in the test's folder from cell C's ageing files (read in place
+from ../shared/data) and a synthetic 2S discharge made here; ``dischargelab serve --db``
+runs on it in a subprocess (127.0.0.1, a free port, stopped by its process id). Every
+number a page shows is compared with what :class:`dischargelab.Logbook` reads from the
+same database, formatted as the page formats it.
 """
 
+from __future__ import annotations
+
+import hashlib
+import math
+import shutil
+import sqlite3
+from pathlib import Path
+
+import numpy as np
 import pytest
 
+pytest.importorskip("sqlalchemy")
+pytest.importorskip("starlette")
+
 import dischargelab as dl
-from dischargelab.errors import DataError
-from web_helpers import Browser, ThreadServer
+from dischargelab.engine import Step
+from dischargelab.simulate import simulate
+from web_helpers import Browser, ServerProcess, multipart
+
+CELL_C = "samsung30q_ageing_cellC"
+#: Cycles of cell C in the logbook (cycle 300 was overcharged; the rest span its fade).
+CYCLES = (1, 100, 200, 300, 400, 500)
+#: The cell C file uploaded through the page.
+UPLOADED_CYCLE = 600
+#: --max-upload of the test servers [MB] (a cell C file is ~200 kB).
+MAX_UPLOAD_MB = 1.0
+MISSION = "paper-table5"
 
 
-class _Table:
-    def __init__(self, data):
-        self.data = data
-
-    def to_dict(self):
-        return self.data
+def cell_c(shared_data: Path, cycle: int) -> Path:
+    return shared_data / CELL_C / f"DischargeCycle{cycle:03d}.txt"
 
 
-class _Pack:
-    def __init__(self, name, reference):
-        self.name, self.reference_capacity_Ah = name, reference
+def synthetic_discharge(path: Path, capacity_scale: float = 1.0) -> Path:
+    """A 2S LiPo bench log (time_s, voltage_V, current_A): 60 s at rest, then 1.1 A to
+    3.0 V per cell, simulated on the zippy-1100-2s preset, sampled every 2 s, its time
+    axis (so its charge) scaled by ``capacity_scale``."""
+    bat = dl.load("zippy-1100-2s")
+    sim = simulate(bat, [Step("rest", 0.0, 60.0), Step("current", 1.1)], cutoff_cell_V=3.0,
+                   points_per_step=400)
+    t = np.arange(0.0, float(sim.time_s[-1]), 2.0)
+    v = np.interp(t, sim.time_s, sim.voltage_V)
+    i = np.interp(t, sim.time_s, sim.current_A)
+    rows = [f"{a * capacity_scale:.1f},{b:.4f},{c:.3f}" for a, b, c in zip(t, v, i)]
+    path.write_text("time_s,voltage_V,current_A\n" + "\n".join(rows) + "\n")
+    return path
 
-    def to_battery(self):
-        return dl.load("zippy-1100-2s")
 
-    battery = to_battery
+def num(value, digits: int) -> str:
+    """Python's twin of the pages' DL.num (toFixed; '–' for no value)."""
+    if value is None or not math.isfinite(value):
+        return "–"
+    return f"{value:.{digits}f}"
 
 
-class ContractLogbook:
-    """In-memory logbook with the contract's interface (see the module docstring)."""
+def list_row(row: dict) -> list[str]:
+    """A row of the pack list as the page writes it, from ``Logbook.packs()``."""
+    frac = row["capacity_fraction"]
+    iv = row["eol_efc_interval95"]
+    return [row["name"], str(row["events"]), num(row["efc"], 1), num(row["capacity_Ah"], 3),
+            "–" if frac is None else f"{math.floor(frac * 100 + 0.5)} %",
+            "–" if row["resistance_ohm"] is None else num(row["resistance_ohm"] * 1000, 1),
+            num(row["eol_efc"], 0),
+            "–" if not iv else f"{num(iv[0], 0)} – {num(iv[1], 0)}"]
 
-    def __init__(self):
-        self.rows = [
-            {"name": "zippy-a", "events": 3, "efc": 41.5, "capacity_Ah": 1.032,
-             "capacity_fraction": 0.938, "resistance_ohm": 0.0412, "eol_efc": 212.0,
-             "eol_efc_interval95": [160.0, 290.0]},
-            {"name": "zippy-b", "events": 1, "efc": 7.0, "capacity_Ah": 1.087,
-             "capacity_fraction": 0.988, "resistance_ohm": None, "eol_efc": None,
-             "eol_efc_interval95": None},
-        ]
-        self.health_events = {"zippy-a": [
-            {"source": "a1.csv", "start": "2026-01-02T10:00:00", "kind": "full",
-             "discharged_Ah": 1.08, "capacity_Ah": 1.081, "capacity_interval95": [1.07, 1.09],
-             "resistance_ohm": 0.038, "efc": 1.0, "outlier": False},
-            {"source": "a2.csv", "start": "2026-02-02T10:00:00", "kind": "full",
-             "discharged_Ah": 1.05, "capacity_Ah": 1.055, "capacity_interval95": [1.04, 1.07],
-             "resistance_ohm": 0.040, "efc": 20.0, "outlier": False},
-            {"source": "a3.csv", "start": "2026-03-02T10:00:00", "kind": "flight",
-             "discharged_Ah": 0.71, "capacity_Ah": 1.032, "capacity_interval95": [1.0, 1.06],
-             "resistance_ohm": 0.0412, "efc": 41.5, "outlier": False}],
-            "zippy-b": []}
 
-    def packs(self):
-        return _Table({"rows": self.rows})
+def content(path: Path) -> str:
+    """Digest of everything stored in a SQLite database (its write-ahead log included)."""
+    conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    try:
+        return hashlib.sha256("\n".join(conn.iterdump()).encode()).hexdigest()
+    finally:
+        conn.close()
 
-    def pack(self, name):
-        return _Pack(name, 1.1)
 
-    def events(self, name):
-        return _Table({"pack": name, "rows": self.health_events[name]})
-
-    def health(self, name, eol=0.8):
-        forecast = ({"threshold_Ah": 0.88, "eol_efc": 212.0, "eol_efc_interval95": [160.0, 290.0]}
-                    if name == "zippy-a" else None)
-        return _Table({"pack": name, "events": self.health_events[name], "forecast": forecast})
-
-    def add_bytes(self, file_name, data, pack):
-        if not data.startswith(b"time_s,"):
-            raise DataError(f"{file_name}: not a discharge log (no time_s column)")
-        self.rows.append({"name": pack, "events": 1, "efc": 1.0, "capacity_Ah": 1.1,
-                          "capacity_fraction": 1.0, "resistance_ohm": None, "eol_efc": None,
-                          "eol_efc_interval95": None})
-        self.health_events[pack] = []
-        return _Table({"added": [file_name], "skipped": [], "rejected": [], "events": 1})
+@pytest.fixture(scope="module")
+def template_db(tmp_path_factory, shared_data) -> Path:
+    """The logbook every test copies: pack 'cell C' (six cycles), pack 'zippy 2S' (one
+    synthetic discharge); no model fitted."""
+    folder = tmp_path_factory.mktemp("logbook")
+    path = folder / "template.sqlite"
+    with dl.Logbook(str(path)) as lb:
+        added = lb.add([cell_c(shared_data, c) for c in CYCLES], pack="cell C")
+        assert added.events == len(CYCLES) and not added.rejected
+        added = lb.add([synthetic_discharge(folder / "zippy-2s-001.csv")], pack="zippy 2S")
+        assert added.events == 1 and not added.rejected
+    return path
 
 
 @pytest.fixture
-def pages_server():
-    srv = ThreadServer(db=None)
-    srv.server.app_state("packs")._logbook = ContractLogbook()
+def db(template_db, tmp_path) -> Path:
+    path = tmp_path / "logbook.sqlite"
+    shutil.copyfile(template_db, path)
+    return path
+
+
+@pytest.fixture
+def server(db, tmp_path):
+    srv = ServerProcess(["serve", "--db", str(db), "--port", "0",
+                         "--max-upload", str(MAX_UPLOAD_MB)], cwd=tmp_path)
     yield srv
-    srv.server.stop()
+    srv.stop()
 
 
 @pytest.fixture
@@ -95,56 +118,175 @@ def browser():
     b.quit()
 
 
-def test_pack_list_shows_the_logbooks_numbers(pages_server, browser):
-    browser.get(f"http://127.0.0.1:{pages_server.port}/")
-    browser.wait_for("window.__packs && window.__packs.loaded")
-    rows = browser.js("return [...document.querySelectorAll('#packs tbody tr')].map("
+def page_rows(browser) -> list[list[str]]:
+    return browser.js("return [...document.querySelectorAll('#packs tbody tr')].map("
                       "r => [...r.cells].map(c => c.textContent.trim()));")
-    assert rows[0][:4] == ["zippy-a", "3", "41.5", "1.032"]
-    assert rows[0][4].startswith("94 %") and rows[0][5] == "41.2" and rows[0][6] == "212"
-    assert rows[0][7] == "160 – 290"
-    assert rows[1][:4] == ["zippy-b", "1", "7.0", "1.087"] and rows[1][6] == "–"
 
 
-def test_pack_page_shows_health_events_and_model(pages_server, browser):
-    browser.get(f"http://127.0.0.1:{pages_server.port}/packs/zippy-a")
-    browser.wait_for("window.__pack && window.__pack.loaded")
-    assert browser.text("m-capacity") == "1.032" and browser.text("m-efc") == "41.5"
-    assert browser.text("m-eol") == "212" and "160–290" in browser.text("m-eol-iv")
-    cells = browser.js("return [...document.querySelectorAll('#events tbody tr')].map("
-                       "r => r.cells[0].textContent + ' ' + r.cells[4].textContent);")
-    assert cells == ["a3.csv 1.032", "a2.csv 1.055", "a1.csv 1.081"]
-    curves = browser.js("return window.__pack.data.model.curves.length;")
-    assert curves == 3
-    mission = browser.js("return document.getElementById('mission').value;")
+def open_list(browser, server) -> list[list[str]]:
+    browser.get(server.base + "/")
+    browser.wait_for("window.__packs && window.__packs.loaded", what="the pack list")
+    return page_rows(browser)
+
+
+def test_pack_list_shows_the_databases_numbers(server, browser, db):
+    rows = open_list(browser, server)
+    with dl.Logbook(str(db)) as lb:
+        expected = lb.packs().to_dict()["rows"]
+    assert [r["name"] for r in expected] == ["cell C", "zippy 2S"]
+    assert rows == [list_row(r) for r in expected]
+    assert expected[0]["eol_efc"] is not None and expected[1]["eol_efc"] is None
+    assert rows[0][2] != "–" and rows[1][6] == "–"
+    assert browser.text("count") == "2 packs"
+    fill = browser.js("const f = document.querySelector('#packs .bar > span'); return f."
+                      "getBoundingClientRect().width / f.parentNode.getBoundingClientRect().width;")
+    assert fill == pytest.approx(round(expected[0]["capacity_fraction"] * 100) / 100, abs=0.005)
+    href = browser.js("return document.querySelector('#packs tbody a').getAttribute('href');")
+    assert href == "/packs/cell%20C"
+
+
+@pytest.mark.slow
+def test_pack_page_reads_without_writing_then_refits_and_flies(server, browser, db):
+    before = content(db)
+    browser.get(server.base + "/packs/cell%20C")
+    browser.wait_for("window.__pack && window.__pack.loaded", what="the pack page")
+    with dl.Logbook(str(db)) as lb:
+        pack = lb.pack("cell C")
+        summary, health = pack.to_dict(), lb.health("cell C").to_dict()
+        assert not pack.fitted
+    # the numbers stored, as the page formats them
+    assert browser.text("m-capacity") == num(summary["capacity_Ah"], 3)
+    fraction = summary["capacity_Ah"] / summary["reference_capacity_Ah"]
+    assert browser.text("m-health") == f"Ah ({num(fraction * 100, 0)} %)"
+    assert browser.text("m-reference") == num(summary["reference_capacity_Ah"], 3)
+    assert browser.text("m-efc") == num(summary["efc"], 1)
+    assert browser.text("m-resistance") == num(summary["resistance_ohm"] * 1000, 1)
+    fc = health["forecast"]
+    assert browser.text("m-eol") == num(fc["eol_efc"], 0)
+    lo, hi = fc["eol_efc_interval95"]
+    assert browser.text("m-eol-iv") == f"EFC (95 %: {num(lo, 0)}–{num(hi, 0)})"
+    assert browser.text("pack-summary") == f"{len(CYCLES)} events"
+    events = browser.js("return [...document.querySelectorAll('#events tbody tr')].map("
+                        "r => [...r.cells].map(c => c.textContent));")
+    assert [(e[0], e[2], e[4], e[7]) for e in events] == [
+        (e["source"], e["kind"], num(e["capacity_Ah"], 3), num(e["efc"], 1))
+        for e in reversed(health["events"])]
+    assert [e[0] for e in events[::-1]] == [f"DischargeCycle{c:03d}.txt" for c in CYCLES]
+    band = browser.js("return window.__pack.data.health.forecast.band;")
+    assert len(band["efc"]) == len(band["lo"]) == len(band["hi"]) > 10
+    # no model stored: the page says so, flying is off, and the GET wrote nothing
+    assert browser.js("return window.__pack.data.model;") is None
+    assert browser.js("return window.__pack.data.model_note;") == "no model fitted yet — Refit"
+    assert browser.js("return document.getElementById('fly').disabled;")
+    status, body = server.request("POST", "/api/packs/cell%20C/endurance",
+                                  b'{"mission": "%s"}' % MISSION.encode(),
+                                  {"Content-Type": "application/json"})
+    assert status == 409 and "no fitted model yet" in body["error"]
+    assert content(db) == before
+    with dl.Logbook(str(db)) as lb:
+        assert not lb.pack("cell C").fitted
+
+    # the refit is the explicit POST; then the curves and the endurance use the stored model
+    browser.driver.find_element("id", "refit").click()
+    browser.wait_for("window.__pack.data.model && window.__pack.data.model.curves", 120,
+                     "the refitted model")
+    assert browser.text("fit-result") == "model refitted"
+    assert content(db) != before
+    with dl.Logbook(str(db)) as lb:
+        assert lb.pack("cell C").fitted
+        expected = dl.endurance(lb.pack("cell C"), MISSION).to_dict()
+    model = browser.js("return window.__pack.data.model;")
+    assert [c["c_rate"] for c in model["curves"]] == [0.5, 1.0, 2.0]
+    assert "scaled to its health today" in browser.text("model-note")
+    assert browser.js("return document.getElementById('mission').value;") == MISSION
     browser.driver.find_element("id", "fly").click()
     result = browser.wait_for("window.__endurance", 60, "the endurance result")
-    expected = dl.endurance(dl.load("zippy-1100-2s"), mission).to_dict()
     assert result["flight_time_s"] == pytest.approx(expected["flight_time_s"], rel=1e-9)
+    assert any("scaled to its health today" in n for n in result["notes"])
 
 
-def test_unknown_pack_is_a_404_on_the_page_and_the_api(pages_server, browser):
-    status, data, _ = pages_server.request("GET", "/api/packs/nope")
-    assert status == 404 and data["error"] == "no pack named 'nope' in the logbook"
-    browser.get(f"http://127.0.0.1:{pages_server.port}/packs/nope")
-    browser.wait_for("window.__pack && window.__pack.loaded")
-    assert "no pack named 'nope'" in browser.text("message")
-
-
-def test_an_upload_appears_in_the_list_and_garbage_is_refused(pages_server, browser, tmp_path):
-    log = tmp_path / "new-run.csv"
-    log.write_text("time_s,voltage_V,current_A\n0,8.2,1.1\n1,8.1,1.1\n")
-    browser.get(f"http://127.0.0.1:{pages_server.port}/")
-    browser.wait_for("window.__packs && window.__packs.loaded")
-    browser.driver.find_element("id", "upload-pack").send_keys("zippy-new")
-    browser.driver.find_element("id", "upload-file").send_keys(str(log))
+@pytest.mark.slow
+def test_uploads_through_the_form_and_the_api_appear_in_the_list(server, browser, db,
+                                                                  shared_data, tmp_path):
+    open_list(browser, server)
+    uploaded = cell_c(shared_data, UPLOADED_CYCLE)
+    browser.driver.find_element("id", "upload-pack").send_keys("cell C")
+    browser.driver.find_element("id", "upload-file").send_keys(str(uploaded))
     browser.driver.find_element("id", "upload-button").click()
-    browser.wait_for("window.__packs.rows.some(r => r.name === 'zippy-new')", 20, "the new pack")
-    assert "new-run.csv: added" in browser.text("upload-result")
+    browser.wait_for("window.__packs.rows.some(r => r.name === 'cell C' && r.events === "
+                     f"{len(CYCLES) + 1})", 60, "the uploaded event in the list")
+    assert browser.text("upload-result") == f"{uploaded.name}: added, 1 events"
+    with dl.Logbook(str(db)) as lb:
+        expected = lb.packs().to_dict()["rows"]
+        sources = [e["source"] for e in lb.health("cell C").to_dict()["events"]]
+    assert page_rows(browser) == [list_row(r) for r in expected]
+    assert uploaded.name in sources
+
+    # the API: multipart `file` and `pack`, a new pack; the page lists it on reload
+    log = synthetic_discharge(tmp_path / "spare-001.csv", capacity_scale=0.97)
+    body, ctype = multipart({"pack": "zippy spare"}, {"file": (log.name, log.read_bytes())})
+    status, data = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+    assert status == 200 and data["added"] == [log.name] and data["events"] == 1
+    status, data = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+    assert status == 200 and data["skipped"] == [log.name] and data["added"] == []
+    rows = open_list(browser, server)
+    with dl.Logbook(str(db)) as lb:
+        expected = lb.packs().to_dict()["rows"]
+    assert [r["name"] for r in expected] == ["cell C", "zippy 2S", "zippy spare"]
+    assert rows == [list_row(r) for r in expected]
+
+
+def test_bad_requests_get_a_clear_4xx_and_the_server_stays_up(server, db, tmp_path):
+    packs = server.get_json("/api/packs")
+    before = content(db)
+
+    def refused(method, path, body=None, headers=None, status=400, words=""):
+        got, data = server.request(method, path, body, headers)
+        assert got == status, (path, got, data)
+        assert isinstance(data, dict) and set(data) == {"error"}, data
+        line = data["error"]
+        assert line and "\n" not in line and "Traceback" not in line and words in line, line
+        assert server.alive and server.get_json("/api/packs") == packs
+        return line
+
+    garbage = bytes(range(256)) * 64
+    body, ctype = multipart({"pack": "cell C"}, {"file": ("garbage.bin", garbage)})
+    line = refused("POST", "/api/upload", body, {"Content-Type": ctype}, 422, "garbage.bin: ")
+    assert len(line) < 300
+    text = b"time_s;volts\nnot,a,log\n" * 10
+    body, ctype = multipart({"pack": "cell C"}, {"file": ("notes.csv", text)})
+    refused("POST", "/api/upload", body, {"Content-Type": ctype}, 422, "notes.csv: ")
+    big = b"0" * int((MAX_UPLOAD_MB + 0.1) * 1024 * 1024)
+    body, ctype = multipart({"pack": "cell C"}, {"file": ("big.csv", big)})
+    refused("POST", "/api/upload", body, {"Content-Type": ctype}, 413, "over the limit")
+    refused("POST", "/api/upload", b"x=1", {"Content-Type": "application/x-www-form-urlencoded"},
+            400, "multipart/form-data")
+    for path in ("/static/../../../etc/passwd", "/static/%2e%2e%2f%2e%2e%2fetc%2fpasswd",
+                 "/static/%252e%252e%252fpyproject.toml", "/packs/..%2f..%2fetc%2fpasswd",
+                 "/api/packs/%2e%2e%2fcell%20C", "/api/packs/%252e%252e"):
+        refused("GET", path, words="path")
+    refused("GET", "/api/packs/no%20such%20pack", status=404,
+            words="no pack named 'no such pack' in the logbook")
+    refused("POST", "/api/packs/no%20such%20pack/fit", b"{}",
+            {"Content-Type": "application/json"}, 404, "no pack named")
+    refused("POST", "/api/packs/cell%20C/endurance", b'{"mission": "to-the-moon"}',
+            {"Content-Type": "application/json"}, 400, "unknown mission 'to-the-moon'")
+    assert content(db) == before                  # nothing refused reached the database
+
+
+@pytest.mark.slow
+def test_unknown_pack_and_garbage_upload_on_the_pages(server, browser, tmp_path):
+    browser.get(server.base + "/packs/no%20such%20pack")
+    browser.wait_for("window.__pack && window.__pack.loaded", what="the pack page")
+    assert browser.js("return window.__pack.status;") == 404
+    assert browser.text("message") == "no pack named 'no such pack' in the logbook"
+    open_list(browser, server)
     garbage = tmp_path / "garbage.bin"
     garbage.write_bytes(bytes(range(256)) * 8)
+    browser.driver.find_element("id", "upload-pack").send_keys("cell C")
     browser.driver.find_element("id", "upload-file").send_keys(str(garbage))
     browser.driver.find_element("id", "upload-button").click()
-    message = browser.wait_for("document.getElementById('message').textContent", 20, "refusal")
-    assert "garbage.bin: not a discharge log" in message
-    assert pages_server.alive()
+    message = browser.wait_for("document.getElementById('message').textContent", 30,
+                               "the refusal")
+    assert message.startswith("garbage.bin: ") and "\n" not in message
+    assert server.alive and len(server.get_json("/api/packs")["rows"]) == 2

@@ -49,6 +49,8 @@ class AcquireSettings:
     give_up_after_s: float | None = None
     fsync_interval_s: float = 0.5
     extra_meta: dict = field(default_factory=dict)
+    #: Battery model of the pack on test (a Battery): the live time to cutoff is the model's.
+    battery_model: object | None = None
 
 
 @dataclass
@@ -108,7 +110,8 @@ class Acquisition:
         self.display = LiveDisplay(
             cells_series=limits.cells_series, cutoff_pack_V=limits.cutoff_pack_V,
             current_given_A=settings.current_A, stats=lambda: self.pipeline.stats,
-            safety=self.safety, title=f"dischargelab acquire  {settings.port} -> {settings.out}")
+            safety=self.safety, title=f"dischargelab acquire  {settings.port} -> {settings.out}",
+            battery=settings.battery_model)
         consumers += [self.display, self.safety]
         if settings.logview:
             from .logview import LogViewWriter
@@ -278,6 +281,7 @@ def prepare_acquisition(settings: AcquireSettings) -> Acquisition:
             "max_temperature_C": limits.max_temperature_C,
             "debounce_samples": limits.debounce_samples,
             "current_given_A": settings.current_A,
+            "battery_model": getattr(settings.battery_model, "name", None),
             "firmware": info.get("firmware"),
             "source_info": info,
             "host": platform.node(), "dischargelab_version": __version__,

@@ -19,9 +19,16 @@ from ..errors import DischargelabError
 
 SPARK_CHARS = "▁▂▃▄▅▆▇█"
 
-#: Samples kept for the time-to-cutoff estimate, and the test-time window it fits [s].
+#: Samples kept for the time-to-cutoff estimate, and the test-time window it uses [s]
+#: (the voltage trend, or the mean current run through the battery model).
 RECENT_POINTS = 600
 ETA_WINDOW_S = 120.0
+#: Least wall-clock time between two runs of the battery model for the estimate [s].
+MODEL_EVERY_S = 1.0
+#: Test time at the start whose mean voltage and current say, through the battery model,
+#: how much charge the pack had given before the test [s] (one sample is not enough:
+#: on a flat curve one ADC step of the pack voltage is several % of the charge).
+START_WINDOW_S = 30.0
 
 
 def sparkline(values, width: int = 48) -> str:
@@ -84,12 +91,24 @@ class LiveDisplay:
     safety : SafetyMonitor, optional
         Shown as debounce / trip state.
     title : str
+    battery : Battery, optional
+        Model of the pack on test: the time to cutoff is then the model's
+        (:meth:`time_to_cutoff`); otherwise the voltage trend's.
     """
 
     def __init__(self, *, cells_series: int = 1, cutoff_pack_V: float | None = None,
                  current_given_A: float | None = None, stats=None, safety=None, title: str = "",
-                 clock=time.monotonic):
+                 clock=time.monotonic, battery=None):
         self.cells_series = max(1, int(cells_series))
+        if battery is not None:
+            from .remaining import for_pack
+
+            battery = for_pack(battery, self.cells_series)
+        self.battery = battery
+        self._start = [0, 0.0, 0.0, 0.0]      # samples, sums of voltage, current, logged Ah
+        self._start_t: float | None = None
+        self._charge_before: float | None = None
+        self._model_eta: tuple[float, int, float | None] | None = None  # (wall, samples, s)
         self.cutoff_pack_V = cutoff_pack_V
         self.current_given_A = current_given_A
         self._stats = stats or (dict)
@@ -103,7 +122,7 @@ class LiveDisplay:
         self.charge_Ah = 0.0
         self.energy_Wh = 0.0
         self.trend = Trend()
-        self._recent: deque = deque(maxlen=RECENT_POINTS)   # (time_s, voltage_V) for the ETA
+        self._recent: deque = deque(maxlen=RECENT_POINTS)   # (time_s, voltage_V, current_A)
         self._arrivals: deque = deque(maxlen=21)          # about 5 s at 4 points per second
         self._prev = None
         self.link = "connecting"
@@ -131,11 +150,19 @@ class LiveDisplay:
         self._prev = sample
         self.last = sample
         self.samples += 1
+        if self.battery is not None and math.isfinite(sample.voltage_V):
+            if self._start_t is None:
+                self._start_t = sample.time_s
+            if sample.time_s - self._start_t <= START_WINDOW_S:
+                n, v, i, q = self._start
+                self._start = [n + 1, v + sample.voltage_V,
+                               i + (self.current_of(sample) or 0.0), q + self.charge_Ah]
+                self._charge_before = None
         if math.isfinite(sample.voltage_V):
             self.min_voltage_V = min(self.min_voltage_V, sample.voltage_V)
         self.trend.add(sample.time_s, sample.voltage_V)
         if math.isfinite(sample.voltage_V):
-            self._recent.append((sample.time_s, sample.voltage_V))
+            self._recent.append((sample.time_s, sample.voltage_V, self.current_of(sample)))
         now = self._clock()
         if not self._arrivals or now - self._arrivals[-1][0] >= 0.25:
             self._arrivals.append((now, self.samples))
@@ -168,21 +195,84 @@ class LiveDisplay:
             return 0.0
         return (n1 - n0) / (t1 - t0) if t1 > t0 else math.nan
 
-    def time_to_cutoff_s(self, window_s: float = ETA_WINDOW_S) -> float | None:
+    def _window(self, window_s: float) -> list:
+        recent = list(self._recent)       # one atomic copy: the pipeline thread appends
+        if not recent:
+            return []
+        t_end = recent[-1][0]
+        return [r for r in recent if r[0] >= t_end - window_s]
+
+    def time_to_cutoff(self) -> tuple[float | None, str | None]:
+        """Test time left until the cutoff [s] and how it was found: ``"model"`` (the
+        battery model, :meth:`model_time_to_cutoff_s`) when one is known and can say,
+        else ``"trend"`` (:meth:`trend_time_to_cutoff_s`); ``(None, None)`` when neither
+        can."""
+        if self.battery is not None:
+            seconds = self.model_time_to_cutoff_s()
+            if seconds is not None:
+                return seconds, "model"
+        seconds = self.trend_time_to_cutoff_s()
+        return (seconds, "trend") if seconds is not None else (None, None)
+
+    @property
+    def charge_before_Ah(self) -> float | None:
+        """Pack charge out before the test [Ah] by the battery model: the mean voltage and
+        current of the first :data:`START_WINDOW_S` of test time read on the model
+        (:func:`~dischargelab.acquire.remaining.charge_before_test_Ah`), less the charge
+        logged meanwhile; 0 for a full pack, None without a model or data."""
+        if self.battery is None or not self._start[0]:
+            return None
+        if self._charge_before is None:
+            from .remaining import charge_before_test_Ah
+
+            n, v, i, q = self._start
+            self._charge_before = max(0.0, charge_before_test_Ah(self.battery, v / n, i / n)
+                                      - q / n)
+        return self._charge_before
+
+    def model_time_to_cutoff_s(self, window_s: float = ETA_WINDOW_S) -> float | None:
+        """Test time left [s] by the battery model: from the charge out so far (the
+        charge before the test plus the logged Ah) at the mean current of the last
+        ``window_s`` of test time (:mod:`dischargelab.acquire.remaining`); None without
+        a model, a cutoff, a current, or when the model reads the pack at the cutoff.
+
+        The model runs at most every :data:`MODEL_EVERY_S` of wall time; in between,
+        the last answer is counted down by the test time since.
+        """
+        if self.battery is None or not self.cutoff_pack_V or self.last is None:
+            return None
+        now = self._clock()
+        cached = self._model_eta
+        if cached is not None and now - cached[0] < MODEL_EVERY_S:
+            _, t_then, seconds = cached
+            return None if seconds is None else max(0.0, seconds - (self.last.time_s - t_then))
+        pts = [i for _, _, i in self._window(window_s) if i is not None and math.isfinite(i)]
+        seconds = None
+        if pts:
+            from .remaining import model_time_to_cutoff_s
+
+            seconds = model_time_to_cutoff_s(
+                self.battery, charge_out_Ah=(self.charge_before_Ah or 0.0) + self.charge_Ah,
+                current_A=sum(pts) / len(pts), cutoff_pack_V=self.cutoff_pack_V)
+        self._model_eta = (now, self.last.time_s, seconds)
+        return seconds
+
+    def trend_time_to_cutoff_s(self, window_s: float = ETA_WINDOW_S) -> float | None:
         """Test time left until the pack reaches the cutoff at its present rate of fall [s].
 
         A straight line fitted (least squares) to the pack voltage over the last
         ``window_s`` of test time (at most :data:`RECENT_POINTS` samples) is
         extended to ``cutoff_pack_V``. A discharge curve bends down at its knee,
-        so this is an upper estimate that shrinks as the knee approaches; None
-        when there is no cutoff, too little data, or the voltage is not falling.
+        so this is an upper estimate that shrinks as the knee approaches (hours
+        too long on the flat middle of a LiPo curve); None when there is no cutoff,
+        too little data, or the voltage is not falling.
         """
         if not self.cutoff_pack_V or len(self._recent) < 3:
             return None
-        t_end = self._recent[-1][0]
-        pts = [(t, v) for t, v in self._recent if t >= t_end - window_s]
+        pts = [(t, v) for t, v, _ in self._window(window_s)]
         if len(pts) < 3:
             return None
+        t_end = pts[-1][0]
         n = len(pts)
         mt = sum(t for t, _ in pts) / n
         mv = sum(v for _, v in pts) / n
@@ -270,6 +360,9 @@ class LiveDisplay:
             else:
                 grid.add_row("current", Text("unknown (give --current A for Ah and Wh)",
                                              style="dim"))
+            left, how = self.time_to_cutoff()
+            if left is not None:
+                grid.add_row("to cutoff", f"{_clock_text(left)}   ({how})")
             if last.temperature_C is not None:
                 grid.add_row("temperature", f"{last.temperature_C:.1f} °C")
             if len(self.trend.values) > 1:

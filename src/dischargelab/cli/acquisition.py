@@ -258,6 +258,10 @@ def _report_acquisition(result, as_json: bool) -> None:
 @click.option("--give-up-after", "give_up_s", type=click.FloatRange(min=0, min_open=True),
               metavar="S", help="End the test if the link stays down this long [s] "
                                 "(default: keep reconnecting until stopped).")
+@click.option("--battery-model", "battery_model", metavar="PRESET|FILE",
+              help="Model of the pack on test (preset or battery file): the time to cutoff "
+                   "is run through it from the charge taken out at the recent mean current, "
+                   "instead of the voltage trend's straight line.")
 @click.option("--serve", is_flag=True,
               help="Also show the test on a live web page (extra web; the address is printed).")
 @click.option("--serve-port", type=click.IntRange(0, 65535), default=8050, show_default=True,
@@ -270,7 +274,8 @@ def _report_acquisition(result, as_json: bool) -> None:
 def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_temp, debounce,
                 rate_Hz, calibration_path, ke, current_A, current_sensor, thermistor,
                 switch_load, duration_s, plot, live, quiet, every_s, force, logview_path, baud,
-                parity, give_up_s, serve, serve_port, serve_host, serve_token, as_json):
+                parity, give_up_s, battery_model, serve, serve_port, serve_host, serve_token,
+                as_json):
     """Log a discharge test from a serial instrument, with live view and safety cutoff.
 
     The producer/consumer program of the paper (section 3.2): samples are
@@ -289,6 +294,8 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
       dischargelab acquire --source ebc-a20 --port /dev/ttyUSB0 --out run.csv --cells 2 \\
           --current 1.7
       dischargelab acquire --port /dev/ttyACM0 --out run.csv --ke 4.38 --current 2 --serve
+      dischargelab acquire --port /dev/ttyACM0 --out run.csv --ke 4.38 --current 2 \\
+          --battery-model pack3.json --serve
     """
     from ..acquire.acquisition import AcquireSettings, prepare_acquisition
     from ..acquire.sensors import Thermistor
@@ -304,6 +311,11 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
 
     logview_file = logview_path if logview_path and not is_serial_target(logview_path) else None
     guard_outputs([out_path, logview_file], [calibration_path], force)
+    model = None
+    if battery_model:
+        from ..model import load_battery
+
+        model = load_battery(battery_model)
     calibration = None
     if calibration_path:
         from ..acquire.calibration import load_calibration
@@ -320,7 +332,7 @@ def acquire_cmd(port, out_path, source_kind, cells, chemistry, cutoff_cell, max_
         current_sensor=make_current_sensor(current_sensor) if current_sensor else None,
         thermistor=Thermistor() if thermistor else None, baudrate=baud, parity=parity,
         switch_load=switch_load, duration_s=duration_s, force=force, logview=logview_path,
-        give_up_after_s=give_up_s)
+        give_up_after_s=give_up_s, battery_model=model)
     web = _live_page_server(serve_host, serve_port, serve_token) if serve else None
     acquisition = prepare_acquisition(settings)
     console = err if as_json else out

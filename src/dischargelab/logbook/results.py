@@ -232,6 +232,12 @@ class Pack:
     _model: Any = None
     _fit: Any = None
 
+    @property
+    def fitted(self) -> bool:
+        """A fitted model of the pack is stored (without one, :meth:`battery` fits and
+        stores one first: a write)."""
+        return self._model is not None
+
     def battery(self):
         """The pack's fitted model scaled to today's capacity and resistance.
 

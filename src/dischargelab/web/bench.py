@@ -50,9 +50,12 @@ class LiveBench:
                 "limits": limits.to_dict(), "rate_Hz": settings.rate_Hz,
                 "current_given_A": settings.current_A, "can_start": self.can_start}
         meta.update(info or {})
+        if settings.battery_model is not None:
+            meta.setdefault("battery_model", settings.battery_model.name)
         self.hub.begin(meta, cells_series=limits.cells_series,
                        cutoff_pack_V=limits.cutoff_pack_V, current_given_A=settings.current_A,
-                       stats=lambda: acquisition.pipeline.stats, safety=acquisition.safety)
+                       stats=lambda: acquisition.pipeline.stats, safety=acquisition.safety,
+                       battery=settings.battery_model)
         acquisition.pipeline.add(self.hub)
 
     def finished(self, result) -> None:
@@ -187,7 +190,7 @@ class DemoBench(LiveBench):
                     debounce_samples=opts["debounce"], rate_Hz=opts["rate_Hz"],
                     calibration=Calibration(gain=gain, divider="virtual"),
                     current_sensor=CURRENT_SENSORS["acs712-20a"], thermistor=Thermistor(),
-                    duration_s=opts.get("duration_s"),
+                    duration_s=opts.get("duration_s"), battery_model=device.battery,
                     extra_meta={"virtual_device": device.truth(), "demo": True}))
             except BaseException:
                 device.stop()

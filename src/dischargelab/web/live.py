@@ -103,8 +103,10 @@ class LiveHub:
 
     # ------------------------------------------------------------------ runs
     def begin(self, info: dict, *, cells_series: int = 1, cutoff_pack_V: float | None = None,
-              current_given_A: float | None = None, stats=None, safety=None) -> None:
-        """Start a new run: clears the history; every subscriber gets a resync."""
+              current_given_A: float | None = None, stats=None, safety=None,
+              battery=None) -> None:
+        """Start a new run: clears the history; every subscriber gets a resync. ``battery``
+        (the pack's model, optional) gives the time to cutoff by the model."""
         with self._lock:
             self.run_id += 1
             self.info = dict(info)
@@ -113,7 +115,7 @@ class LiveHub:
             self.count = 0
             self.display = LiveDisplay(cells_series=cells_series, cutoff_pack_V=cutoff_pack_V,
                                        current_given_A=current_given_A, stats=stats,
-                                       safety=safety, clock=self._clock)
+                                       safety=safety, clock=self._clock, battery=battery)
             self.active = True
             self.ended_by = None
             self.end_message = ""
@@ -229,11 +231,12 @@ class LiveHub:
         last = disp.last
         summary = disp.summary()
         safety = disp.safety
+        left, how = disp.time_to_cutoff() if self.active else (None, None)
         return {
             "run": self.run_id, "active": self.active, "info": self.info,
             "samples": self.count, "ended_by": self.ended_by, "end_message": self.end_message,
             "elapsed_s": None if last is None else _num(last.time_s, 3),
-            "time_to_cutoff_s": _num(disp.time_to_cutoff_s(), 1) if self.active else None,
+            "time_to_cutoff_s": _num(left, 1), "time_to_cutoff_method": how,
             "min_voltage_V": _num(disp.min_voltage_V) if last is not None else None,
             "rate_Hz": _num(disp.rate_Hz, 2), "link": disp.link,
             "safety": safety.pending if safety is not None else "",

@@ -28,6 +28,8 @@ _PACK_NAME = re.compile(r"^[^\x00-\x1f\x7f/\\]{1,100}$")
 CURVE_C_RATES = (0.5, 1.0, 2.0)
 #: Points per model curve sent to the page.
 CURVE_POINTS = 200
+#: What a pack page says when no model is stored.
+NO_MODEL = "no model fitted yet — Refit"
 
 
 def check_pack_name(name: str) -> str:
@@ -124,16 +126,22 @@ class PackPages:
         return JSONResponse(_clean(data))
 
     def _pack_detail(self, name: str) -> dict:
+        """What is stored about a pack, read only: a GET never fits or writes (a pack
+        without a stored model says so; the refit is ``POST /api/packs/NAME/fit``)."""
         name = self._known(name)
         lb = self.logbook()
         pack = lb.pack(name)
-        out = {"name": name,
-               "reference_capacity_Ah": getattr(pack, "reference_capacity_Ah", None),
-               "health": lb.health(name).to_dict(), "events": lb.events(name).to_dict(),
-               "model": None, "model_note": None}
-        model = getattr(pack, "to_battery", None) or pack.battery
+        summary = pack.to_dict()
+        ref, cap = summary.get("reference_capacity_Ah"), summary.get("capacity_Ah")
+        summary["capacity_fraction"] = cap / ref if cap is not None and ref else None
+        health = pack.health if pack.health is not None else lb.health(name)
+        out = {"name": name, "summary": summary, "health": health.to_dict(),
+               "events": lb.events(name).to_dict(), "model": None, "model_note": None}
+        if not pack.fitted:
+            out["model_note"] = NO_MODEL
+            return out
         try:
-            battery = model()
+            battery = pack.battery()
         except DischargelabError as exc:
             out["model_note"] = str(exc)
             return out
@@ -145,9 +153,7 @@ class PackPages:
         out["model"] = {
             "name": battery.name, "family": battery.model,
             "cells_series": battery.cells_series, "strings_parallel": battery.strings_parallel,
-            "capacity_Ah": battery.capacity_Ah,
-            "note": getattr(battery, "extra", {}).get("note") if hasattr(battery, "extra")
-            else None,
+            "capacity_Ah": battery.capacity_Ah, "note": battery.extra.get("note"),
             "curves": [{"c_rate": c, "current_A": sim.to_dict().get("current_A"),
                         "time_to_cutoff_s": sim.time_to_cutoff_s,
                         "charge_Ah": _thin(sim.charge_Ah), "voltage_V": _thin(sim.voltage_V)}
@@ -173,7 +179,11 @@ class PackPages:
         if mission not in bundled_missions():
             raise RequestRefused(400, f"unknown mission {mission!r}; choose one of "
                                       f"{', '.join(sorted(bundled_missions()))}")
-        return dl.endurance(self.logbook().pack(name), mission).to_dict()
+        pack = self.logbook().pack(name)
+        if not pack.fitted:      # flying would fit and store one: only the refit writes
+            raise RequestRefused(409, f"pack {name!r} has no fitted model yet; refit it first "
+                                      f"(Refit, or POST /api/packs/{name}/fit)")
+        return dl.endurance(pack, mission).to_dict()
 
     async def endurance(self, request: Request) -> Response:
         body = await self._json(request)
@@ -185,8 +195,9 @@ class PackPages:
 
     def _refit(self, name: str) -> dict:
         name = self._known(name)
-        result = self.logbook().fit(name)
-        return result.to_dict() if hasattr(result, "to_dict") else {"fitted": name}
+        battery = self.logbook().fit(name)
+        return {"pack": name, "model": battery.name, "family": battery.model,
+                "battery": battery.to_dict()}
 
     async def refit(self, request: Request) -> Response:
         await self._json(request)
@@ -201,10 +212,6 @@ class PackPages:
         file_name, data, pack = parse_upload(request.headers.get("content-type", ""), body)
         pack = check_pack_name(pack)
         result = await self._call(lambda: self.logbook().add_bytes(file_name, data, pack))
-        out = _clean(result.to_dict())
-        rejected = getattr(result, "rejected", None) or []
-        if rejected and not getattr(result, "added", None) and not getattr(result, "skipped",
-                                                                           None):
-            reason = rejected[0][1] if isinstance(rejected[0], (list, tuple)) else rejected[0]
-            return error(422, f"{file_name}: {reason}")
-        return JSONResponse(out)
+        if result.rejected:
+            return error(422, f"{file_name}: {result.rejected[0][1]}")
+        return JSONResponse(_clean(result.to_dict()))

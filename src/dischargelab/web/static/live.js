@@ -11,6 +11,10 @@
     status: null, events: [], connected: false,
   };
   const $ = id => document.getElementById(id);
+  const ETA_HOW = {
+    model: "The pack's battery model run from the charge taken out so far to the cutoff, at the mean current of the last two minutes",
+    trend: "The voltage's present rate of fall extended to the cutoff (no battery model given): an upper estimate that shrinks as the knee of the curve comes",
+  };
   let voltagePlot, currentPlot, drawPending = false;
 
   function reset(firstN) {
@@ -97,6 +101,8 @@
     $("s-safety").textContent = s.safety || (s.active ? "within limits" : "–");
     $("s-min").textContent = s.min_voltage_V === null || s.min_voltage_V === undefined ? "–" : DL.num(s.min_voltage_V, 3) + " V";
     $("m-eta").textContent = s.time_to_cutoff_s === null || s.time_to_cutoff_s === undefined ? "–" : DL.clock(s.time_to_cutoff_s);
+    $("m-eta-method").textContent = s.time_to_cutoff_method ? "(" + s.time_to_cutoff_method + ")" : "";
+    $("eta-meter").title = ETA_HOW[s.time_to_cutoff_method] || "";
     $("start").disabled = !s.can_start;
     $("stop").disabled = !s.can_stop;
     $("start-form").classList.toggle("locked", !s.can_start);

@@ -12,16 +12,18 @@
     window.__pack = {loaded: true, data: d};
     document.title = d.name + " · dischargelab";
     $("pack-name").textContent = d.name;
+    const s = d.summary || {};
     const events = (d.health && d.health.events) || [];
     const fc = d.health && d.health.forecast;
-    const last = events.length ? events[events.length - 1] : {};
     const withCap = events.filter(e => e.capacity_Ah !== null && e.capacity_Ah !== undefined);
     const withR = events.filter(e => e.resistance_ohm !== null && e.resistance_ohm !== undefined);
-    $("pack-summary").textContent = events.length + " events";
-    $("m-capacity").textContent = withCap.length ? DL.num(withCap[withCap.length - 1].capacity_Ah, 3) : "–";
-    $("m-reference").textContent = DL.num(d.reference_capacity_Ah, 3);
-    $("m-efc").textContent = DL.num(last.efc, 1);
-    $("m-resistance").textContent = withR.length ? DL.num(withR[withR.length - 1].resistance_ohm * 1000, 1) : "–";
+    $("pack-summary").textContent = [s.events + (s.events === 1 ? " event" : " events"),
+      s.chemistry, s.cells ? s.cells + (s.cells === 1 ? " cell" : " cells") + " in series" : null].filter(Boolean).join(" · ");
+    $("m-capacity").textContent = DL.num(s.capacity_Ah, 3);
+    $("m-health").textContent = s.capacity_fraction === null || s.capacity_fraction === undefined ? "Ah" : "Ah (" + DL.num(s.capacity_fraction * 100, 0) + " %)";
+    $("m-reference").textContent = DL.num(s.reference_capacity_Ah, 3);
+    $("m-efc").textContent = DL.num(s.efc, 1);
+    $("m-resistance").textContent = s.resistance_ohm === null || s.resistance_ohm === undefined ? "–" : DL.num(s.resistance_ohm * 1000, 1);
     $("m-eol").textContent = fc ? DL.num(fc.eol_efc, 0) : "–";
     $("m-eol-iv").textContent = fc && fc.eol_efc_interval95 ? "EFC (95 %: " + DL.num(fc.eol_efc_interval95[0], 0) + "–" + DL.num(fc.eol_efc_interval95[1], 0) + ")" : "EFC";
 
@@ -29,8 +31,9 @@
     const bands = [], series = [], vlines = [], hlines = [];
     const band = fc && fc.band;
     if (band && band.efc) {
-      bands.push({x: band.efc, lo: band.lo, hi: band.hi, color: "rgba(37,99,235,0.13)"});
-      series.push({x: band.efc, y: band.capacity_Ah, color: "#2563eb", width: 1.2, dash: [5, 3], label: "trend and 95 % band"});
+      // the band's far end can fall steeply: it is clipped to the measured capacities' range
+      bands.push({x: band.efc, lo: band.lo, hi: band.hi, color: "rgba(37,99,235,0.13)", yFit: false});
+      series.push({x: band.efc, y: band.capacity_Ah, color: "#2563eb", width: 1.2, dash: [5, 3], label: "trend and 95 % band", yFit: false});
     }
     const ivs = withCap.filter(e => e.capacity_interval95);
     for (const e of ivs) series.push({x: [e.efc, e.efc], y: e.capacity_interval95, color: "#93c5fd", width: 1});
@@ -58,9 +61,12 @@
                                                   label: DL.num(c.c_rate, 1) + "C (" + DL.num(c.current_A, 1) + " A)"}))});
       $("model-note").textContent = m.note || "";
     } else {
-      new LinePlot($("plot-model"), {}).draw({series: [], empty: "no model for this pack yet"});
-      $("model-note").textContent = d.model_note || "";
+      $("model-name").textContent = "";
+      new LinePlot($("plot-model"), {}).draw({series: [], empty: d.model_note || "no model fitted yet — Refit"});
+      $("model-note").textContent = "Refit fits the pack's model to its latest full discharge and stores it; the curves and the endurance use it, scaled to the pack's health today.";
     }
+    $("fly").disabled = !m;
+    $("fly").title = m ? "" : "no model fitted yet: Refit first";
 
     const body = $("events").querySelector("tbody");
     body.replaceChildren();

@@ -1,6 +1,7 @@
 // dischargelab: a small line plot on a <canvas> (no dependencies).
 // LinePlot(canvas, {xLabel, yLabel}) ; plot.draw({series: [{x, y, color, label, width, dash}],
 // bands: [{x, lo, hi, color}], hlines: [{y, color, label}], vlines: [{x, color, label}]}).
+// A series or band with yFit: false does not widen the y axis (it is clipped to the others').
 // Long series are thinned per pixel column (min and max kept), so drawing stays fast.
 "use strict";
 
@@ -67,8 +68,11 @@
       const hlines = spec.hlines || [];
       const vlines = spec.vlines || [];
       let xr = [Infinity, -Infinity], yr = [Infinity, -Infinity];
-      for (const s of series) { extent(s.x, xr); extent(s.y, yr); }
-      for (const b of bands) { extent(b.x, xr); extent(b.lo, yr); extent(b.hi, yr); }
+      for (const s of series) { extent(s.x, xr); if (s.yFit !== false) extent(s.y, yr); }
+      for (const b of bands) {
+        extent(b.x, xr);
+        if (b.yFit !== false) { extent(b.lo, yr); extent(b.hi, yr); }
+      }
       for (const l of hlines) if (isFinite(l.y)) extent([l.y], yr);
       for (const l of vlines) if (isFinite(l.x)) extent([l.x], xr);
       if (spec.xMin !== undefined) xr[0] = Math.min(xr[0], spec.xMin);
