@@ -47,7 +47,7 @@ import time
 
 from ..discharge import Curve
 from ..errors import FitError
-from .auto import AUTO, choose_model, fit_auto, selection_score
+from .auto import AUTO, choose_model, fit_auto, rate_capacity_error, selection_score
 from .family import HELD_OUT_TAIL, fit_family, guess_parameters, held_out_error
 from .problem import CURRENT_SCALE, _resolve_e0_r, _spec, _stack  # noqa: F401  (benchmarks)
 from .result import FitResult
@@ -125,4 +125,5 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
 
 
 __all__ = ["Curve", "FitResult", "fit_battery", "guess_parameters", "held_out_error",
-           "choose_model", "selection_score", "AUTO", "CURRENT_SCALE", "HELD_OUT_TAIL"]
+           "choose_model", "selection_score", "rate_capacity_error", "AUTO", "CURRENT_SCALE",
+           "HELD_OUT_TAIL"]
