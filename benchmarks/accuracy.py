@@ -479,7 +479,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=default_data_dir())
     parser.add_argument("--sets", default=",".join(SETS))
-    parser.add_argument("--families", default=",".join(FAMILIES))
+    parser.add_argument("--families", default=",".join([*FAMILIES, "auto"]))
     parser.add_argument("--bootstrap", type=int, default=30,
                         help="bootstrap refits per fit (the interval draws; default 30)")
     parser.add_argument("--detail", action="store_true",

@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from ..discharge import measured_time_to_cutoff
 from ..errors import FitError
 from ..models import get_family
 from .family import _several_rates, fit_family
@@ -86,7 +87,6 @@ def rate_capacity_error(battery, curves) -> dict | None:
     """
     from ..errors import SimulationError
     from ..simulate import simulate_current
-    from ..validate import measured_time_to_cutoff
 
     cutoff = max(float(c.voltage_V[-1]) for c in curves)
     rows = []
