@@ -1,5 +1,5 @@
 """Fitting one model family: starts, the bounded variable-projection fit, its
-thermal parameters, identifiability, and the model's own error from held-out data.
+thermal parameters and identifiability.
 
 See :mod:`dischargelab.fit` for the method and its references.
 """
@@ -13,7 +13,7 @@ from scipy.special import stdtrit
 
 from ..cell import CellParameters
 from ..discharge import Curve
-from ..errors import DataError, FitError
+from ..errors import FitError
 from ..identifiability import Identifiability, analyse, equilibrated_svd, plausibility, undetermined
 from ..models import Family, Samples, get_family
 from ..models.base import HELD_AT_AMBIENT_HEAT_CAPACITY, MIN_HEATING_K, fit_lumped_thermal
@@ -72,10 +72,16 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 fixed: dict | None = None, bounds: dict | None = None,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
                 weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
-                seed: int = 0, model="shepherd", model_error: bool = True,
-                progress=None) -> FitResult:
-    """Fit one model family (``model`` a family name, not ``"auto"``); see
-    :func:`dischargelab.fit.fit_battery` for the parameters."""
+                seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
+                max_samples: int = MAX_SAMPLES_PER_CURVE,
+                bootstrap_method: str = "linearised") -> FitResult:
+    """Fit one model family (``model`` a family name, not ``"auto"``) without its
+    held-out model error (:func:`dischargelab.fit.heldout.held_out_error`); see
+    :func:`dischargelab.fit.fit_battery` for the parameters.
+
+    ``start`` (values of the nonlinear parameters, e.g. a fit to more of the same
+    data) skips the multi-start search and refines from there: a warm start.
+    ``max_samples`` thins each curve to at most that many samples."""
     t_start = time.perf_counter()
     curves = [curves] if isinstance(curves, Curve) else list(curves)
     if not curves:
@@ -85,7 +91,8 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         raise FitError("cells in series and strings in parallel must be at least 1")
     if weighting not in ("equal", "samples"):
         raise FitError(f"weighting must be 'equal' or 'samples', got {weighting!r}")
-    stack = _stack(curves, cells_series, strings_parallel, use_rest, weighting)
+    stack = _stack(curves, cells_series, strings_parallel, use_rest, weighting,
+                   max_samples=max_samples)
     requested_fixed = dict(fixed or {})
     if paper_mode:
         if "E0_V" not in requested_fixed:
@@ -96,7 +103,7 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     notes, warnings = [], []
     _resolve_e0_r(family, stack, fixed, notes, warnings)
     for c in curves:
-        used = _thin(c.time_s.size, MAX_SAMPLES_PER_CURVE).size
+        used = _thin(c.time_s.size, max_samples).size
         if used < c.time_s.size:
             notes.append(f"curve {c.name or '?'}: {used} of {c.time_s.size} samples used "
                          f"(evenly thinned in time)")
@@ -107,7 +114,12 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     starts, lo, hi = _starts(mdl, bnds, guess)
     nfev = 0
     theta = np.empty(0)
-    if mdl.nonlinear:
+    if mdl.nonlinear and start is not None and all(n in start for n in mdl.nonlinear):
+        warm = np.clip([float(start[n]) for n in mdl.nonlinear], lo, hi)
+        sol = _varpro_solve(mdl, _defined_start(mdl, warm, hi), lo, hi)
+        nfev += sol.nfev
+        theta = sol.x
+    elif mdl.nonlinear:
         # coarse to fine: search on a thinned copy of the data, refine on all of it
         coarse = _Model(family, _stack(curves, cells_series, strings_parallel, use_rest,
                                        weighting, max_samples=SEARCH_SAMPLES_PER_CURVE),
@@ -174,7 +186,8 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     warnings += implausible + undetermined(family, params, ci95, fixed)
     samples = None
     if bootstrap:
-        samples = _bootstrap(mdl, values, residual, bnds, int(bootstrap), seed, progress)
+        samples = _bootstrap(mdl, values, residual, bnds, int(bootstrap), seed, progress,
+                             method=bootstrap_method)
         if thermal is not None:
             for name in ("Cth_J_per_K", "Rth_K_per_W"):
                 samples[:, names_all.index(name)] = params[name]
@@ -188,16 +201,8 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         n_starts=len(starts), bootstrap=samples, model=family.name,
         ambient_C=float(stack.ambient_C), thermal=thermal, implausible=implausible,
     )
-    if model_error and not paper_mode:
-        result.model_error = held_out_error(
-            curves, model=family.name, cells_series=cells_series,
-            strings_parallel=strings_parallel, fixed=requested_fixed, bounds=bounds,
-            use_rest=use_rest, weighting=weighting)
     result.elapsed_s = time.perf_counter() - t_start
     return result
-
-
-#: ``model`` value that picks the family by evidence.
 
 
 def _interval95(value: float, stderr: float, t_crit: float, positive: bool) -> tuple:
@@ -264,112 +269,3 @@ def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list
                  + how.format(fitted["Cth_J_per_K"], fitted["Rth_K_per_W"])
                  + f" (RMSE {fitted['rmse_K']:.2f} K)")
     return params, dict(fitted, source=source)
-
-
-def _several_rates(curves) -> bool:
-    """Two or more curves whose mean currents differ by 20 % or more."""
-    currents = [c.mean_current_A for c in curves]
-    return len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
-
-
-#: Fraction of a curve's duration left out at its end by :func:`held_out_error`.
-HELD_OUT_TAIL = 0.2
-
-
-def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=None,
-                   bounds=None, use_rest=True, weighting="equal") -> dict | None:
-    """The model's own error of the time to cutoff, from data left out of the fit.
-
-    Two kinds of folds, each predicting the time to the left-out curve's last
-    voltage at its mean current (thermal families from its starting temperature):
-
-    * **whole curves**: each curve in turn is left out and the model fitted to the
-      others. The prediction is an extrapolation by the current ratio ``r_k``
-      between the left-out curve and the fitted ones, so its error is brought back
-      to the fitted currents by dividing it by ``1 + g_k ln r_k``, ``g_k`` being
-      the growth :func:`dischargelab.uncertainty.extrapolation_growth` of that
-      smaller fit (one rate: the prior's; several: the held-out one);
-    * **curve ends**: each curve in turn loses its last :data:`HELD_OUT_TAIL` of
-      duration (the knee and the cutoff) and the model is fitted to that and every
-      other curve. Every rate stays in the fit, so this is an error at the fitted
-      currents, the one a two-curve fit is used for (leaving one of two curves out
-      leaves a one-rate fit).
-
-    Needs two or more curves whose currents differ by 20 % or more.
-
-    Returns
-    -------
-    dict or None
-        ``relative_sd`` and ``dof``: the model error inside the fitted currents,
-        every normalised error pooled with the prior
-        (:func:`dischargelab.uncertainty.held_out_posterior`); ``held_out_rms`` /
-        ``end_rms``: RMS of the raw errors of each kind [-] (None when none could
-        be computed); ``errors_pct``, ``extrapolation_ratios``, ``curves``
-        (whole curves left out) and ``end_errors_pct``; ``source = "held-out"``.
-    """
-    from dataclasses import replace as _replace
-
-    from ..uncertainty import extrapolation_growth, held_out_posterior
-
-    if not _several_rates(curves):
-        return None
-    common = dict(cells_series=cells_series, strings_parallel=strings_parallel, fixed=fixed,
-                  bounds=bounds, use_rest=use_rest, weighting=weighting, model=model)
-    errors, ratios, normalised, names, ends = [], [], [], [], []
-    for k, left in enumerate(curves):
-        rest = [c for j, c in enumerate(curves) if j != k]
-        fold = _held_out_fold(rest, left, common)
-        if fold is not None:
-            error, battery = fold
-            ratio = battery.extrapolation_ratio(left.mean_current_A / strings_parallel)
-            growth = extrapolation_growth(
-                battery, "held-out" if _several_rates(rest) else "prior")
-            errors.append(100.0 * error)
-            ratios.append(float(ratio))
-            normalised.append(error / (1.0 + growth * np.log(ratio)))
-            names.append(left.name)
-        t = left.time_s
-        keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
-        cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
-               "current_A": left.current_A[keep]}
-        if left.temperature_C is not None:
-            cut["temperature_C"] = left.temperature_C[keep]
-        try:
-            shortened = _replace(left, **cut)
-        except DataError:
-            continue
-        fold = _held_out_fold([shortened if j == k else c for j, c in enumerate(curves)],
-                              left, common)
-        if fold is not None:
-            ends.append(fold[0])
-    if not errors and not ends:
-        return None
-    sd, dof = held_out_posterior(normalised + ends)
-
-    def rms(values):
-        return float(np.sqrt(np.mean(np.square(values)))) if values else None
-
-    return {"relative_sd": sd, "dof": dof,
-            "held_out_rms": None if not errors else rms(errors) / 100.0,
-            "end_rms": rms(ends), "errors_pct": errors, "extrapolation_ratios": ratios,
-            "curves": names, "end_errors_pct": [100.0 * e for e in ends],
-            "source": "held-out"}
-
-
-def _held_out_fold(fitted, left, common):
-    """(relative error of the predicted time to ``left``'s last voltage, battery) of a
-    fit to ``fitted``; None when the fit or the prediction fails."""
-    from ..errors import SimulationError
-    from ..simulate import simulate_current
-
-    try:
-        res = fit_family(fitted, model_error=False, **common)
-        sim = simulate_current(res.battery, left.mean_current_A,
-                               cutoff_pack_V=float(left.voltage_V[-1]),
-                               ambient_C=left.ambient_C)
-    except (FitError, SimulationError, DataError):
-        return None
-    measured = float(left.time_s[-1] - left.time_s[0])
-    if not np.isfinite(sim.time_to_cutoff_s) or measured <= 0:
-        return None
-    return (sim.time_to_cutoff_s - measured) / measured, res.battery
