@@ -8,7 +8,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck docs min-versions bench browser clean
+.PHONY: demo test lint typecheck docs min-versions bench browser postgres clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/dischargelab demo --out demo-out --force
 
-test: $(STAMP) browser
+test: $(STAMP) browser postgres
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
@@ -37,15 +37,26 @@ docs: $(STAMP)
 min-versions:
 	PYTHON=$(PYTHON) bash .ci/min-versions.sh
 
-# The HTML report is checked in headless Chromium. Installed from Debian's packages
-# when missing and we may (root with apt-get); otherwise that one test is skipped
-# (outside CI) with a note.
+# The HTML report and the web pages are checked in headless Chromium, driven by Selenium
+# through Debian's chromedriver (same package version; nothing is downloaded). Installed from
+# Debian's packages when missing and we may (root with apt-get); otherwise those tests are
+# skipped (outside CI) with a note.
 browser:
-	@command -v chromium >/dev/null 2>&1 || { \
+	@{ command -v chromium >/dev/null 2>&1 && command -v chromedriver >/dev/null 2>&1; } || { \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    echo "installing chromium (headless browser for the report test)"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
-	  else echo "note: chromium not found; the report browser test will be skipped"; fi; }
+	    echo "installing chromium and chromium-driver (headless browser for the page tests)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium \
+	      chromium-driver >/dev/null; \
+	  else echo "note: chromium/chromedriver not found; the browser tests will be skipped"; fi; }
+
+# The logbook tests also run against a throwaway PostgreSQL cluster (initdb + pg_ctl as the
+# `postgres` user, on 127.0.0.1): Debian's server package is installed when missing and we may.
+postgres:
+	@ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing postgresql (throwaway server for the logbook tests)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq postgresql >/dev/null; \
+	  else echo "note: postgresql not found; the logbook's PostgreSQL tests will be skipped"; fi; }
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fit_speed.py

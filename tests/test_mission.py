@@ -22,11 +22,11 @@ from dischargelab.mission import (
     load_mission,
     mission_outcomes,
     mission_summary,
+    mission_uncertainty,
     run_mission,
 )
 from dischargelab.model import PRESETS, Battery, CellParameters
 from dischargelab.simulate import Step, simulate, simulate_current, simulate_power
-from dischargelab.mission import mission_uncertainty
 from dischargelab.uncertainty import sample_parameters
 
 REPO = Path(__file__).resolve().parents[1]

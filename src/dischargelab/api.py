@@ -151,10 +151,20 @@ def predict(battery: Battery | str | Path, *, current: float | None = None,
     ----------
     battery : Battery, preset name, battery-file path or logbook pack
         See :func:`load`.
-    current, c_rate, power, cutoff, cutoff_pack, soc, ambient, interval
-        As :func:`dischargelab.predict.predict`: pack current [A], C-rate or pack
-        power [W] (exactly one); cutoff per cell or per pack [V]; start charge [%];
-        ambient [degC]; whether to add the interval.
+    current : float, optional
+        Constant pack current [A].
+    c_rate : float, optional
+        Current as a multiple of the rated pack capacity [1/h].
+    power : float, optional
+        Constant pack power [W]. Give exactly one of current, c_rate, power.
+    cutoff, cutoff_pack : float, optional
+        Cutoff per cell or per pack [V]; default the chemistry's usual cutoff.
+    soc : float
+        State of charge at the start [%] (100 = full).
+    ambient : float, optional
+        Ambient temperature [degC] (thermal families; default the fitted data's).
+    interval : bool
+        Add the 95 % interval (parameter draws plus model error).
 
     Returns
     -------

@@ -9,10 +9,16 @@ main Axes; nothing is shown: call ``ax.figure.savefig(path)`` or
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import DataError, require
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from .flight import FlightReport
 
 
 def pyplot():
@@ -333,3 +339,95 @@ def plot_discharge(discharge, ax=None):
     ax.set_title(discharge.name or "discharge", fontsize=10)
     ax.grid(alpha=0.3)
     return ax
+
+
+def plot_flight_report(report: FlightReport, axes=None):
+    """Voltage (logged, predicted), current and remaining-time replay against log time.
+
+    Parameters
+    ----------
+    report : FlightReport
+    axes : sequence of three matplotlib Axes, optional
+
+    Returns
+    -------
+    numpy.ndarray of Axes
+    """
+    from .plot import pyplot
+
+    plt = pyplot()
+    if axes is None:
+        fig, axes = plt.subplots(3, 1, figsize=(9, 8.5), sharex=True, layout="constrained",
+                                 gridspec_kw={"height_ratios": [3, 2, 3]})
+    axes = np.asarray(axes)
+    av, ai, ar = axes
+    seen = set()
+
+    def label(text):
+        if text in seen:
+            return None
+        seen.add(text)
+        return text
+
+    tops = []
+    for f in report.flights:
+        smp = f.samples
+        t = smp["time_s"].to_numpy()
+        av.plot(t, smp["voltage_V"], color="0.35", lw=0.6, label=label("logged"))
+        if "predicted_voltage_V" in smp:
+            av.plot(t, smp["predicted_voltage_V"], color="tab:orange", lw=0.8, alpha=0.85,
+                    label=label("model flying the logged current"))
+        ai.plot(t, smp["current_A"], color="tab:blue", lw=0.6)
+        for ax in axes:
+            ax.axvspan(f.summary["start_s"], f.summary["end_s"], color="0.94", zorder=0)
+        tops.append(_plot_replay(ar, f.replay, label))
+    av.axhline(report.cutoff_cell_V * report.cells_series, color="tab:red", ls="--", lw=0.8,
+               label=label(f"cutoff {report.cutoff_cell_V:g} V/cell"))
+    av.set_ylabel("pack voltage [V]")
+    ai.set_ylabel("current [A]")
+    ar.set_ylabel("remaining flight time [s]")
+    ar.set_xlabel("log time [s] (flights shaded)")
+    limits = [x for x in tops if x is not None]
+    if limits:
+        ar.set_ylim(0, max(limits))
+        ar.legend(fontsize=8, loc="upper right")
+    else:
+        ar.text(0.5, 0.5, "no remaining-time replay: give a battery model or the pack capacity",
+                transform=ar.transAxes, ha="center", va="center", color="0.4")
+    title = f"{Path(report.source).name}: {report.battery_label} ({report.cells_series} cells " \
+            "in series)"
+    if report.model:
+        title += f"; model {report.model}"
+    av.set_title(title, fontsize=10)
+    av.legend(fontsize=8, loc="upper right")
+    for ax in axes:
+        ax.grid(True, lw=0.3, alpha=0.6)
+    return axes
+
+
+def _plot_replay(ax, replay: pd.DataFrame, label) -> float | None:
+    """Draw the replay columns; returns a y-limit that keeps the bulk visible (or None)."""
+    if replay.empty:
+        return None
+    t = replay["time_s"].to_numpy()
+    styles = [("true_s", "truth: logged voltage stays under the cutoff", "k", "-", None),
+              ("model_profile_s", "model repeating the recent load (peaks kept)", "tab:red",
+               "-", "D"),
+              ("model_s", "model at the recent mean load", "tab:orange", "-", "o"),
+              ("model_logged_load_s", "model flying the logged load (hindsight)", "tab:orange",
+               ":", None),
+              ("px4_s", "PX4 method (remaining x capacity / mean current)", "tab:green", "-",
+               "^"),
+              ("ardupilot_s", "ArduPilot method ((capacity - used) / mean current)",
+               "tab:purple", "-", "s")]
+    values = []
+    for column, text, color, ls, marker in styles:
+        y = replay[column].to_numpy(dtype=float)
+        m = np.isfinite(y)
+        if m.any():
+            ax.plot(t[m], y[m], color=color, ls=ls, marker=marker, ms=3, lw=1.0, label=label(text))
+            values.append(y[m])
+    if not values:
+        return None
+    every = np.concatenate(values)
+    return float(min(np.max(every), 2.0 * np.percentile(every, 75))) * 1.05

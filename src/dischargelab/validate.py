@@ -231,14 +231,14 @@ def _initial_charge(battery: Battery, meta: dict) -> tuple[float, str | None]:
 
     A flight from a flight log need not start full: its charge comes from the
     rest voltage just before take-off through the model's own open-circuit
-    voltage (:func:`dischargelab.flight.model_charge_at_rest`). Bench discharges
+    voltage (:func:`dischargelab.ocv.model_charge_at_rest`). Bench discharges
     start full.
     """
     rest = meta.get("rest_sample")
     if meta.get("flight") is None or not isinstance(rest, dict) or \
             rest.get("voltage_V") is None:
         return 0.0, None
-    from .flight import model_charge_at_rest
+    from .ocv import model_charge_at_rest
 
     charge = model_charge_at_rest(battery, float(rest["voltage_V"]),
                                   float(rest.get("current_A") or 0.0))

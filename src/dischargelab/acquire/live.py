@@ -19,6 +19,10 @@ from ..errors import DischargelabError
 
 SPARK_CHARS = "▁▂▃▄▅▆▇█"
 
+#: Samples kept for the time-to-cutoff estimate, and the test-time window it fits [s].
+RECENT_POINTS = 600
+ETA_WINDOW_S = 120.0
+
 
 def sparkline(values, width: int = 48) -> str:
     """Unicode bar sparkline of ``values`` resampled to ``width`` characters."""
@@ -99,6 +103,7 @@ class LiveDisplay:
         self.charge_Ah = 0.0
         self.energy_Wh = 0.0
         self.trend = Trend()
+        self._recent: deque = deque(maxlen=RECENT_POINTS)   # (time_s, voltage_V) for the ETA
         self._arrivals: deque = deque(maxlen=21)          # about 5 s at 4 points per second
         self._prev = None
         self.link = "connecting"
@@ -129,6 +134,8 @@ class LiveDisplay:
         if math.isfinite(sample.voltage_V):
             self.min_voltage_V = min(self.min_voltage_V, sample.voltage_V)
         self.trend.add(sample.time_s, sample.voltage_V)
+        if math.isfinite(sample.voltage_V):
+            self._recent.append((sample.time_s, sample.voltage_V))
         now = self._clock()
         if not self._arrivals or now - self._arrivals[-1][0] >= 0.25:
             self._arrivals.append((now, self.samples))
@@ -160,6 +167,33 @@ class LiveDisplay:
         if self._clock() - t1 > max(3.0, 3 * (t1 - t0) / max(n1 - n0, 1)):
             return 0.0
         return (n1 - n0) / (t1 - t0) if t1 > t0 else math.nan
+
+    def time_to_cutoff_s(self, window_s: float = ETA_WINDOW_S) -> float | None:
+        """Test time left until the pack reaches the cutoff at its present rate of fall [s].
+
+        A straight line fitted (least squares) to the pack voltage over the last
+        ``window_s`` of test time (at most :data:`RECENT_POINTS` samples) is
+        extended to ``cutoff_pack_V``. A discharge curve bends down at its knee,
+        so this is an upper estimate that shrinks as the knee approaches; None
+        when there is no cutoff, too little data, or the voltage is not falling.
+        """
+        if not self.cutoff_pack_V or len(self._recent) < 3:
+            return None
+        t_end = self._recent[-1][0]
+        pts = [(t, v) for t, v in self._recent if t >= t_end - window_s]
+        if len(pts) < 3:
+            return None
+        n = len(pts)
+        mt = sum(t for t, _ in pts) / n
+        mv = sum(v for _, v in pts) / n
+        stt = sum((t - mt) ** 2 for t, _ in pts)
+        if stt <= 0:
+            return None
+        slope = sum((t - mt) * (v - mv) for t, v in pts) / stt        # [V/s]
+        if not slope < 0:
+            return None
+        v_now = mv + slope * (t_end - mt)
+        return max(0.0, (v_now - self.cutoff_pack_V) / -slope)
 
     def summary(self) -> dict:
         """Numbers for the end-of-test summary."""

@@ -32,11 +32,11 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataError, require
-from .flightlog import (
+from .flightlog_base import (
+    DATAFLASH_HEAD,
     BatterySeries,
     FlightLog,
     build_flight_log,
-    detect_flight_log,
     drop_unmeasured_temperature,
     quiet,
     quiet_native,
@@ -145,7 +145,9 @@ def read_dataflash(path, *, topic: str | None = None, fields: dict | None = None
     from pymavlink import DFReader
 
     path = Path(path)
-    kind = detect_flight_log(path)
+    with open(path, "rb") as fh:
+        binary = fh.read(len(DATAFLASH_HEAD)) == DATAFLASH_HEAD
+    kind = "ardupilot-bin" if binary else "ardupilot-text"
     if topic and not fields:
         fields = {"voltage_V": "Volt", "current_A": "Curr"}
     battery_types = [topic] if topic else ["BAT", "BAT2", "CURR"]
@@ -153,10 +155,10 @@ def read_dataflash(path, *, topic: str | None = None, fields: dict | None = None
     collector = _Collector()
     try:
         with quiet("pymavlink"), quiet_native():
-            if kind == "ardupilot-text":
-                reader = DFReader.DFReader_text(str(path))
-            else:
+            if binary:
                 reader = DFReader.DFReader_binary(str(path))
+            else:
+                reader = DFReader.DFReader_text(str(path))
             defined = len(getattr(reader, "formats", {})) > 1  # more than the built-in FMT
             try:
                 _stream(reader, types, collector, topic, fields)

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataError, require
-from .flightlog import BatterySeries, FlightLog, build_flight_log, drop_rows, quiet
+from .flightlog_base import BatterySeries, FlightLog, build_flight_log, drop_rows, quiet
 
 #: Frames this far [V] above the resting value are sensor spikes.
 SPIKE_MARGIN_V = 0.05

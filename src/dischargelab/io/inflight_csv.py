@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataError
-from .flightlog import BatterySeries, FlightLog, build_flight_log
+from .flightlog_base import BatterySeries, FlightLog, build_flight_log
 
 #: Cells in series accepted (2S ... 16S).
 MIN_CELLS, MAX_CELLS = 2, 16

@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataError, require
-from .flightlog import (
+from .flightlog_base import (
     BatterySeries,
     FlightLog,
     _first_line,

@@ -1,0 +1,328 @@
+"""Flight logs in, autopilot settings out: convert, flight, autopilot-params, and
+the flight-log side of fit."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import click
+
+from ..errors import DischargelabError
+from .common import (
+    battery_input,
+    cutoff_option,
+    err,
+    force_option,
+    guard_outputs,
+    json_option,
+    load_battery_arg,
+    out,
+    print_json,
+    table,
+)
+
+
+def flight_numbers_option(values) -> list[int] | None:
+    """``--flight 1 --flight 2,3`` as [1, 2, 3]; None when not given."""
+    if not values:
+        return None
+    numbers = []
+    for value in values:
+        for part in str(value).split(","):
+            try:
+                number = int(part)
+            except ValueError:
+                raise DischargelabError(f"--flight expects flight numbers such as 1 or 1,2,3; "
+                                        f"got {value!r}") from None
+            if number < 1:
+                raise DischargelabError(f"--flight numbers count from 1; got {number}")
+            numbers.append(number)
+    return numbers
+
+
+def flight_fit_wanted(paths, flights, battery_index, capacity) -> bool:
+    """True when DATA are flight logs (fitted from their flights); errors on a mix."""
+    from ..io.flightlog import detect_flight_log
+
+    logs = [detect_flight_log(p) is not None for p in paths]
+    if any(logs) and not all(logs):
+        raise DischargelabError("give either flight logs or discharge files to fit, not both")
+    if not all(logs) and (flights or battery_index is not None or capacity is not None):
+        raise DischargelabError("--flight, --battery and --capacity apply to flight logs "
+                                "(ArduPilot, PX4 ULog, blackbox, in-flight logger CSV)")
+    return all(logs)
+
+
+def fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, parallel,
+                     model_name, fixed, bounds, bootstrap, use_rest):
+    """Fit the flights of flight logs together; returns (FlightCurves, FitResult)."""
+    from ..flight import FlightCurves, fit_flights, flight_curves
+
+    parts = [flight_curves(p, flights, battery_index, capacity, chemistry, cells=cells)
+             for p in paths]
+    flights_all = parts[0]
+    for part in parts[1:]:
+        if part.cells_series != flights_all.cells_series:
+            raise DischargelabError(f"{part.source} has {part.cells_series} cells in series, "
+                                    f"{flights_all.source} {flights_all.cells_series}: fit "
+                                    "flights of one pack together")
+        flights_all = FlightCurves(flights_all.curves + part.curves, flights_all.cells_series,
+                                   flights_all.capacity_Ah, flights_all.capacity_source,
+                                   flights_all.chemistry, flights_all.flights + part.flights,
+                                   flights_all.notes + part.notes, flights_all.source)
+    result = fit_flights(flights_all, model=model_name, strings_parallel=parallel, cells=cells,
+                         fixed=fixed, bounds=bounds, bootstrap=bootstrap, use_rest=use_rest)
+    return flights_all, result
+
+
+
+
+@click.command("autopilot-params")
+@click.argument("battery")
+@click.option("--firmware", required=True, type=click.Choice(["ardupilot", "px4"]),
+              help="Autopilot firmware: ardupilot writes a .param file, px4 a QGroundControl "
+                   ".params file.")
+@click.option("--cells", required=True, type=click.IntRange(1), help="Cells in series of the "
+              "flight pack.")
+@click.option("--parallel", type=click.IntRange(1), default=None,
+              help="Strings in parallel (default: as in the battery file).")
+@click.option("--load", "load_current", type=float, metavar="A", default=None,
+              help="Pack current of normal flight (hover/cruise) at which the reserve is "
+                   "computed [A]; default 1C of the pack.")
+@click.option("--reserve-s", default=120.0, show_default=True, type=float, metavar="S",
+              help="Flight time left at that load when the low-voltage warning fires [s].")
+@click.option("--critical-reserve-s", type=float, metavar="S", default=None,
+              help="Flight time left at the critical level [s] (default: a third of the reserve).")
+@cutoff_option("at which the loaded pack is empty")
+@click.option("--ambient", type=float, metavar="C", default=None,
+              help="Ambient temperature [degC] for thermal models.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Parameter file to write (.param for ArduPilot, .params for PX4).")
+@force_option
+@json_option
+def autopilot_params_cmd(battery, firmware, cells, parallel, load_current, reserve_s,
+                         critical_reserve_s, cutoff, ambient, output, force, as_json):
+    """Battery failsafe and scaling settings for ArduPilot or PX4 from the model.
+
+    The model is flown at the stated load; the low and critical voltages are the
+    resting pack voltages at which --reserve-s and --critical-reserve-s of flight
+    remain. Every value in the file carries a comment saying how it was derived.
+
+    \b
+    Examples:
+      dischargelab autopilot-params cell.json --firmware ardupilot --cells 4 --load 25 \\
+          -o battery.param
+      dischargelab autopilot-params cell.json --firmware px4 --cells 6 --reserve-s 90 \\
+          -o battery.params
+    """
+    from ..autopilot import autopilot_params
+
+    guard_outputs([output], battery_input(battery), force)
+    result = autopilot_params(load_battery_arg(battery), firmware=firmware, cells=cells,
+                              parallel=parallel, load_current_A=load_current,
+                              reserve_s=reserve_s, critical_reserve_s=critical_reserve_s,
+                              cutoff=cutoff, ambient=ambient)
+    if output:
+        result.write(output, force=force)
+    if as_json:
+        doc = result.to_dict()
+        if output:
+            doc["file"] = str(output)
+        print_json(doc)
+        return
+    out.print(table(f"{firmware} battery settings", ["parameter", "value", "unit", "derivation"],
+                    [[s.name, s.text(), s.unit, s.comment] for s in result.settings]))
+    for note in result.notes:
+        out.print(f"note: {note}", markup=False)
+    if output:
+        out.print(f"parameter file written to {output}")
+    else:
+        out.print("(not saved: add -o FILE to write the parameter file)")
+
+
+
+
+@click.command("convert")
+@click.argument("log", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="CSV file to write [default: LOG name with .discharge.csv].")
+@click.option("--flight", type=click.IntRange(1), metavar="N",
+              help="Only flight N (counting from 1) [default: every sample, with a flight "
+                   "column].")
+@click.option("--battery", type=click.IntRange(0), metavar="N",
+              help="Battery instance N [default: the first with data].")
+@click.option("--topic", metavar="NAME",
+              help="ULog topic or DataFlash message with the battery data, when not the "
+                   "standard one (battery_status; BAT/CURR).")
+@click.option("--fields", metavar="SPEC",
+              help="With --topic: voltage_V=FIELD,current_A=FIELD (values in V and A).")
+@force_option
+@json_option
+def convert_cmd(log, output, flight, battery, topic, fields, force, as_json):
+    """Convert a flight log's battery data to a canonical CSV.
+
+    Reads ArduPilot .bin/.log, PX4 .ulg, Betaflight/INAV blackbox and in-flight
+    logger CSV (found from the content) and writes time_s, voltage_V,
+    current_A (discharge positive), measured temperature and cell voltages,
+    the log's own counters and a flight column. The summary names the flights,
+    the charge drawn, the current-sensor offset and every dropped record.
+
+    \b
+    Examples:
+      dischargelab convert flight.bin -o flight.csv
+      dischargelab convert log.ulg --battery 1 --flight 2 -o pack2.csv
+      dischargelab convert btfl_001.bbl --json
+    """
+    from ..io.flightlog import convert_flight_log
+
+    output = output or str(Path(Path(log).name).with_suffix(".discharge.csv"))
+    result = convert_flight_log(log, output, flight=flight, battery=battery, force=force,
+                                topic=topic, fields=fields)
+    if as_json:
+        print_json(result)
+        return
+    out.print(result["summary"], markup=False)
+    for note in result["notes"]:
+        out.print(f"note: {note}", markup=False)
+    out.print(f"{result['rows']} rows of {result['battery_label']} written to "
+              f"{result['output']}", markup=False)
+
+
+@click.command("flight")
+@click.argument("log", type=click.Path(dir_okay=False))
+@click.option("--battery-model", "battery_model", metavar="FILE",
+              help="Battery file (or preset) to fly the logged current through: predicted "
+                   "voltage and the remaining-time replay by the model.")
+@click.option("--flight", "flights", multiple=True, metavar="N[,N...]",
+              help="Flights to analyse (repeatable or a comma list) [default: all].")
+@click.option("--battery", "battery_index", type=click.IntRange(0), metavar="N",
+              help="Battery instance N [default: the first with data].")
+@click.option("--capacity", type=float, metavar="AH",
+              help="Label capacity of the pack [Ah] [default: the log's, else the model's].")
+@click.option("--chemistry", type=click.Choice(["lipo", "li-ion", "lifepo4"]),
+              help="Chemistry of the generic OCV curve and the default cutoff "
+                   "[default: the model's, else lipo].")
+@cutoff_option("of the replay and its truth")
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series [default: the log's count, else from the highest voltage].")
+@click.option("--parallel", type=click.IntRange(1), default=1, show_default=True,
+              help="Strings in parallel of the flight pack.")
+@click.option("--low-timer", type=click.FloatRange(0), default=10.0, show_default=True,
+              metavar="S",
+              help="The pack has reached the cutoff when its voltage stays under it this long "
+                   "(ArduPilot BATT_LOW_TIMER); shorter dips are sags. 0 = the first sample.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Save the three-panel plot (PNG, SVG or PDF).")
+@force_option
+@json_option
+def flight_cmd(log, battery_model, flights, battery_index, capacity, chemistry, cutoff, cells,
+               parallel, low_timer, output, force, as_json):
+    """What each flight of a flight log did to the pack, and how long it had left.
+
+    Per flight: duration, charge and energy used, loaded and resting voltages,
+    sag at the peak current, internal resistance (regression over 8 s windows,
+    beside the log's own estimate) and charge left at landing. With a battery
+    model: the voltage predicted from the logged current, and every 5 s the
+    remaining flight time by the model at the recent load next to the PX4 and
+    ArduPilot methods and, where the logged voltage stayed under the cutoff for the
+    low-voltage timer (not a sag at a current peak), the truth.
+
+    \b
+    Examples:
+      dischargelab flight 29.csv
+      dischargelab flight 29.csv --battery-model pack.json --cutoff 3.3 -o flight.png
+      dischargelab flight btfl_001.bbl --flight 2 --capacity 1.3 --json
+      dischargelab flight sample_log_small.ulg --battery 1
+    """
+    from ..flight import analyse_flight
+
+    numbers = flight_numbers_option(flights)
+    inputs = [log] + battery_input(battery_model)
+    guard_outputs([output], inputs, force, figures=[output])
+    model = load_battery_arg(battery_model) if battery_model else None
+    with err.status("analysing the flights", spinner="dots"):
+        report = analyse_flight(log, model, flights=numbers, battery=battery_index,
+                                capacity_Ah=capacity, chemistry=chemistry, cutoff=cutoff,
+                                cells=cells, parallel=parallel, low_timer_s=low_timer)
+    if output:
+        from ..plot import save
+
+        save(report.plot()[0], output)
+    if as_json:
+        doc = report.to_dict()
+        if output:
+            doc["plot"] = str(output)
+        print_json(doc)
+        return
+    _print_flight_report(report)
+    if output:
+        out.print(f"plot: {output}", markup=False)
+
+
+def _print_flight_report(report) -> None:
+    def f(value, spec, scale=1.0):
+        if value is None or (isinstance(value, float) and not math.isfinite(value)):
+            return "-"
+        return format(value * scale, spec)
+
+    def cells(values):
+        return "-" if not values else " / ".join(f"{x:.2f}" for x in values)
+
+    def rest(r):
+        return "-" if r is None else f"{r['voltage_V']:.2f} V at {r['current_A']:.2f} A"
+
+    rows = [("duration [s]", lambda s: f(s["duration_s"], ".1f")),
+            ("charge used [mAh]", lambda s: f(s["charge_Ah"], ".0f", 1000)),
+            ("energy used [Wh]", lambda s: f(s["energy_Wh"], ".2f")),
+            ("mean / peak current [A]", lambda s: f"{f(s['mean_current_A'], '.1f')} / "
+                                                  f"{f(s['peak_current_A'], '.1f')}"),
+            ("rest before take-off", lambda s: rest(s["rest_before"])),
+            ("rest after landing", lambda s: rest(s["rest_after"])),
+            ("min loaded voltage [V]", lambda s: f(s["min_loaded_V"], ".2f")),
+            ("min loaded cells [V]", lambda s: cells(s["min_loaded_cell_V"])),
+            ("sag at peak [V]", lambda s: f(s["sag_V"], ".2f")),
+            ("sag at peak, cells [V]", lambda s: cells(s["sag_cells_V"])),
+            ("resistance, pack [mOhm]", lambda s: f(s["resistance_ohm"], ".1f", 1000)),
+            ("resistance, log's [mOhm]", lambda s: f(s["log_resistance_ohm"], ".1f", 1000)),
+            ("SOC take-off / landing [%]", lambda s: f"{f(s['soc_start'], '.0f', 100)} / "
+                                                     f"{f(s['soc_landing_ocv'], '.0f', 100)}"),
+            ("left at landing, OCV [mAh]", lambda s: f(s["charge_left_ocv_Ah"], ".0f", 1000)),
+            ("left, label - used [mAh]", lambda s: f(s["charge_left_label_Ah"], ".0f", 1000))]
+    if report.model:
+        rows += [("left, model [mAh]", lambda s: f(s.get("charge_left_model_Ah"), ".0f", 1000)),
+                 ("voltage RMSE, pack [mV]", lambda s: f(s.get("rmse_V"), ".0f", 1000)),
+                 ("voltage RMSE, cells [mV]",
+                  lambda s: "-" if not s.get("rmse_cell_V") else
+                  " / ".join(f"{1000 * x:.0f}" for x in s["rmse_cell_V"]))]
+    rows.append(("under the cutoff: first dip / for good [s]",
+                 lambda s: f"{f(s.get('cutoff_dip_at_s'), '.1f')} / "
+                           f"{f(s.get('cutoff_reached_at_s'), '.1f')}"))
+    rows.append(("remaining at mid-flight [s]", _mid_flight_text))
+    out.print(table(f"{Path(report.source).name}: {report.battery_label}, "
+                    f"{report.cells_series} cells, capacity "
+                    f"{f(report.capacity_Ah, '.3g')} Ah ({report.capacity_source}), cutoff "
+                    f"{report.cutoff_cell_V:g} V/cell",
+                    ["quantity"] + [f"flight {a.number}" for a in report.flights],
+                    [[name] + [fn(a.summary) for a in report.flights] for name, fn in rows]))
+    for note in report.notes:
+        out.print(f"note: {note}", markup=False)
+    for a in report.flights:
+        for note in a.notes:
+            out.print(f"note: flight {a.number}: {note}", markup=False)
+
+
+def _mid_flight_text(summary) -> str:
+    mid = summary.get("replay_mid_flight")
+    if not mid:
+        return "-"
+    parts = []
+    for key, name in (("true_s", "true"), ("model_profile_s", "model (recent load)"),
+                      ("model_s", "model (mean load)"), ("px4_s", "PX4"),
+                      ("ardupilot_s", "ArduPilot")):
+        if mid.get(key) is not None:
+            parts.append(f"{name} {mid[key]:.0f}")
+    return ", ".join(parts) or "-"
+
+
+COMMANDS = [autopilot_params_cmd, convert_cmd, flight_cmd]

@@ -1,0 +1,267 @@
+"""Missions and the pilot's report: endurance, report, demo."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..errors import DischargelabError
+from .common import (
+    battery_input,
+    cutoff_option,
+    data_options,
+    duration_text,
+    err,
+    expand_paths,
+    force_option,
+    guard_outputs,
+    json_option,
+    load_battery_arg,
+    out,
+    print_json,
+    progress_callback,
+    table,
+    validation_cases,
+    write_csv,
+)
+
+
+@click.command("demo")
+@click.option("--out", "out_dir", default="demo-out", show_default=True,
+              type=click.Path(file_okay=False), help="Folder for the plots and battery files.")
+@force_option
+@json_option
+def demo_cmd(out_dir, force, as_json):
+    """Run the whole method on the bundled Samsung 30Q data (C/10, 1C, 4C).
+
+    Fits the cell on 1C alone and on all three rates together, predicts each
+    measured rate, flies the paper's Table 5 mission and a survey mission on a
+    4S2P pack of the fitted cells, and writes battery files, plots and an HTML
+    report to --out.
+
+    \b
+    Example:
+      dischargelab demo --out demo-out
+    """
+    from ..demo import check_demo, run_demo
+
+    check_demo(out_dir, force)  # the plot extra and the output files, before any work
+    summary = run_demo(Path(out_dir), console=None if as_json else out, force=force)
+    missions = summary.pop("missions")
+    if as_json:
+        summary["missions"] = {name: {k: v for k, v in m.to_dict().items() if k != "phases"}
+                               for name, m in missions.items()}
+        print_json(summary)
+        return
+    for result in missions.values():
+        out.print()
+        print_mission(result)
+    out.print(f"\nOpen {Path(out_dir) / 'report.html'} in a browser for the full report.")
+
+
+
+
+
+def print_mission(result) -> None:
+    m = result.mission
+    unc = result.uncertainty
+    st = result.stretch
+    head = duration_text(result.endurance_s)
+    if unc and unc.get("available"):
+        e = unc["endurance_s"]
+        head += (f"  (95 % interval {duration_text(e['low'])} to {duration_text(e['high'])}: "
+                 + " + ".join(unc.get("interval_includes", ["parameters"]))
+                 + (f", {unc['accepted']} draws)" if unc.get("accepted") else ")"))
+    else:
+        head += "  (95 % interval unavailable: " + (
+            unc["reason"] if unc else "no uncertainty requested (--draws 0)") + ")"
+    label = "endurance, landing at the reserve" if st else "flight time"
+    out.print(f"{m.name}: {label} {head}", markup=False)
+    rows = [["battery", f"{m.battery.name or '-'} ({m.battery.cells_series}S"
+                        f"{m.battery.strings_parallel}P, {m.capacity_Ah:.3f} Ah)"],
+            ["cutoff / reserve", f"{m.cutoff_cell_V:g} V/cell ({m.cutoff_pack_V:.2f} V pack) / "
+                                 f"{m.reserve_pct:g} %"],
+            ["flight as planned", f"{duration_text(result.flight_time_s)}"
+                                  + ("" if result.completed else
+                                     f" (NOT completed: {result.ended_by})")],
+            ["state of charge at landing", f"{result.soc_end_pct:.1f} %"],
+            ["reserve reached at", duration_text(result.reserve_time_s)],
+            ["cutoff reached at", duration_text(result.cutoff_time_s)],
+            ["lowest pack voltage", f"{result.min_voltage_V:.3f} V "
+                                    f"(margin {result.voltage_margin_V:.3f} V)"],
+            ["charge / energy used", f"{result.simulation.capacity_Ah:.3f} Ah / "
+                                     f"{result.simulation.energy_Wh_total:.1f} Wh"]]
+    if st:
+        rows.append([f"max {st['phase']}", f"{duration_text(st['max_s'])} "
+                                          f"(limited by the {st['binding']})"])
+        if st["margin_s"] is not None:
+            rows.append([f"margin on {st['phase']}", duration_text(st["margin_s"])])
+    out.print(table("Endurance", ["quantity", "value"], rows))
+    phase_rows = [[r["phase"] + (f" #{r['repetition']}" if r["repetition"] else ""), r["load"],
+                   f"{r['start_s']:.0f}", f"{r['duration_s']:.1f}", f"{r['mean_current_A']:.2f}",
+                   f"{r['charge_Ah']:.3f}", f"{r['end_voltage_V']:.3f}",
+                   f"{r['end_soc_pct']:.1f}"] for r in result.phases]
+    if len(phase_rows) > 30:
+        phase_rows = phase_rows[:12] + [["...", "", "", "", "", "", "", ""]] + phase_rows[-12:]
+    out.print(table("Phases", ["phase", "load", "start [s]", "duration [s]", "current [A]",
+                               "charge [Ah]", "end V", "end SOC [%]"], phase_rows))
+    for w in result.warnings:
+        out.print(f"warning: {w}", markup=False)
+
+
+@click.command("endurance")
+@click.argument("battery")
+@click.argument("mission", type=click.Path(dir_okay=False))
+@cutoff_option(default="the mission file's")
+@click.option("--reserve", type=click.FloatRange(0, 100, max_open=True), metavar="PCT",
+              help="State of charge to land with [%] (overrides the mission file).")
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series (overrides the mission and battery files).")
+@click.option("--parallel", type=click.IntRange(1), default=None,
+              help="Strings in parallel (overrides the mission and battery files).")
+@click.option("--ambient", type=float, metavar="C", default=None,
+              help="Ambient temperature [degC] for thermal models (overrides the mission file; "
+                   "default: the battery's, that of its fitted data).")
+@click.option("--draws", default=300, show_default=True, type=click.IntRange(0),
+              help="Parameter draws for the 95 % interval (0 = no interval; without draws in "
+                   "the battery file the interval is the model error alone).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the draws.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="Save the flight profile plot (PNG, SVG or PDF).")
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False),
+              help="Save voltage, current, power and state of charge through the flight (CSV).")
+@force_option
+@json_option
+def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, ambient, draws, seed,
+                  plot_path, csv_path, force, as_json):
+    """Fly a mission (TOML) on a battery: flight time, max cruise, margin and its interval.
+
+    BATTERY is a battery file from `fit` or a preset name; MISSION a TOML file of
+    phases (current, power or flight condition; duration, until cutoff/reserve,
+    repeat blocks; one phase may be `stretch = true`). Bundled examples by name:
+    paper-table5, fixed-wing-survey, multirotor-hover.
+
+    \b
+    Examples:
+      dischargelab endurance hacker-4100-4s-lifepo4 paper-table5
+      dischargelab endurance battery.json mission.toml --reserve 25 --plot flight.png
+      dischargelab endurance cell.json mission.toml --cells 4 --parallel 2 --cutoff 3.0
+      dischargelab endurance battery.json mission.toml --draws 500 --json
+    """
+    from ..mission import load_mission, run_mission
+
+    guard_outputs([plot_path, csv_path], battery_input(battery) + [mission], force,
+                  figures=[plot_path])
+    plan = load_mission(mission, battery=load_battery_arg(battery), cutoff_cell_V=cutoff,
+                        reserve_pct=reserve, ambient_C=ambient)
+    plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
+    with err.status("flying the mission", spinner="dots") as status:
+        result = run_mission(plan, draws=draws, seed=seed,
+                             progress=progress_callback(status, "parameter draws"))
+    if plot_path:
+        from ..plot import save
+
+        save(result.plot(), plot_path)
+    if csv_path:
+        write_csv(result.to_pandas(), csv_path)
+    if as_json:
+        print_json(result.to_dict())
+        return
+    print_mission(result)
+    if plot_path:
+        out.print(f"plot: {plot_path}", markup=False)
+
+
+
+
+@click.command("report")
+@click.argument("battery")
+@click.option("--mission", "mission_path", type=click.Path(dir_okay=False),
+              help="Mission TOML to fly and report.")
+@click.option("--validate", "validate_paths", multiple=True, metavar="DATA",
+              help="Measured discharge to validate against (repeat, or a quoted pattern "
+                   "such as 'runs/*.csv').")
+@cutoff_option("for validation and curves", "the mission's, else the chemistry's")
+@data_options
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series of the mission pack (overrides the mission file).")
+@click.option("--parallel", type=click.IntRange(1), default=None,
+              help="Strings in parallel of the mission pack (overrides the mission file).")
+@click.option("--draws", default=300, show_default=True, type=click.IntRange(0),
+              help="Parameter draws for the mission's 95 % interval (0 = none).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the draws.")
+@click.option("--title", default=None, help="Page title.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
+              help="HTML file to write (one self-contained page).")
+@force_option
+@json_option
+def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment,
+               units,
+               cells, parallel, draws, seed, title, output, force, as_json):
+    """Write one self-contained HTML report for the pilot: model, fit, mission, validation.
+
+    \b
+    Examples:
+      dischargelab report battery.json -o report.html
+      dischargelab report battery.json --mission mission.toml --validate 'runs/*.csv' \\
+          --cutoff 3.0 --columns time_s=0,current_A=1,voltage_V=2 -o report.html
+      dischargelab report hacker-4100-4s-lifepo4 \\
+          --mission paper-table5 -o table5.html
+    """
+    from ..mission import load_mission, run_mission
+    from ..model import CUTOFF_CELL_VOLTAGE_V
+    from ..report import write_report
+    from ..validate import summarise
+
+    if not output.lower().endswith((".html", ".htm")):
+        raise DischargelabError(f"-o must name an .html file, got {output!r}")
+    validate_paths = expand_paths(validate_paths)
+    guard_outputs([output], battery_input(battery) + [mission_path] + validate_paths, force)
+    from ..errors import require
+
+    require("matplotlib", "plot")  # the report's figures; checked before any work
+    bat = load_battery_arg(battery)
+    result = None
+    cases = []
+    with err.status("building the report", spinner="dots") as status:
+        if mission_path:
+            status.update("flying the mission")
+            plan = load_mission(mission_path, battery=bat, cutoff_cell_V=cutoff)
+            plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
+            result = run_mission(plan, draws=draws, seed=seed,
+                                 progress=progress_callback(status, "parameter draws"))
+        if validate_paths:
+            cut = cutoff
+            if cut is None and result is not None:
+                cut = result.mission.cutoff_cell_V
+            if cut is None:
+                cut = CUTOFF_CELL_VOLTAGE_V.get(bat.chemistry or "")
+            if cut is None:
+                raise DischargelabError("give --cutoff V (per cell) for the validation: the "
+                                        "battery's chemistry is unknown")
+            cases = validation_cases(bat, validate_paths, cut, columns, current, sign, segment,
+                                      units, status)
+        status.update("drawing plots")
+        label = battery if isinstance(battery, str) else None
+        from ..atomic import atomic_path
+
+        with atomic_path(output) as tmp:
+            write_report(tmp, bat if bat.name else label, mission_result=result,
+                         validation=cases, title=title, cutoff_cell_V=cutoff)
+        path = Path(output)
+    summary = {"report": str(path), "bytes": path.stat().st_size,
+               "mission": None if result is None else result.to_dict(),
+               "validation": [c.summary for c in cases],
+               "validation_summary": summarise([c.summary for c in cases]) if cases else None}
+    if as_json:
+        summary["mission"] = None if result is None else {
+            k: v for k, v in result.to_dict().items() if k != "phases"}
+        print_json(summary)
+        return
+    out.print(f"report written: {path} ({summary['bytes'] / 1024:.0f} KiB)", markup=False)
+    if result is not None:
+        print_mission(result)
+
+
+COMMANDS = [demo_cmd, endurance_cmd, report_cmd]

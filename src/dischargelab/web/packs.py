@@ -1,0 +1,210 @@
+"""The logbook's JSON API: pack list, one pack, upload, fit and endurance.
+
+Every handler calls the public library (:class:`dischargelab.Logbook`,
+:func:`dischargelab.endurance`, :func:`dischargelab.simulate.curve_family`) in a worker
+thread and returns its ``to_dict()``; nothing here computes a battery quantity.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import re
+import threading
+
+from starlette.requests import Request
+from starlette.responses import JSONResponse, Response
+from starlette.routing import Route
+
+from ..errors import DischargelabError, MissingExtraError
+from .body import error, read_body, read_json
+from .guard import RequestRefused
+from .upload import parse_upload
+
+#: A pack name: what the logbook's command line accepts, 1-100 characters, no control
+#: characters and no slash.
+_PACK_NAME = re.compile(r"^[^\x00-\x1f\x7f/\\]{1,100}$")
+#: C-rates of the model curves on a pack page.
+CURVE_C_RATES = (0.5, 1.0, 2.0)
+#: Points per model curve sent to the page.
+CURVE_POINTS = 200
+
+
+def check_pack_name(name: str) -> str:
+    name = (name or "").strip()
+    if not _PACK_NAME.match(name):
+        raise RequestRefused(400, "pack name must be 1-100 characters without '/', '\\' or "
+                                  "control characters")
+    return name
+
+
+def _thin(values, points: int = CURVE_POINTS) -> list:
+    n = len(values)
+    step = max(1, math.ceil(n / points))
+    idx = list(range(0, n, step))
+    if idx[-1] != n - 1:
+        idx.append(n - 1)
+    return [None if not math.isfinite(float(values[i])) else float(values[i]) for i in idx]
+
+
+def _clean(value):
+    """JSON-safe copy: NaN and infinities become None, tuples lists, numpy scalars floats."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if value is None or isinstance(value, (str, int, float, bool)):
+        return value
+    return str(value)
+
+
+class PackPages:
+    """Routes of the logbook API; the logbook is opened at the first request needing it."""
+
+    def __init__(self, url=None, *, logbook=None, max_upload_bytes: int):
+        self.url = url
+        self._logbook = logbook
+        self._own = logbook is None
+        self.max_upload_bytes = max_upload_bytes
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------------ logbook
+    def logbook(self):
+        with self._lock:
+            if self._logbook is None:
+                try:
+                    from ..logbook import Logbook
+                except ImportError as exc:
+                    raise MissingExtraError("the logbook needs SQLAlchemy; install it with: "
+                                            "pip install 'dischargelab[logbook]'") from exc
+                self._logbook = Logbook(self.url)
+            return self._logbook
+
+    def close(self) -> None:
+        lb = self._logbook
+        if self._own and lb is not None and hasattr(lb, "close"):
+            lb.close()
+
+    def _pack_names(self) -> list[str]:
+        return [row["name"] for row in self.logbook().packs().to_dict()["rows"]]
+
+    def _known(self, name: str) -> str:
+        name = check_pack_name(name)
+        if name not in self._pack_names():
+            raise RequestRefused(404, f"no pack named {name!r} in the logbook")
+        return name
+
+    async def _call(self, func, *args):
+        try:
+            return await asyncio.to_thread(func, *args)
+        except RequestRefused:
+            raise
+        except MissingExtraError as exc:
+            raise RequestRefused(503, str(exc)) from None
+        except DischargelabError as exc:
+            raise RequestRefused(400, str(exc)) from None
+
+    # ------------------------------------------------------------------ handlers
+    def routes(self) -> list[Route]:
+        return [
+            Route("/api/packs", self.list_packs, methods=["GET"]),
+            Route("/api/packs/{name}", self.one_pack, methods=["GET"]),
+            Route("/api/packs/{name}/endurance", self.endurance, methods=["POST"]),
+            Route("/api/packs/{name}/fit", self.refit, methods=["POST"]),
+            Route("/api/missions", self.missions, methods=["GET"]),
+            Route("/api/upload", self.upload, methods=["POST"]),
+        ]
+
+    async def list_packs(self, request: Request) -> Response:
+        data = await self._call(lambda: self.logbook().packs().to_dict())
+        return JSONResponse(_clean(data))
+
+    def _pack_detail(self, name: str) -> dict:
+        name = self._known(name)
+        lb = self.logbook()
+        pack = lb.pack(name)
+        out = {"name": name,
+               "reference_capacity_Ah": getattr(pack, "reference_capacity_Ah", None),
+               "health": lb.health(name).to_dict(), "events": lb.events(name).to_dict(),
+               "model": None, "model_note": None}
+        model = getattr(pack, "to_battery", None) or pack.battery
+        try:
+            battery = model()
+        except DischargelabError as exc:
+            out["model_note"] = str(exc)
+            return out
+        from ..predict import default_cutoff
+        from ..simulate import curve_family
+
+        currents = [c * battery.rated_capacity_Ah for c in CURVE_C_RATES]
+        curves = curve_family(battery, currents, **default_cutoff(battery))
+        out["model"] = {
+            "name": battery.name, "family": battery.model,
+            "cells_series": battery.cells_series, "strings_parallel": battery.strings_parallel,
+            "capacity_Ah": battery.capacity_Ah,
+            "note": getattr(battery, "extra", {}).get("note") if hasattr(battery, "extra")
+            else None,
+            "curves": [{"c_rate": c, "current_A": sim.to_dict().get("current_A"),
+                        "time_to_cutoff_s": sim.time_to_cutoff_s,
+                        "charge_Ah": _thin(sim.charge_Ah), "voltage_V": _thin(sim.voltage_V)}
+                       for c, sim in zip(CURVE_C_RATES, curves)],
+        }
+        return out
+
+    async def one_pack(self, request: Request) -> Response:
+        data = await self._call(self._pack_detail, request.path_params["name"])
+        return JSONResponse(_clean(data))
+
+    async def missions(self, request: Request) -> Response:
+        from ..mission import bundled_missions
+
+        return JSONResponse({"missions": sorted(bundled_missions())})
+
+    def _endurance(self, name: str, mission: str) -> dict:
+        import dischargelab as dl
+
+        from ..mission import bundled_missions
+
+        name = self._known(name)
+        if mission not in bundled_missions():
+            raise RequestRefused(400, f"unknown mission {mission!r}; choose one of "
+                                      f"{', '.join(sorted(bundled_missions()))}")
+        return dl.endurance(self.logbook().pack(name), mission).to_dict()
+
+    async def endurance(self, request: Request) -> Response:
+        body = await self._json(request)
+        mission = body.get("mission")
+        if not isinstance(mission, str) or not mission:
+            raise RequestRefused(400, "give the mission's name: {\"mission\": \"paper-table5\"}")
+        data = await self._call(self._endurance, request.path_params["name"], mission)
+        return JSONResponse(_clean(data))
+
+    def _refit(self, name: str) -> dict:
+        name = self._known(name)
+        result = self.logbook().fit(name)
+        return result.to_dict() if hasattr(result, "to_dict") else {"fitted": name}
+
+    async def refit(self, request: Request) -> Response:
+        await self._json(request)
+        data = await self._call(self._refit, request.path_params["name"])
+        return JSONResponse(_clean(data))
+
+    async def _json(self, request: Request) -> dict:
+        return await read_json(request)
+
+    async def upload(self, request: Request) -> Response:
+        body = await read_body(request, self.max_upload_bytes, "upload")
+        file_name, data, pack = parse_upload(request.headers.get("content-type", ""), body)
+        pack = check_pack_name(pack)
+        result = await self._call(lambda: self.logbook().add_bytes(file_name, data, pack))
+        out = _clean(result.to_dict())
+        rejected = getattr(result, "rejected", None) or []
+        if rejected and not getattr(result, "added", None) and not getattr(result, "skipped",
+                                                                           None):
+            reason = rejected[0][1] if isinstance(rejected[0], (list, tuple)) else rejected[0]
+            return error(422, f"{file_name}: {reason}")
+        return JSONResponse(out)

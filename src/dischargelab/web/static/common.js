@@ -1,0 +1,53 @@
+// dischargelab: helpers shared by the pages (fetching JSON, formatting numbers).
+"use strict";
+
+(function (global) {
+  async function api(path, options) {
+    const response = await fetch(path, Object.assign({credentials: "same-origin"}, options || {}));
+    let body = null;
+    try { body = await response.json(); } catch (e) { body = null; }
+    if (!response.ok) {
+      const reason = body && body.error ? body.error : response.status + " " + response.statusText;
+      const err = new Error(reason);
+      err.status = response.status;
+      throw err;
+    }
+    return body;
+  }
+
+  function postJSON(path, data) {
+    return api(path, {method: "POST", headers: {"Content-Type": "application/json"},
+                      body: JSON.stringify(data || {})});
+  }
+
+  function num(v, digits) {
+    if (v === null || v === undefined || !isFinite(v)) return "–";
+    return Number(v).toFixed(digits === undefined ? 3 : digits);
+  }
+
+  function clock(seconds) {
+    if (seconds === null || seconds === undefined || !isFinite(seconds)) return "–";
+    const s = Math.max(0, Math.floor(seconds));
+    const h = Math.floor(s / 3600), m = Math.floor(s / 60) % 60, r = s % 60;
+    return h + ":" + String(m).padStart(2, "0") + ":" + String(r).padStart(2, "0");
+  }
+
+  function el(tag, attrs, children) {
+    const node = document.createElement(tag);
+    for (const [k, v] of Object.entries(attrs || {})) {
+      if (k === "text") node.textContent = v; else node.setAttribute(k, v);
+    }
+    for (const c of children || []) node.append(c);
+    return node;
+  }
+
+  function showMessage(text, kind) {
+    const box = document.getElementById("message");
+    if (!box) return;
+    box.hidden = !text;
+    box.textContent = text || "";
+    box.className = "message " + (kind || "error");
+  }
+
+  global.DL = {api, postJSON, num, clock, el, showMessage};
+})(window);

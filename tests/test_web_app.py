@@ -1,0 +1,186 @@
+"""The web server's safety rules and the live hub's no-silent-drop promise (no browser)."""
+
+import asyncio
+import subprocess
+import sys
+import time
+
+import pytest
+
+from dischargelab.acquire.pipeline import Sample
+from dischargelab.errors import DischargelabError
+from dischargelab.web.guard import path_problem
+from dischargelab.web.live import LiveHub
+from dischargelab.web.server import Server, build_server, check_bind
+from web_helpers import ThreadServer, multipart
+
+
+@pytest.fixture
+def server(tmp_path):
+    srv = ThreadServer(db=str(tmp_path / "logbook.sqlite"), max_upload_bytes=50_000)
+    yield srv
+    srv.server.stop()
+
+
+@pytest.mark.parametrize("path", [
+    "/static/../../etc/passwd", "/static/..%2f..%2fetc%2fpasswd",
+    "/static/%2e%2e%2f%2e%2e%2fetc%2fpasswd", "/%2e%2e/%2e%2e/etc/passwd",
+    "/static/%252e%252e%252f%252e%252e%252fetc%252fpasswd", "/static/%25252e%25252e%25252fx",
+    "/static/..\\..\\pyproject.toml", "/static/%5c..%5cpyproject.toml", "/packs/..",
+    "/api/packs/%2e%2e", "/static/app.css%00.png",
+])
+def test_path_traversal_is_refused_in_every_encoding(server, path):
+    status, data, _ = server.request("GET", path)
+    assert status == 400, (status, data)
+    assert "path" in data["error"]
+    assert server.alive()
+
+
+def test_path_problem_decodes_repeatedly():
+    assert path_problem("/static/app.css") is None
+    assert path_problem("/packs/pack%20one") is None
+    assert path_problem("/a/%2525252e%2525252e/b")
+
+
+def test_only_the_apps_own_files_are_served(server):
+    status, body, _ = server.request("GET", "/static/app.css")
+    assert status == 200 and "font" in body
+    for path in ("/static/pyproject.toml", "/static/live.html", "/static/__init__.py",
+                 "/static/", "/nothing-here", "/api/nothing"):
+        status, data, _ = server.request("GET", path)
+        assert status == 404 and data["error"], path
+    status, data, _ = server.request("DELETE", "/api/live")
+    assert status == 405 and "DELETE is not allowed" in data["error"]
+    assert server.alive()
+
+
+def test_bad_uploads_get_a_clear_4xx(server):
+    body, ctype = multipart({"pack": "p1"}, {"file": ("run.csv", b"x" * 60_000)})
+    status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+    assert status == 413 and "over the limit of 50000 bytes" in data["error"]
+    status, data, _ = server.request("POST", "/api/upload", b"just bytes",
+                                     {"Content-Type": "text/plain"})
+    assert status == 400 and "multipart/form-data" in data["error"]
+    status, data, _ = server.request(
+        "POST", "/api/upload", b"--b\r\nContent-Disposition: form-data; name=\"file\"\r\n\r\nx",
+        {"Content-Type": "multipart/form-data; boundary=b"})
+    assert status == 400
+    body, ctype = multipart({}, {"file": ("run.csv", b"time_s,voltage_V\n0,4\n")})
+    status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+    assert status == 400 and "'pack'" in data["error"]
+    body, ctype = multipart({"pack": "p1"}, {})
+    status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+    assert status == 400 and "'file'" in data["error"]
+    body, ctype = multipart({"pack": "a/b"}, {"file": ("run.csv", b"1,2\n")})
+    status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+    assert status == 400 and "pack name" in data["error"]
+    assert server.alive()
+
+
+def test_other_sites_and_other_host_names_are_refused(server):
+    status, data, _ = server.request("POST", "/api/live/stop", b"{}",
+                                     {"Origin": "http://evil.example"})
+    assert status == 403 and "another site" in data["error"]
+    status, data, _ = server.request("GET", "/api/live", headers={"Host": "evil.example:80"})
+    assert status == 421
+    status, data, _ = server.request("POST", "/api/live/start", b"[1, 2]",
+                                     {"Content-Type": "application/json"})
+    assert status == 409 or status == 400
+    assert server.alive()
+
+
+def test_listening_beyond_loopback_needs_a_token():
+    with pytest.raises(DischargelabError, match="give it a token"):
+        check_bind("0.0.0.0", None)
+    with pytest.raises(DischargelabError, match="give it a token"):
+        build_server(host="0.0.0.0", port=0)
+    check_bind("0.0.0.0", "secret")
+    check_bind("127.0.0.1", None)
+    check_bind("::1", None)
+
+
+def test_a_token_is_needed_on_every_request_when_given(tmp_path):
+    srv = ThreadServer(db=str(tmp_path / "lb.sqlite"), token="s3cret-token")
+    try:
+        status, data, _ = srv.request("GET", "/api/live")
+        assert status == 401 and "token" in data["error"]
+        status, data, _ = srv.request("GET", "/api/live",
+                                      headers={"Authorization": "Bearer wrong"})
+        assert status == 401
+        status, data, _ = srv.request("GET", "/api/live",
+                                      headers={"Authorization": "Bearer s3cret-token"})
+        assert status == 200
+        status, _, cookie = srv.request("GET", "/live?token=s3cret-token")
+        assert status == 200 and "dl_token=s3cret-token" in cookie and "HttpOnly" in cookie
+        status, data, _ = srv.request("GET", "/api/live",
+                                      headers={"Cookie": "dl_token=s3cret-token"})
+        assert status == 200
+    finally:
+        srv.server.stop()
+
+
+def test_a_busy_port_is_one_clear_line(tmp_path):
+    first = ThreadServer(db=str(tmp_path / "lb.sqlite"))
+    try:
+        with pytest.raises(DischargelabError, match=f"port {first.port} on 127.0.0.1 is in use"):
+            Server(object(), "127.0.0.1", first.port)
+    finally:
+        first.server.stop()
+
+
+# ---------------------------------------------------------------------- live hub
+
+def _samples(n, start=0):
+    return [Sample(time_s=0.1 * k, voltage_V=8.0 - 1e-4 * k, current_A=1.0, seq=k)
+            for k in range(start, start + n)]
+
+
+def test_hub_never_waits_for_a_subscriber_and_resyncs_one_that_fell_behind():
+    async def scenario():
+        hub = LiveHub(ring_samples=1000, subscriber_samples=50)
+        hub.begin({"out": "x.csv"}, cells_series=2, cutoff_pack_V=6.0)
+        sub = hub.subscribe(asyncio.get_running_loop())
+        kind, snap = hub.take(sub)
+        assert kind == "snapshot" and snap["samples"] == []
+        t0 = time.perf_counter()
+        for s in _samples(40):
+            hub.handle(s)
+        kind, got = hub.take(sub)
+        assert kind == "samples" and [r[0] for r in got["samples"]] == list(range(40))
+        for s in _samples(300, 40):          # the page reads nothing: its queue overflows
+            hub.handle(s)
+        elapsed = time.perf_counter() - t0
+        kind, got = hub.take(sub)            # resync: the whole ring, nothing missing
+        assert kind == "snapshot"
+        assert [r[0] for r in got["samples"]] == list(range(340))
+        assert got["samples"][-1][9] == 339 and got["samples"][1][3] == pytest.approx(
+            (8.0 - 1e-4) / 2)
+        assert hub.take(sub) is None
+        hub.handle(_samples(1, 340)[0])
+        kind, got = hub.take(sub)
+        assert kind == "samples" and got["samples"][0][0] == 340
+        assert elapsed < 1.0                 # 340 samples without any reader
+        hub.unsubscribe(sub)
+        assert hub.subscribers == 0
+
+    asyncio.run(scenario())
+
+
+def test_hub_history_is_bounded_and_says_where_it_starts():
+    async def scenario():
+        hub = LiveHub(ring_samples=100, subscriber_samples=10)
+        hub.begin({})
+        for s in _samples(250):
+            hub.handle(s)
+        sub = hub.subscribe(asyncio.get_running_loop())
+        kind, snap = hub.take(sub)
+        assert snap["first_n"] == 150 and len(snap["samples"]) == 100
+
+    asyncio.run(scenario())
+
+
+def test_importing_dischargelab_does_not_import_the_web_stack():
+    code = ("import sys, dischargelab; bad = [m for m in sys.modules if m.split('.')[0] in "
+            "('starlette', 'uvicorn', 'python_multipart', 'multipart', 'anyio', "
+            "'dischargelab.web')]; print(bad); assert not bad")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
