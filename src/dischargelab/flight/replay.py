@@ -112,8 +112,12 @@ def fly_model(part: FlightSamples, series, s: Settings, bat, notes: list):
     cells = [c for c in frame.columns if c.startswith("cell") and c.endswith("_V")]
     if cells and err.size:
         per_cell = predicted[inside] / s.cells
-        summary["rmse_cell_V"] = [float(np.sqrt(np.mean((per_cell - frame[c].to_numpy()[inside])
-                                                        ** 2))) for c in cells]
+        rmse = []
+        for c in cells:  # masked (glitched) cell samples are NaN: left out
+            diff = per_cell - frame[c].to_numpy(dtype=float)[inside]
+            diff = diff[np.isfinite(diff)]
+            rmse.append(float(np.sqrt(np.mean(diff ** 2))) if diff.size else None)
+        summary["rmse_cell_V"] = rmse
     last = max(states) if states else None
     if last is not None:
         q_end = float(states[last]["charge_Ah"][0]) * bat.strings_parallel
