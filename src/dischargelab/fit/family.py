@@ -74,14 +74,43 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
                 seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
                 max_samples: int = MAX_SAMPLES_PER_CURVE,
-                bootstrap_method: str = "linearised") -> FitResult:
+                bootstrap_method: str = "linearised", cooling: str | None = "still-air",
+                chemistry: str | None = None) -> FitResult:
     """Fit one model family (``model`` a family name, not ``"auto"``) without its
     held-out model error (:func:`dischargelab.fit.heldout.held_out_error`); see
     :func:`dischargelab.fit.fit_battery` for the parameters.
 
     ``start`` (values of the nonlinear parameters, e.g. a fit to more of the same
     data) skips the multi-start search and refines from there: a warm start.
-    ``max_samples`` thins each curve to at most that many samples."""
+    ``max_samples`` thins each curve to at most that many samples. A thermal family
+    fitted without a logged temperature gets the thermal prior of ``cooling`` and
+    ``chemistry`` (:func:`fit_self_heating`; ``cooling``
+    None holds the cell at the ambient instead)."""
+    if needs_prior(curves, model, cooling):
+        return fit_self_heating(
+            curves, cooling=cooling, chemistry=chemistry, cells_series=cells_series,
+            strings_parallel=strings_parallel, fixed=fixed, bounds=bounds, guess=guess,
+            paper_mode=paper_mode, use_rest=use_rest, weighting=weighting, n_best=n_best,
+            bootstrap=bootstrap, seed=seed, model=model, progress=progress, start=start,
+            max_samples=max_samples, bootstrap_method=bootstrap_method)
+    return fit_once(curves, cells_series=cells_series, strings_parallel=strings_parallel,
+                    fixed=fixed, bounds=bounds, guess=guess, paper_mode=paper_mode,
+                    use_rest=use_rest, weighting=weighting, n_best=n_best, bootstrap=bootstrap,
+                    seed=seed, model=model, progress=progress, start=start,
+                    max_samples=max_samples, bootstrap_method=bootstrap_method)
+
+
+def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
+             fixed: dict | None = None, bounds: dict | None = None,
+             guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
+             weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
+             seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
+             max_samples: int = MAX_SAMPLES_PER_CURVE, bootstrap_method: str = "linearised",
+             virtual_temperature=None, thermal_prior: dict | None = None) -> FitResult:
+    """One fit of one family (see :func:`fit_family`); ``virtual_temperature`` (per
+    curve, a simulated cell temperature [degC]) stands in for the unlogged temperature,
+    and ``thermal_prior`` (``Cth_J_per_K``, ``Rth_K_per_W``, ``note``) gives a thermal
+    family fitted without a logged temperature its heat capacity and resistance."""
     t_start = time.perf_counter()
     curves = [curves] if isinstance(curves, Curve) else list(curves)
     if not curves:
@@ -92,7 +121,7 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     if weighting not in ("equal", "samples"):
         raise FitError(f"weighting must be 'equal' or 'samples', got {weighting!r}")
     stack = _stack(curves, cells_series, strings_parallel, use_rest, weighting,
-                   max_samples=max_samples)
+                   max_samples=max_samples, virtual_temperature=virtual_temperature)
     requested_fixed = dict(fixed or {})
     if paper_mode:
         if "E0_V" not in requested_fixed:
@@ -122,7 +151,8 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     elif mdl.nonlinear:
         # coarse to fine: search on a thinned copy of the data, refine on all of it
         coarse = _Model(family, _stack(curves, cells_series, strings_parallel, use_rest,
-                                       weighting, max_samples=SEARCH_SAMPLES_PER_CURVE),
+                                       weighting, max_samples=SEARCH_SAMPLES_PER_CURVE,
+                                       virtual_temperature=virtual_temperature),
                         fixed, bnds)
         cost = coarse.grid_costs(starts)
         nfev += len(starts)
@@ -176,7 +206,7 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
 
     thermal = None
     if family.thermal:
-        params, thermal = _thermal(family, params, stack, notes)
+        params, thermal = _thermal(family, params, stack, notes, thermal_prior)
     ident = analyse(jac, mdl.free, values, bnds, paper_mode=paper_mode, svd=svd)
     _physical_limits(family, ident, notes)
     warnings += ident.warnings
@@ -236,8 +266,16 @@ def _physical_limits(family: Family, ident: Identifiability, notes: list) -> Non
     ident.at_bounds = keep
 
 
-def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list):
-    """Heat capacity and thermal resistance from the logged temperature (else defaults)."""
+def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list,
+             prior: dict | None = None):
+    """Heat capacity and thermal resistance from the logged temperature, else from the
+    thermal prior, else held at the ambient (else defaults)."""
+    if not stack.has_temperature and prior is not None:
+        params = params.replace(Cth_J_per_K=prior["Cth_J_per_K"],
+                                Rth_K_per_W=prior["Rth_K_per_W"])
+        return params, {"Cth_J_per_K": float(prior["Cth_J_per_K"]),
+                        "Rth_K_per_W": float(prior["Rth_K_per_W"]),
+                        "source": "prior (no temperature logged): " + prior["note"]}
     if not stack.has_temperature:
         # the fit took the cell at the ambient, so its resistances already hold whatever
         # heating the runs had: predictions keep the cell at the ambient too
@@ -269,3 +307,130 @@ def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list
                  + how.format(fitted["Cth_J_per_K"], fitted["Rth_K_per_W"])
                  + f" (RMSE {fitted['rmse_K']:.2f} K)")
     return params, dict(fitted, source=source)
+
+
+# ---- self-heating without a logged temperature ----------------------------------------
+
+#: The prior's simulated heating is kept unless it makes the voltage fit worse than
+#: this factor, and this margin [V], times / above the fit with the cell at the ambient
+#: (data whose voltage does not show the heating the prior predicts).
+PRIOR_RMSE_FACTOR = 1.1
+PRIOR_RMSE_MARGIN_V = 0.001
+
+#: Refits at most, and the change of the simulated temperature [K] that ends them.
+VIRTUAL_ITERATIONS = 10
+VIRTUAL_TOLERANCE_K = 0.2
+
+#: Points of the current profile flown to simulate the temperature of a run (the
+#: thermal time constants are minutes; within each interval the RMS current keeps the
+#: Joule heat of current peaks).
+VIRTUAL_PROFILE_POINTS = 300
+
+
+def needs_prior(curves, model, cooling) -> bool:
+    """True for a thermal family, fitted without a logged temperature, with a cooling."""
+    curves = [curves] if isinstance(curves, Curve) else list(curves)
+    return (cooling is not None and get_family(model).thermal
+            and not all(c.temperature_C is not None for c in curves))
+
+
+def prior_for(result, curves, cooling: str, chemistry: str | None) -> dict:
+    """The thermal prior of the fitted cell (capacity per cell from the fit, chemistry
+    given or from the full cell's voltage, the pack's cells sharing its surface)."""
+    from ..thermalprior import chemistry_from_full_voltage, thermal_prior
+
+    if chemistry is None:
+        full = result.battery.voltage(0.0, 0.0) / result.cells_series
+        chemistry = chemistry_from_full_voltage(float(np.asarray(full).ravel()[0]))
+    capacity = float(result.parameters["C_Ah"])
+    return thermal_prior(capacity, chemistry, cells=result.cells_series * result.strings_parallel,
+                         cooling=cooling)
+
+
+def virtual_temperature(battery, curve: Curve) -> np.ndarray:
+    """Cell temperature [degC] at the samples of ``curve``: its logged current flown
+    through ``battery`` (with its thermal parameters) from the ambient."""
+    from ..engine import Step, run
+
+    t = curve.time_s - curve.time_s[0]
+    keep = _thin(t.size, VIRTUAL_PROFILE_POINTS)
+    # RMS current over each interval between kept samples (Joule heat of the peaks)
+    edges = np.r_[keep, t.size]
+    i2 = np.add.reduceat(curve.current_A ** 2, keep) / np.diff(edges)
+    current = np.sqrt(i2)
+    times = t[np.minimum(edges[1:], t.size - 1)]
+    times = np.maximum.accumulate(np.maximum(times, 1e-6))
+    ok = np.r_[True, np.diff(times) > 0]
+    step = Step("profile", profile_time_s=tuple(times[ok]), profile_current_A=tuple(current[ok]))
+    params = {n: np.array([float(battery.parameters[n])]) for n in battery.family.names}
+    ambient = curve.ambient_C if curve.ambient_C is not None else battery.ambient_C
+    res = run(battery.family, params, [step], cutoff_pack_V=0.0,
+              cells_series=battery.cells_series, strings_parallel=battery.strings_parallel,
+              ambient_C=ambient, initial_charge_Ah=float(curve.initial_charge_Ah), record=True)
+    flown_t = np.asarray(res.series["time_s"], dtype=float)
+    flown_T = np.asarray(res.series["temperature_C"], dtype=float)
+    good = np.isfinite(flown_T)
+    if not good.any():
+        return np.full(t.size, float(ambient))
+    return np.interp(t, flown_t[good], flown_T[good])
+
+
+def fit_self_heating(curves, *, cooling: str, chemistry: str | None = None, **kw):
+    """Fit a thermal family to curves without a logged temperature, its self-heating
+    simulated with the thermal prior; ``kw`` as :func:`fit_once`.
+
+    Fitting a thermal family to data without a logged temperature: the self-heating the
+    runs had is simulated with a thermal prior instead of ignored.
+
+    Without a temperature log the fit used to take the cell at the ambient throughout, and
+    predictions kept it there: the resistances then hold whatever heating the fitted runs
+    had, and a prediction at a higher current misses the heating it adds (a slow drain
+    says nothing about how warm a 3.5C drain gets, and a warm cell sags less). Here:
+
+    1. the family is fitted with the cell at the ambient;
+    2. the thermal prior (:func:`dischargelab.thermalprior.thermal_prior`: heat capacity and
+       thermal resistance from the cell's capacity, its chemistry, the cells in the pack
+       and the cooling) is given to the fit, and each run's logged current is flown through
+       the fitted model (the one engine, :func:`dischargelab.engine.run`) from the ambient:
+       a simulated cell temperature for every sample;
+    3. the family is fitted again with that temperature standing in for the unlogged one
+       (its Arrhenius resistances read it), warm-started, and 2-3 repeat until the simulated
+       temperature moves by less than :data:`VIRTUAL_TOLERANCE_K`.
+
+    Predictions then simulate the heating with the same prior. A slow drain hardly heats,
+    so its fit is the cold cell's; a fast drain heats and its resistances fall with the
+    family's Arrhenius prior. When the simulated heating makes the voltage fit worse
+    (:data:`PRIOR_RMSE_FACTOR`, :data:`PRIOR_RMSE_MARGIN_V`), the data argue against it
+    and the cell is held at the ambient, as without a prior.
+    """
+    curves = [curves] if isinstance(curves, Curve) else list(curves)
+    held = res = fit_once(curves, **kw)
+    prior = prior_for(res, curves, cooling, chemistry)
+    res = fit_once(curves, **dict(kw, thermal_prior=prior, start=res.parameters.as_dict()))
+    temps = [np.full(c.time_s.size, np.nan) for c in curves]
+    change, rounds = np.inf, 0
+    while rounds < VIRTUAL_ITERATIONS:
+        rounds += 1
+        new = [virtual_temperature(res.battery, c) for c in curves]
+        change = max(float(np.nanmax(np.abs(a - b))) if np.isfinite(b).any() else np.inf
+                     for a, b in zip(new, temps))
+        temps = new
+        res = fit_once(curves, **dict(kw, thermal_prior=prior, virtual_temperature=temps,
+                                      start=res.parameters.as_dict()))
+        if change < VIRTUAL_TOLERANCE_K:
+            break
+    if res.rmse_V > max(PRIOR_RMSE_FACTOR * held.rmse_V, held.rmse_V + PRIOR_RMSE_MARGIN_V):
+        held.notes.append(
+            f"no temperature logged: the self-heating the {prior['note']} predicts makes the "
+            f"fit worse (RMSE {1000 * held.rmse_V:.1f} -> {1000 * res.rmse_V:.1f} mV): the "
+            f"voltage does not show that heating, so the cell is held at the ambient")
+        return held
+    rise = max(float(np.max(tc) - tc[0]) for tc in temps)
+    converged = "" if change < VIRTUAL_TOLERANCE_K else (
+        f"; not settled after {rounds} refits (last change {change:.2g} K)")
+    res.notes.append(f"no temperature logged: the self-heating is simulated with the "
+                     f"{prior['note']}; the fitted runs heat the cell by up to {rise:.1f} K "
+                     f"in that simulation, and the fit reads its resistances at that "
+                     f"temperature ({rounds} refit(s){converged})")
+    res.thermal_prior = dict(prior, fit_virtual_rise_K=rise)
+    return res

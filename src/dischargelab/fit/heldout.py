@@ -32,7 +32,8 @@ FOLD_SAMPLES_PER_CURVE = 500
 
 
 def held_out_error(curves, *, model, battery=None, cells_series=1, strings_parallel=1,
-                   fixed=None, bounds=None, use_rest=True, weighting="equal") -> dict | None:
+                   fixed=None, bounds=None, use_rest=True, weighting="equal",
+                   cooling="still-air", chemistry=None) -> dict | None:
     """The model's own error of the time to cutoff, from data left out of the fit.
 
     Each fold predicts the time to a left-out curve's last voltage at its mean current
@@ -78,7 +79,7 @@ def held_out_error(curves, *, model, battery=None, cells_series=1, strings_paral
         return None
     common = dict(cells_series=cells_series, strings_parallel=strings_parallel, fixed=fixed,
                   bounds=bounds, use_rest=use_rest, weighting=weighting, model=model,
-                  max_samples=FOLD_SAMPLES_PER_CURVE)
+                  max_samples=FOLD_SAMPLES_PER_CURVE, cooling=cooling, chemistry=chemistry)
     if battery is not None:  # warm start from the full fit
         common["start"] = battery.parameters.as_dict()
     errors, ratios, names, ends, pooled = [], [], [], [], []

@@ -42,8 +42,11 @@ def _thin(n: int, limit: int) -> np.ndarray:
 
 
 def _stack(curves, cells_series, strings_parallel, use_rest, weighting,
-           max_samples=MAX_SAMPLES_PER_CURVE) -> Samples:
-    """Cell-level samples of all curves (thinned), rest points appended as i = 0, q = 0."""
+           max_samples=MAX_SAMPLES_PER_CURVE, virtual_temperature=None) -> Samples:
+    """Cell-level samples of all curves (thinned), rest points appended as i = 0, q = 0.
+
+    ``virtual_temperature``: per curve, a simulated cell temperature at its samples
+    [degC] used where no temperature was logged (``has_temperature`` stays False)."""
     parts = []
     has_temp = all(c.temperature_C is not None for c in curves)
     ambients = [c.ambient_C for c in curves if c.ambient_C is not None]
@@ -55,7 +58,12 @@ def _stack(curves, cells_series, strings_parallel, use_rest, weighting,
         q0 = float(c.initial_charge_Ah) / strings_parallel
         q = c.charge_Ah[keep] / strings_parallel + q0
         t = c.time_s[keep] - c.time_s[0]
-        temp = c.temperature_C[keep] if has_temp else np.full(v.size, ambient)
+        if has_temp:
+            temp = c.temperature_C[keep]
+        elif virtual_temperature is not None:
+            temp = np.asarray(virtual_temperature[k], dtype=float)[keep]
+        else:
+            temp = np.full(v.size, ambient)
         w = np.full(v.size, 1.0 / np.sqrt(v.size) if weighting == "equal" else 1.0)
         rest = np.zeros(v.size, bool)
         if use_rest and c.rest_voltage_V is not None:

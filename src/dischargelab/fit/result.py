@@ -67,6 +67,9 @@ class FitResult:
     thermal: dict | None = None
     model_error: dict | None = None
     implausible: list = field(default_factory=list)
+    #: The thermal prior of a thermal family fitted without a logged temperature
+    #: (:mod:`dischargelab.fit.selfheating`), else None.
+    thermal_prior: dict | None = None
 
     @property
     def physical(self) -> bool:
@@ -111,6 +114,8 @@ class FitResult:
                  if c.temperature_C is not None]
         if rises:
             extra["fit_temperature_rise_K"] = max(rises)
+        if self.thermal_prior is not None:
+            extra["thermal_prior"] = dict(self.thermal_prior)
         plateau = plateau_ratio(self.curves[lowest])
         if plateau is not None:
             extra["fit_plateau_ratio"] = plateau

@@ -211,7 +211,10 @@ def analyse_flight(path, model=None, *, flights=None, battery: int | None = None
     cutoff = float(cutoff) if cutoff is not None else CUTOFF_CELL_VOLTAGE_V[chemistry]
     settings = Settings(cells, parallel, capacity, chemistry, cutoff, replay_every_s,
                          recent_load_s, window_s, float(low_timer_s))
-    if bat is not None and "fit_temperature_rise_K" not in bat.extra and bat.family.thermal:
+    if bat is not None and "thermal_prior" in bat.extra:
+        notes.append("the cell temperature is simulated with the model's thermal prior (no "
+                     "temperature logged): " + str(bat.extra["thermal_prior"].get("note", "")))
+    elif bat is not None and "fit_temperature_rise_K" not in bat.extra and bat.family.thermal:
         notes.append("the cell temperature is held at the ambient: the model was fitted to data "
                      "without heating, and the log has no battery temperature")
     if capacity is None:

@@ -43,7 +43,8 @@ PX4_VOLTAGE_WINDOW_S = 1.0
 
 def _engine_params(bat) -> dict:
     params = {n: float(bat.parameters[n]) for n in bat.family.names}
-    if bat.family.thermal and "fit_temperature_rise_K" not in bat.extra:
+    if bat.family.thermal and "fit_temperature_rise_K" not in bat.extra \
+            and "thermal_prior" not in bat.extra:
         params["Cth_J_per_K"] = HELD_AT_AMBIENT_HEAT_CAPACITY
     return params
 
