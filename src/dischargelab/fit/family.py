@@ -321,12 +321,6 @@ PRIOR_RMSE_MARGIN_V = 0.001
 VIRTUAL_ITERATIONS = 10
 VIRTUAL_TOLERANCE_K = 0.2
 
-#: Points of the current profile flown to simulate the temperature of a run (the
-#: thermal time constants are minutes; within each interval the RMS current keeps the
-#: Joule heat of current peaks).
-VIRTUAL_PROFILE_POINTS = 300
-
-
 def needs_prior(curves, model, cooling) -> bool:
     """True for a thermal family, fitted without a logged temperature, with a cooling."""
     curves = [curves] if isinstance(curves, Curve) else list(curves)
@@ -347,32 +341,31 @@ def prior_for(result, curves, cooling: str, chemistry: str | None) -> dict:
                          cooling=cooling)
 
 
-def virtual_temperature(battery, curve: Curve) -> np.ndarray:
-    """Cell temperature [degC] at the samples of ``curve``: its logged current flown
-    through ``battery`` (with its thermal parameters) from the ambient."""
-    from ..engine import Step, run
-
-    t = curve.time_s - curve.time_s[0]
-    keep = _thin(t.size, VIRTUAL_PROFILE_POINTS)
-    # RMS current over each interval between kept samples (Joule heat of the peaks)
-    edges = np.r_[keep, t.size]
-    i2 = np.add.reduceat(curve.current_A ** 2, keep) / np.diff(edges)
-    current = np.sqrt(i2)
-    times = t[np.minimum(edges[1:], t.size - 1)]
-    times = np.maximum.accumulate(np.maximum(times, 1e-6))
-    ok = np.r_[True, np.diff(times) > 0]
-    step = Step("profile", profile_time_s=tuple(times[ok]), profile_current_A=tuple(current[ok]))
-    params = {n: np.array([float(battery.parameters[n])]) for n in battery.family.names}
-    ambient = curve.ambient_C if curve.ambient_C is not None else battery.ambient_C
-    res = run(battery.family, params, [step], cutoff_pack_V=0.0,
-              cells_series=battery.cells_series, strings_parallel=battery.strings_parallel,
-              ambient_C=ambient, initial_charge_Ah=float(curve.initial_charge_Ah), record=True)
-    flown_t = np.asarray(res.series["time_s"], dtype=float)
-    flown_T = np.asarray(res.series["temperature_C"], dtype=float)
-    good = np.isfinite(flown_T)
-    if not good.any():
-        return np.full(t.size, float(ambient))
-    return np.interp(t, flown_t[good], flown_T[good])
+def virtual_temperature(result: FitResult, curve: Curve, prior: dict,
+                        temperature) -> np.ndarray:
+    """Cell temperature [degC] at the samples of ``curve`` by the lumped thermal model with
+    the prior's heat capacity and resistance, heated by the fitted model's irreversible
+    heat ``i (U_ocv - V)`` at the samples (its resistances read at ``temperature``, the
+    previous estimate); exact over each sample interval for the interval's mean heat."""
+    family, p = result.family, result.parameters
+    t_all = curve.time_s - curve.time_s[0]
+    data = _stack([curve], result.cells_series, result.strings_parallel, False, "samples",
+                  virtual_temperature=[np.asarray(temperature, dtype=float)])
+    with np.errstate(invalid="ignore", over="ignore"):
+        v = family.fit_voltage(p, data)
+        state = {st.name: (data.charge if st.kind == "charge" else data.temperature
+                           if st.kind == "thermal" else data.current) for st in family.states}
+        heat = data.current * (family.open_circuit_voltage(p, state) - v)
+    heat = np.where(np.isfinite(heat), np.maximum(heat, 0.0), 0.0)
+    ambient = curve.ambient_C if curve.ambient_C is not None else result.ambient_C
+    rth, tau = prior["Rth_K_per_W"], prior["Rth_K_per_W"] * prior["Cth_J_per_K"]
+    decay = np.exp(-np.diff(data.time) / tau)
+    mean_heat = 0.5 * (heat[1:] + heat[:-1])
+    out = np.empty(data.time.size)
+    out[0] = ambient
+    for k in range(decay.size):
+        out[k + 1] = ambient + (out[k] - ambient) * decay[k] + mean_heat[k] * rth * (1 - decay[k])
+    return np.interp(t_all, data.time, out)
 
 
 def fit_self_heating(curves, *, cooling: str, chemistry: str | None = None, **kw):
@@ -390,12 +383,13 @@ def fit_self_heating(curves, *, cooling: str, chemistry: str | None = None, **kw
     1. the family is fitted with the cell at the ambient;
     2. the thermal prior (:func:`dischargelab.thermalprior.thermal_prior`: heat capacity and
        thermal resistance from the cell's capacity, its chemistry, the cells in the pack
-       and the cooling) is given to the fit, and each run's logged current is flown through
-       the fitted model (the one engine, :func:`dischargelab.engine.run`) from the ambient:
-       a simulated cell temperature for every sample;
+       and the cooling) turns the fitted model's irreversible heat at every sample of a
+       run into a simulated cell temperature from the ambient
+       (:func:`virtual_temperature`);
     3. the family is fitted again with that temperature standing in for the unlogged one
        (its Arrhenius resistances read it), warm-started, and 2-3 repeat until the simulated
-       temperature moves by less than :data:`VIRTUAL_TOLERANCE_K`.
+       temperature moves by less than :data:`VIRTUAL_TOLERANCE_K` (the prior's heat
+       capacity and resistance become the fit's).
 
     Predictions then simulate the heating with the same prior. A slow drain hardly heats,
     so its fit is the cold cell's; a fast drain heats and its resistances fall with the
@@ -406,20 +400,21 @@ def fit_self_heating(curves, *, cooling: str, chemistry: str | None = None, **kw
     curves = [curves] if isinstance(curves, Curve) else list(curves)
     held = res = fit_once(curves, **kw)
     prior = prior_for(res, curves, cooling, chemistry)
-    res = fit_once(curves, **dict(kw, thermal_prior=prior, start=res.parameters.as_dict()))
-    temps = [np.full(c.time_s.size, np.nan) for c in curves]
-    change, rounds = np.inf, 0
+    temps = [np.full(c.time_s.size, c.ambient_C if c.ambient_C is not None else res.ambient_C,
+                     dtype=float) for c in curves]
+    change, rounds, worse = np.inf, 0, False
     while rounds < VIRTUAL_ITERATIONS:
         rounds += 1
-        new = [virtual_temperature(res.battery, c) for c in curves]
-        change = max(float(np.nanmax(np.abs(a - b))) if np.isfinite(b).any() else np.inf
-                     for a, b in zip(new, temps))
+        new = [virtual_temperature(res, c, prior, tc) for c, tc in zip(curves, temps)]
+        change = max(float(np.max(np.abs(a - b))) for a, b in zip(new, temps))
         temps = new
         res = fit_once(curves, **dict(kw, thermal_prior=prior, virtual_temperature=temps,
                                       start=res.parameters.as_dict()))
-        if change < VIRTUAL_TOLERANCE_K:
+        worse = res.rmse_V > max(PRIOR_RMSE_FACTOR * held.rmse_V,
+                                 held.rmse_V + PRIOR_RMSE_MARGIN_V)
+        if change < VIRTUAL_TOLERANCE_K or worse:
             break
-    if res.rmse_V > max(PRIOR_RMSE_FACTOR * held.rmse_V, held.rmse_V + PRIOR_RMSE_MARGIN_V):
+    if worse:
         held.notes.append(
             f"no temperature logged: the self-heating the {prior['note']} predicts makes the "
             f"fit worse (RMSE {1000 * held.rmse_V:.1f} -> {1000 * res.rmse_V:.1f} mV): the "

@@ -52,8 +52,10 @@ def _engine_params(bat) -> dict:
 def _initial_model_charge(part: FlightSamples, series, bat, notes: list) -> tuple[float, str]:
     rest = part.rest_before
     if rest is not None:
-        return model_charge_at_rest(bat, rest.voltage_V), \
-            f"rest voltage {rest.voltage_V:.3f} V before take-off through the model's OCV"
+        # at the idle current the pack sat at, as validate reads the same rest sample
+        return model_charge_at_rest(bat, rest.voltage_V, rest.current_A), \
+            (f"rest voltage {rest.voltage_V:.3f} V at {rest.current_A:.2f} A before take-off "
+             f"through the model")
     remaining = log_remaining_at(series, part.frame["time_s"].iloc[0])
     if remaining is not None:
         return (1.0 - remaining) * bat.capacity_Ah, \
