@@ -143,9 +143,15 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     starts, lo, hi = _starts(mdl, bnds, guess)
     nfev = 0
     theta = np.empty(0)
+    warm = None
     if mdl.nonlinear and start is not None and all(n in start for n in mdl.nonlinear):
-        warm = np.clip([float(start[n]) for n in mdl.nonlinear], lo, hi)
-        sol = _varpro_solve(mdl, _defined_start(mdl, warm, hi), lo, hi)
+        warm = _defined_start(mdl, np.clip([float(start[n]) for n in mdl.nonlinear], lo, hi),
+                              hi)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            if not np.all(np.isfinite(mdl.varpro_residual(warm))):
+                warm = None  # the start is undefined on these data: search instead
+    if warm is not None:
+        sol = _varpro_solve(mdl, warm, lo, hi)
         nfev += sol.nfev
         theta = sol.x
     elif mdl.nonlinear:

@@ -464,9 +464,12 @@ def _varpro_solve(model: _Model, theta0, lo, hi, max_iter: int = 200,
     nfev = 1
     lam = None
     for _ in range(max_iter):
-        jac = model.varpro_jacobian(x)
-        grad = jac.T @ r
-        hess = jac.T @ jac
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            jac = model.varpro_jacobian(x)
+            grad = jac.T @ r
+            hess = jac.T @ jac
+        if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(hess))):
+            break  # a sample at the empty cell: the last defined point is the solution
         at_lo = (x <= lo) & (grad > 0)
         at_hi = (x >= hi) & (grad < 0)
         free = ~(at_lo | at_hi)
