@@ -304,7 +304,8 @@ def held_out_summary(model_error: dict) -> str:
     """One line on a stored held-out model error (``FitResult.model_error``)."""
     parts = []
     for key, what in (("held_out_rms", "whole curves left out"),
-                      ("end_rms", "curve ends left out")):
+                      ("end_rms", "curve ends left out"),
+                      ("rate_rms", "the rate-capacity check")):
         value = model_error.get(key)
         if isinstance(value, (int, float)):
             parts.append(f"{100 * value:.2f} % RMS with {what}")
