@@ -67,6 +67,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/io_read_speed.py
 	$(BIN)/python benchmarks/calibration_table1.py
 	$(BIN)/python benchmarks/acquire_throughput.py
+	$(BIN)/python benchmarks/logbook.py
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache

@@ -429,6 +429,43 @@ def test_lvm_without_usable_description_needs_columns(tmp_path):
     assert any("Description" in n for n in meta2["notes"])
 
 
+def _seven_column_lvm(tmp_path, strain_at):
+    """A discharge whose Description names six columns for seven (one strain column left out)."""
+    t, v, i = discharge_rows()
+    temp = 20.0 + 0.05 * np.arange(t.size)
+    strain = 3.7e-4 + 1e-6 * np.sin(t)
+    columns = [t, -i, v, -i * v, temp, 20.5 + 0 * t]
+    columns.insert(strain_at, strain)
+    description = "Clolumns are: time, Current, Voltage, Power, Battery Temp, and Chamber Temp"
+    text = LVM_TEMPLATE.format(description=description).replace(
+        "X_Value\tUntitled\tUntitled 1\tComment",
+        "X_Value\t" + "\t".join(["Untitled"] + [f"Untitled {k}" for k in range(1, 6)])
+        + "\tComment")
+    return write(tmp_path / f"strain{strain_at}.lvm", text + as_csv(columns, sep="\t")), v, temp
+
+
+@pytest.mark.parametrize("strain_at", [5, 6])
+def test_lvm_description_missing_a_column_is_placed_by_the_data(tmp_path, strain_at):
+    path, v, temp = _seven_column_lvm(tmp_path, strain_at)
+    frame, meta = read_discharge(path)  # no flags
+    np.testing.assert_allclose(frame["voltage_V"], v, rtol=1e-5)
+    np.testing.assert_allclose(frame["temperature_C"], temp, rtol=1e-5)
+    assert meta["sign_convention"] == "discharge negative (flipped)"
+    assert frame["ambient_temperature_C"].median() == pytest.approx(20.5)
+    note = next(n for n in meta["notes"] if "Description" in n)
+    assert f"column {strain_at} left unnamed" in note
+
+
+def test_lvm_description_placement_that_fits_nothing_is_not_used(tmp_path):
+    t, v, i = discharge_rows()
+    # seven columns, but the voltage is negative wherever the names could put it
+    columns = [t, -i, -v, -v, -v, -v, -v]
+    text = LVM_TEMPLATE.format(description="Columns are: time, Current, Voltage, Power, A, B")
+    path = write(tmp_path / "odd.lvm", text + as_csv(columns, sep="\t"))
+    with pytest.raises(DataError, match="no voltage_V column found"):
+        read_discharge(path)
+
+
 DJI_LINE = ("{clock} I/ExceptionLogger : Battery updated: Battery{{exists=true, "
             "currentVoltage={mv}, currentCurrent={ma}, remainPowerPercent={soc}, "
             "smartBattery=true, temperature=20.5}}.")

@@ -223,3 +223,35 @@ def test_dji_waddle_segments_selectable(shared_data):
     assert meta4["segment"] == 4
     with pytest.raises(DataError, match=r"--segment 9: the file has 7"):
         read_discharge(path, segment=9)
+
+
+def _lvm_columns(path: Path) -> np.ndarray:
+    """The data block of an LVM file parsed with numpy alone (after the X_Value line)."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    start = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 1
+    return np.array([[float(x) for x in line.split("\t")[:7]] for line in lines[start:]
+                     if line.strip()])
+
+
+@pytest.mark.parametrize("cycle", ["001", "300", "664"])
+def test_cell_c_ageing_files_read_without_flags(shared_data, cycle):
+    """The Description names six columns for seven (no strain): read with no options."""
+    path = shared_data / "samsung30q_ageing_cellC" / f"DischargeCycle{cycle}.txt"
+    frame, meta = read_discharge(path)
+    raw = _lvm_columns(path)
+    load = raw[:, 1] < -1.0  # README: -3.0 A discharge, negative in the file
+    np.testing.assert_allclose(frame["voltage_V"], raw[load, 2], rtol=1e-9)
+    np.testing.assert_allclose(frame["temperature_C"], raw[load, 4], rtol=1e-9)
+    assert frame["ambient_temperature_C"].median() == pytest.approx(20.8, abs=0.5)
+    truth = np.trapezoid(-raw[load, 1], raw[load, 0]) / 3600
+    assert charge_from_current(frame["time_s"], frame["current_A"])[-1] == pytest.approx(
+        truth, rel=1e-3)
+    assert "column 5 left unnamed" in " ".join(meta["notes"])
+
+
+def test_cell_c_fits_without_flags(shared_data):
+    import dischargelab as dl
+
+    result = dl.fit(shared_data / "samsung30q_ageing_cellC" / "DischargeCycle001.txt",
+                    bootstrap=0)
+    assert result.rmse_V < 0.03

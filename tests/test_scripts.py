@@ -21,6 +21,7 @@ BENCHMARKS = {
     "calibration_table1.py": ([], "Target: 3.3 kOhm Ke = 4.38 +/- 0.01 -> 4.380"),
     "flightlog_read_speed.py": (["--mb", "2", "--blackbox-mb", "2.5", "--unfiltered-mb", "1"],
                                 "peak RSS MB"),
+    "logbook.py": (["--copies", "20"], "later capacities in band"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }

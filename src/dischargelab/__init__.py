@@ -10,7 +10,8 @@ imported by the functions that need them.
 from . import fit as _fit_module, predict as _predict_module, validate as _validate_module  # noqa: F401, I001
 from .api import endurance, fit, load, predict, read, validate
 from .discharge import Discharge
-from .errors import DataError, DischargelabError, FitError, SimulationError
+from .errors import DataError, DischargelabError, FitError, LogbookError, SimulationError
+from .logbook import Logbook
 from .model import (
     PARAMETER_NAMES, PRESETS, Battery, CellParameters, cell_voltage, load_battery,
 )
@@ -21,6 +22,7 @@ from .predict import Prediction
 __all__ = [
     "read", "fit", "load", "predict", "endurance", "validate", "Discharge", "Battery",
     "Prediction", "CellParameters", "FAMILIES", "PARAMETER_NAMES", "PRESETS", "cell_voltage",
-    "load_battery", "DataError", "DischargelabError", "FitError", "SimulationError",
+    "load_battery", "Logbook", "DataError", "DischargelabError", "FitError", "LogbookError",
+    "SimulationError",
     "__version__",
 ]

@@ -35,3 +35,7 @@ def require(module: str, extra: str):
         raise MissingExtraError(
             f"{module} is not installed; install it with: pip install 'dischargelab[{extra}]'"
         ) from exc
+
+
+class LogbookError(DischargelabError):
+    """The logbook cannot do what was asked (unknown pack, newer database, no connection...)."""

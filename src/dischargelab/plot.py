@@ -431,3 +431,96 @@ def _plot_replay(ax, replay: pd.DataFrame, label) -> float | None:
         return None
     every = np.concatenate(values)
     return float(min(np.max(every), 2.0 * np.percentile(every, 75))) * 1.05
+
+
+def plot_health(health, axes=None):
+    """A pack's capacity and resistance against equivalent full cycles (logbook health).
+
+    Capacity per event with its 95 % interval (outliers hollow, left out of the
+    trend), the trend with its 95 % band through the forecast, the end-of-life
+    threshold and the EFC where it is crossed with its 95 % interval; below, the
+    resistance per event with its trend and band.
+
+    Parameters
+    ----------
+    health : dischargelab.logbook.Health
+    axes : sequence of two matplotlib Axes, optional
+
+    Returns
+    -------
+    numpy.ndarray of Axes
+    """
+    plt = pyplot()
+    if axes is None:
+        fig, axes = plt.subplots(2, 1, figsize=(8.5, 7.5), sharex=True, layout="constrained",
+                                 height_ratios=(3, 2))
+    ax_c, ax_r = axes[0], axes[1]
+    events = [e for e in health.events if e.efc is not None]
+    fc = health.forecast
+    caps = [e for e in events if e.capacity_Ah is not None]
+    if fc is not None:
+        band = fc.band_points(points=240)
+        ax_c.fill_between(band["efc"], band["lo"], band["hi"], color="C0", alpha=0.15, lw=0,
+                          label="trend, 95 % band")
+        ax_c.plot(band["efc"], band["capacity_Ah"], color="C0", lw=1.2, ls="--")
+        reference = health.reference_capacity_Ah
+        ax_c.axhline(fc.threshold_Ah, color="C3", lw=1, ls=":",
+                     label=f"end of life ({100 * fc.eol:.0f} % of {reference:.3g} Ah)")
+        lo, hi = fc.eol_efc_interval95
+        if fc.eol_efc is not None:
+            right = hi if hi is not None else max(band["efc"])
+            left = lo if lo is not None else min(band["efc"])
+            ax_c.axvspan(left, right, color="C3", alpha=0.08, lw=0)
+            how = "observed at" if fc.observed else "at"
+            span = "between events" if fc.observed else "95 %"
+            ax_c.axvline(fc.eol_efc, color="C3", lw=1.2,
+                         label=f"end of life {how} {fc.eol_efc:.0f} EFC ({span}: "
+                               f"{'?' if lo is None else f'{lo:.0f}'}-"
+                               f"{'open' if hi is None else f'{hi:.0f}'})")
+    for outlier, style in ((False, dict(color="C0", mfc="C0")),
+                           (True, dict(color="C1", mfc="white"))):
+        sel = [e for e in caps if e.outlier == outlier]
+        if not sel:
+            continue
+        x = np.array([e.efc for e in sel])
+        y = np.array([e.capacity_Ah for e in sel])
+        err = np.array([[e.capacity_Ah - e.capacity_interval95[0],
+                         e.capacity_interval95[1] - e.capacity_Ah] for e in sel]).T
+        ax_c.errorbar(x, y, yerr=err, fmt="o", ms=4, lw=0.8, capsize=0, zorder=3,
+                      label="outlier (left out of the trend)" if outlier else "capacity",
+                      **style)
+    if caps and fc is not None:  # the band may run far down: keep the events readable
+        values = [e.capacity_Ah for e in caps]
+        top, bottom = max(values), min(min(values), fc.threshold_Ah)
+        span = max(top - bottom, 1e-3)
+        ax_c.set_ylim(bottom - 0.6 * span, top + 0.15 * span)
+    ax_c.set_ylabel("capacity [Ah]")
+    ax_c.set_title(f"{health.pack}: capacity and resistance against equivalent full cycles")
+    ax_c.grid(alpha=0.3)
+    if caps:
+        ax_c.legend(loc="lower left", fontsize=8)
+    else:
+        ax_c.text(0.5, 0.5, "no capacity measured yet", transform=ax_c.transAxes,
+                  ha="center")
+    res = [e for e in events if e.resistance_ohm is not None]
+    if res:
+        x = np.array([e.efc for e in res])
+        y = np.array([e.resistance_ohm for e in res]) * 1000
+        err = np.array([[0.0, 0.0] if e.resistance_interval95 is None else
+                        [e.resistance_ohm - e.resistance_interval95[0],
+                         e.resistance_interval95[1] - e.resistance_ohm] for e in res]).T * 1000
+        ax_r.errorbar(x, y, yerr=err, fmt="s", ms=3.5, lw=0.8, color="C2", label="resistance")
+        if fc is not None and fc.resistance is not None:
+            grid = np.linspace(min(x), max(x), 100)
+            lo_r, hi_r = fc.resistance.band(grid)
+            ax_r.fill_between(grid, lo_r * 1000, hi_r * 1000, color="C2", alpha=0.15, lw=0,
+                              label="trend, 95 % band")
+            ax_r.plot(grid, fc.resistance.mean(grid) * 1000, color="C2", lw=1.2, ls="--")
+        ax_r.legend(loc="upper left", fontsize=8)
+    else:
+        ax_r.text(0.5, 0.5, "no load steps to measure the resistance", transform=ax_r.transAxes,
+                  ha="center")
+    ax_r.set_ylabel("resistance [mOhm]")
+    ax_r.set_xlabel("equivalent full cycles [EFC]")
+    ax_r.grid(alpha=0.3)
+    return np.asarray(axes)

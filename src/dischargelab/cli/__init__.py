@@ -15,6 +15,7 @@ types, consoles, JSON, error lines) is in :mod:`.common`:
 - :mod:`.flightlogs`: convert, flight, autopilot-params
 - :mod:`.acquisition`: calibrate, acquire, virtual-device, demo-acquire
 - :mod:`.serve`: serve (the web pages)
+- :mod:`.logbook`: logbook add, packs, health, events, export, fit
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import traceback
 import click
 
 from ..errors import DischargelabError
-from . import acquisition, flightlogs, missions, model, serve
+from . import acquisition, flightlogs, logbook, missions, model, serve
 from .common import BUG_LINE, CONTEXT, cli_message, err, usage_line
 
 __all__ = ["BUG_LINE", "app", "main"]
@@ -46,7 +47,7 @@ def app() -> None:
     """
 
 
-for _group in (model, missions, flightlogs, acquisition, serve):
+for _group in (model, missions, flightlogs, acquisition, serve, logbook):
     for _command in _group.COMMANDS:
         app.add_command(_command)
 

@@ -370,3 +370,45 @@ def validation_cases(battery, paths, cutoff, columns, current, sign, segment, un
             for data, meta in read_data_files(paths, columns, current, sign, segment, units,
                                               status=status, verb="validating",
                                               flight_options=flight_options)]
+
+
+def executor_options(func):
+    """``--workers`` and ``--scheduler``: where fleet work runs (:mod:`dischargelab.fleet`)."""
+    func = click.option(
+        "--scheduler", metavar="tcp://HOST:PORT",
+        help="Run the work on an existing Dask cluster [default: $DISCHARGELAB_SCHEDULER]; "
+             "files its workers cannot see are sent to them.")(func)
+    return click.option(
+        "--workers", type=click.IntRange(1), default=None, metavar="N",
+        help="Run the work on N Dask worker processes on this machine (extra dask) "
+             "[default: 1, in this process].")(func)
+
+
+def open_executor(workers, scheduler):
+    """The executor for ``--workers`` / ``--scheduler``, said on stderr when it is Dask."""
+    from ..fleet import InProcessExecutor, executor
+
+    with err.status("starting the Dask workers", spinner="dots"):
+        chosen = executor(workers=workers, scheduler=scheduler)
+    if not isinstance(chosen, InProcessExecutor):
+        err.print(f"running on {chosen.describe()}", markup=False)
+    return chosen
+
+
+def progress_bar(description: str):
+    """A rich progress bar on stderr and its ``progress(done, total, message)`` callback."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
+
+    bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                   TimeRemainingColumn(), console=err, transient=True)
+    task = bar.add_task(description, total=None)
+
+    def progress(done, total, message):
+        bar.update(task, completed=done, total=total, description=f"{description} {message[:40]}")
+    return bar, progress

@@ -108,11 +108,18 @@ def print_mission(result) -> None:
                                "charge [Ah]", "end V", "end SOC [%]"], phase_rows))
     for w in result.warnings:
         out.print(f"warning: {w}", markup=False)
+    for n in result.notes:
+        out.print(f"note: {n}", markup=False)
 
 
 @click.command("endurance")
-@click.argument("battery")
-@click.argument("mission", type=click.Path(dir_okay=False))
+@click.argument("battery", required=False)
+@click.argument("mission", required=False, type=click.Path(dir_okay=False))
+@click.option("--pack", "pack_name", metavar="NAME",
+              help="Fly a logbook pack: its model scaled to today's capacity and resistance "
+                   "(then give MISSION alone).")
+@click.option("--db", metavar="URL|FILE",
+              help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's logbook).")
 @cutoff_option(default="the mission file's")
 @click.option("--reserve", type=click.FloatRange(0, 100, max_open=True), metavar="PCT",
               help="State of charge to land with [%] (overrides the mission file).")
@@ -133,8 +140,8 @@ def print_mission(result) -> None:
               help="Save voltage, current, power and state of charge through the flight (CSV).")
 @force_option
 @json_option
-def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, ambient, draws, seed,
-                  plot_path, csv_path, force, as_json):
+def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, parallel, ambient,
+                  draws, seed, plot_path, csv_path, force, as_json):
     """Fly a mission (TOML) on a battery: flight time, max cruise, margin and its interval.
 
     BATTERY is a battery file from `fit` or a preset name; MISSION a TOML file of
@@ -148,12 +155,26 @@ def endurance_cmd(battery, mission, cutoff, reserve, cells, parallel, ambient, d
       dischargelab endurance battery.json mission.toml --reserve 25 --plot flight.png
       dischargelab endurance cell.json mission.toml --cells 4 --parallel 2 --cutoff 3.0
       dischargelab endurance battery.json mission.toml --draws 500 --json
+      dischargelab endurance --pack zippy-a paper-table5     # a logbook pack, today
     """
     from ..mission import load_mission, run_mission
 
-    guard_outputs([plot_path, csv_path], battery_input(battery) + [mission], force,
+    if pack_name is not None:
+        if mission is not None:
+            raise DischargelabError("with --pack NAME give the MISSION alone, not a battery")
+        battery, mission = None, battery
+    if battery is None and pack_name is None or mission is None:
+        raise DischargelabError("give BATTERY and MISSION, or --pack NAME and MISSION")
+    guard_outputs([plot_path, csv_path], battery_input(battery or "") + [mission], force,
                   figures=[plot_path])
-    plan = load_mission(mission, battery=load_battery_arg(battery), cutoff_cell_V=cutoff,
+    if pack_name is not None:
+        from ..logbook import Logbook
+
+        with Logbook(db) as lb:
+            loaded = lb.pack(pack_name).battery()
+    else:
+        loaded = load_battery_arg(battery)
+    plan = load_mission(mission, battery=loaded, cutoff_cell_V=cutoff,
                         reserve_pct=reserve, ambient_C=ambient)
     plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
     with err.status("flying the mission", spinner="dots") as status:

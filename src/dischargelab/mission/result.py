@@ -6,7 +6,7 @@ model's own error, see :mod:`dischargelab.uncertainty`)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -60,6 +60,9 @@ class MissionResult:
     uncertainty : dict or None
         See :func:`dischargelab.uncertainty.mission_uncertainty`.
     warnings : list of str
+    notes : list of str
+        What the result rests on that the caller should know (e.g. a logbook pack's
+        model scaled to its health today).
     """
 
     mission: Mission
@@ -77,6 +80,7 @@ class MissionResult:
     stretch: dict | None
     warnings: list
     uncertainty: dict | None = None
+    notes: list = field(default_factory=list)
 
     @property
     def soc_pct(self) -> np.ndarray:
@@ -128,6 +132,7 @@ class MissionResult:
             "phases": self.phases,
             "uncertainty": self.uncertainty,
             "warnings": list(self.warnings),
+            "notes": list(self.notes),
         }
         return out
 
@@ -298,6 +303,9 @@ def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
         soc_end_pct=soc_end, min_voltage_V=float(np.min(sim.voltage_V)), stretch=stretch,
         warnings=warnings,
     )
+    extra = mission.battery.extra
+    if extra.get("logbook") and extra.get("note"):  # a logbook pack at today's health
+        result.notes.append(str(extra["note"]))
     if draws:
         result.uncertainty = mission_uncertainty(mission, draws=draws, seed=seed,
                                                  progress=progress, nominal=result,

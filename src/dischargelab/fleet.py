@@ -1,0 +1,290 @@
+"""One executor interface for fleet-scale work: in this process, or on a Dask cluster.
+
+A task is a pure function of one item (a file path, or a file's name and bytes) that
+returns a small, serialisable summary; it never touches the database. An executor
+maps it over items and yields ``(item, outcome)`` as each finishes, in any order;
+``outcome`` is the task's result or the exception it raised (the caller decides
+which exceptions are rejections and which are bugs). At most ``max_in_flight``
+items are submitted and not yet collected, so a big folder never floods memory
+or a scheduler, and the client is the only writer of whatever stores the results.
+
+* :class:`InProcessExecutor` runs the tasks one after the other here, with no Dask
+  import at all (``workers=1`` or nothing given).
+* :class:`DaskExecutor` runs them on ``dask.distributed`` workers: a
+  ``LocalCluster`` of ``workers`` processes it starts and ends itself, or an
+  existing cluster at a scheduler address (``tcp://host:port``). A worker that
+  dies mid-task has its task retried on another worker by the scheduler; a task
+  whose worker dies twice is reported as failed (:class:`WorkerCrash`) instead of
+  being retried for ever.
+
+:func:`executor` picks one from the arguments (or ``DISCHARGELAB_SCHEDULER``).
+
+References
+----------
+Dask distributed documentation: "Futures" (``Client.submit``, ``as_completed``),
+"Resilience" (a task whose workers die more than ``allowed-failures`` times
+raises ``KilledWorker``) and "Dask Best Practices" (bounded submission, small
+results, pure functions).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any, Protocol
+
+from .errors import DischargelabError, require
+
+#: Environment variable naming the scheduler of an existing cluster.
+SCHEDULER_ENV = "DISCHARGELAB_SCHEDULER"
+
+#: Items submitted and not yet collected, by default, in process.
+DEFAULT_MAX_IN_FLIGHT = 64
+
+#: Tasks in flight per Dask worker: enough to keep every worker busy while results
+#: travel back, few enough that the client holds only a handful of payloads at a time.
+IN_FLIGHT_PER_WORKER = 4
+
+#: Deaths of a task's worker after which the task counts as failed (the first death
+#: is retried elsewhere, the second is the task's fault).
+WORKER_DEATHS_ALLOWED = 1
+
+#: Seconds to wait for a cluster's workers to come up (or connect to a scheduler).
+START_TIMEOUT_S = 60.0
+
+
+class FleetError(DischargelabError):
+    """The cluster cannot be started or reached, or it lost every worker."""
+
+
+class WorkerCrash(DischargelabError):
+    """A task's worker process died twice while running it (the task kills workers)."""
+
+
+class Executor(Protocol):
+    """What the logbook's ingest and fleet analysis need from an executor."""
+
+    workers: int
+    shares_files: bool
+
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
+                      ) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, result or exception)`` for every item, in completion order."""
+        ...
+
+    def describe(self) -> str:
+        """Where the tasks run, for progress lines."""
+        ...
+
+    def close(self) -> None:
+        ...
+
+
+class InProcessExecutor:
+    """Runs every task in this process, one after the other (no Dask import).
+
+    Parameters
+    ----------
+    max_in_flight : int
+        Kept for the interface; in process one item is in flight at a time.
+    """
+
+    workers = 1
+    shares_files = True
+
+    def __init__(self, max_in_flight: int = DEFAULT_MAX_IN_FLIGHT):
+        if max_in_flight < 1:
+            raise FleetError("max_in_flight must be at least 1")
+        self.max_in_flight = int(max_in_flight)
+
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
+                      ) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, func(item))``, or ``(item, exception)`` when ``func`` raised one."""
+        for item in items:
+            try:
+                outcome = func(item)
+            except Exception as exc:  # handed to the caller, which re-raises what is a bug
+                outcome = exc
+            yield item, outcome
+
+    def describe(self) -> str:
+        return "in this process"
+
+    def close(self) -> None:
+        return None
+
+    def __enter__(self) -> InProcessExecutor:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class DaskExecutor:
+    """Run tasks on a ``dask.distributed`` cluster.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Start a ``LocalCluster`` of this many worker processes (one thread each) on
+        127.0.0.1; it is ended by :meth:`close`.
+    scheduler : str, optional
+        Address of an existing scheduler (``tcp://host:port``) instead. Its
+        ``distributed.scheduler.allowed-failures`` decides how often a task whose
+        worker dies is retried; start it with
+        ``DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=1`` to fail a task at its
+        second worker death as a local cluster does.
+    max_in_flight : int, optional
+        Tasks submitted and not yet collected [default: :data:`IN_FLIGHT_PER_WORKER`
+        per worker].
+    """
+
+    def __init__(self, workers: int | None = None, scheduler: str | None = None,
+                 max_in_flight: int | None = None):
+        if (workers is None) == (scheduler is None):
+            raise FleetError("give either workers (a local cluster) or scheduler (an "
+                             "existing one)")
+        require("distributed", "dask")
+        import dask
+        from distributed import Client, LocalCluster
+
+        self.cluster = None
+        try:
+            if scheduler is None:
+                with dask.config.set({"distributed.scheduler.allowed-failures":
+                                      WORKER_DEATHS_ALLOWED}):
+                    # no dashboard; the status servers Dask always runs listen on
+                    # loopback only, on free ports
+                    self.cluster = LocalCluster(
+                        n_workers=int(workers), threads_per_worker=1, processes=True,
+                        host="127.0.0.1", dashboard_address=None, silence_logs=50,
+                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                        worker_dashboard_address="127.0.0.1:0")
+                self.client = Client(self.cluster, timeout=START_TIMEOUT_S)
+            else:
+                self.client = Client(scheduler, timeout=START_TIMEOUT_S)
+                self.client.wait_for_workers(1, timeout=START_TIMEOUT_S)
+        except (OSError, TimeoutError) as exc:
+            self.close()
+            where = f"the scheduler at {scheduler}" if scheduler else "a local cluster"
+            raise FleetError(f"cannot start or reach {where} ({_first_line(exc)}); check "
+                             "the address and that its workers run") from None
+        self.scheduler = scheduler
+        n = self.workers
+        self.max_in_flight = int(max_in_flight or IN_FLIGHT_PER_WORKER * max(1, n))
+
+    @property
+    def workers(self) -> int:
+        """Workers connected now."""
+        return len(self.client.scheduler_info(n_workers=-1).get("workers", {}))
+
+    @property
+    def shares_files(self) -> bool:
+        """True when the workers see this machine's files (a local cluster)."""
+        return self.cluster is not None
+
+    def sees(self, path) -> bool:
+        """True when every worker sees ``path`` as a file of the same size as here."""
+        size = os.path.getsize(path)
+        try:
+            sizes = self.client.run(_file_size, os.path.abspath(path))
+        except OSError:
+            return False
+        return bool(sizes) and all(s == size for s in sizes.values())
+
+    def describe(self) -> str:
+        where = self.scheduler or "a local cluster on 127.0.0.1"
+        return f"{self.workers} Dask worker(s) at {where}"
+
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any]
+                      ) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, result or exception)`` as tasks finish; at most
+        ``max_in_flight`` pending. A task whose worker died twice yields
+        :class:`WorkerCrash`.
+
+        Stopping the iteration early (or Ctrl-C) cancels what is still pending.
+        """
+        from distributed import as_completed
+        from distributed.scheduler import KilledWorker
+
+        source = iter(items)
+        pending: dict = {}          # future key -> (future, item)
+        done = as_completed()
+
+        def submit_next() -> bool:
+            for item in source:
+                future = self.client.submit(func, item, pure=False)
+                pending[future.key] = (future, item)
+                done.add(future)
+                return True
+            return False
+
+        try:
+            for _ in range(self.max_in_flight):
+                if not submit_next():
+                    break
+            for future in done:
+                _, item = pending.pop(future.key)
+                try:
+                    outcome = future.result()
+                except KilledWorker:
+                    outcome = WorkerCrash(f"{_label(item)}: the worker process died twice while "
+                                          "working on it (it crashes its reader); skipped")
+                except Exception as exc:  # handed to the caller, like InProcessExecutor
+                    outcome = exc
+                future.release()
+                yield item, outcome
+                submit_next()
+        finally:
+            if pending:
+                self.client.cancel([f for f, _ in pending.values()])
+                pending.clear()
+            done.clear()
+
+    def close(self) -> None:
+        client = getattr(self, "client", None)
+        if client is not None:
+            client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+            self.cluster = None
+
+    def __enter__(self) -> DaskExecutor:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def executor(workers: int | None = None, scheduler: str | None = None):
+    """The executor the arguments ask for.
+
+    ``scheduler`` (or the ``DISCHARGELAB_SCHEDULER`` environment variable) uses that
+    cluster; ``workers`` > 1 starts a local cluster; otherwise the tasks run in this
+    process and Dask is not imported.
+    """
+    scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
+    if scheduler and workers not in (None, 1):
+        raise FleetError("give either workers or a scheduler address, not both")
+    if workers is not None and workers < 1:
+        raise FleetError(f"workers must be 1 or more, got {workers}")
+    if scheduler:
+        return DaskExecutor(scheduler=scheduler)
+    if workers and workers > 1:
+        return DaskExecutor(workers=workers)
+    return InProcessExecutor()
+
+
+def _file_size(path: str) -> int:
+    """Size of ``path`` on a worker, -1 when it does not see it (runs on the workers)."""
+    return os.path.getsize(path) if os.path.isfile(path) else -1
+
+
+def _label(item) -> str:
+    name = getattr(item, "name", None) or (item[0] if isinstance(item, tuple) else item)
+    return os.path.basename(str(name))
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__

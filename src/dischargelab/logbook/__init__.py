@@ -1,0 +1,402 @@
+"""The pack logbook: every pack's tests and flights in one database, its health, its future.
+
+::
+
+    import dischargelab as dl
+    lb = dl.Logbook()                        # the user's logbook.sqlite (or $DISCHARGELAB_DB)
+    lb.add("tests/", pack="C", recursive=True).to_dict()
+    lb.health("C").to_dict()["forecast"]     # EFC at 80 % of the reference capacity, 95 %
+    lb.health("C").plot()
+    dl.endurance(lb.pack("C"), "paper-table5")   # the model scaled to today's health
+
+``Logbook(url)``: ``None`` is ``$DISCHARGELAB_DB`` or ``logbook.sqlite`` in the user's
+data folder; a path is a SQLite file; ``postgresql+psycopg://user@host/db`` is a
+PostgreSQL database (extra ``postgres``). The database needs the extra ``logbook``
+(SQLAlchemy); importing dischargelab does not import it.
+
+Where each figure comes from: :mod:`.summarise` (per event, from the readers),
+:mod:`.health` (capacity, resistance, EFC, outliers), :mod:`.forecast` (trend, band,
+end of life), :mod:`.schema` (tables and versions), :mod:`.ingest` (hash, skip,
+summarise, write).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import DischargelabError, LogbookError
+from .results import (
+    DEFAULT_EOL,
+    EventTable,
+    Forecast,
+    Health,
+    Pack,
+    PackTable,
+    build_health,
+)
+
+#: Event columns listed by :meth:`Logbook.events` (in this order).
+EVENT_COLUMNS = ("id", "source", "idx", "kind", "start_time", "cycle", "duration_s",
+                 "discharged_Ah", "discharged_Wh", "mean_current_A", "max_current_A",
+                 "rest_voltage_V", "rest_after_V", "min_voltage_V", "end_voltage_V",
+                 "resistance_ohm", "temperature_start_C", "temperature_max_C", "ambient_C",
+                 "cell_spread_V", "reaches_knee", "samples")
+
+#: Export formats.
+EXPORT_FORMATS = ("csv", "parquet")
+
+
+class Logbook:
+    """A logbook database (see the module docstring).
+
+    Raises
+    ------
+    MissingExtraError
+        SQLAlchemy (extra ``logbook``) or psycopg (extra ``postgres``) is missing.
+    LogbookError
+        The database cannot be reached, is not a logbook, or has a newer schema.
+    """
+
+    def __init__(self, url=None):
+        from ..errors import require
+
+        require("sqlalchemy", "logbook")
+        from . import schema
+
+        self.url = schema.resolve_url(url)
+        self._engine = schema.create(self.url)
+        with schema.database_errors(self.url):
+            #: Schema version found when opened (0: created now).
+            self.opened_version = schema.prepare(self._engine, self.url)
+
+    # ------------------------------------------------------------------ plumbing
+    def close(self) -> None:
+        """Release the database connections."""
+        self._engine.dispose()
+
+    def __enter__(self) -> Logbook:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        from .schema import shown_url
+
+        return f"Logbook({shown_url(self.url)!r})"
+
+    def _read(self):
+        from . import schema
+
+        return schema.reading(self._engine)
+
+    def _errors(self):
+        from . import schema
+
+        return schema.database_errors(self.url)
+
+    # ------------------------------------------------------------------ writing
+    def add(self, paths, pack: str | None = None, pack_from: str | None = None,
+            recursive: bool = False, executor=None, progress=None, **reader_options):
+        """Add files and folders (tests, logger files, flight logs) to a pack.
+
+        Parameters
+        ----------
+        paths : path-like or list of them
+            Files, or folders (their data files; sub-folders with ``recursive``).
+        pack : str, optional
+            The pack every file belongs to.
+        pack_from : {"parent"}, optional
+            Take each file's pack from its folder's name instead.
+        recursive : bool
+            Descend into sub-folders.
+        executor : optional
+            Where files are summarised (:class:`dischargelab.fleet.InProcessExecutor`
+            by default).
+        progress : callable, optional
+            ``progress(done, total, message)`` after each file.
+        **reader_options
+            As :func:`dischargelab.read` (``columns``, ``current_A``, ``sign``...).
+
+        Returns
+        -------
+        AddResult
+            ``.added``, ``.skipped`` (already in the logbook), ``.rejected``
+            (``(path, one-line reason)``), ``.events``; ``.lines()`` for printing.
+        """
+        from .ingest import add_files
+
+        with self._errors():
+            return add_files(self._engine, paths, pack=pack, pack_from=pack_from,
+                             recursive=recursive, executor=executor, progress=progress,
+                             reader_options=reader_options)
+
+    def add_bytes(self, file_name: str, data: bytes, pack: str, **reader_options):
+        """Add one file given as bytes (an upload); returns an AddResult."""
+        from .ingest import add_upload
+
+        with self._errors():
+            return add_upload(self._engine, file_name, data, pack, reader_options)
+
+    def set_pack(self, name: str, *, label_capacity_Ah: float | None = None,
+                 chemistry: str | None = None, cells: int | None = None) -> None:
+        """Create a pack or store its label capacity [Ah], chemistry and cells in series."""
+        from ..ocv import check_chemistry
+        from . import schema, store
+
+        if chemistry is not None:
+            check_chemistry(chemistry)
+        if label_capacity_Ah is not None and not float(label_capacity_Ah) > 0:
+            raise LogbookError(f"label_capacity_Ah must be positive, got {label_capacity_Ah!r}")
+        if cells is not None and int(cells) < 1:
+            raise LogbookError(f"cells must be at least 1, got {cells!r}")
+        with self._errors(), schema.writing(self._engine) as conn:
+            store.set_pack(conn, str(name).strip(), label_capacity_Ah=label_capacity_Ah,
+                           chemistry=chemistry, cells=None if cells is None else int(cells))
+
+    # ------------------------------------------------------------------ reading
+    def _pack_data(self, name: str):
+        from . import store
+
+        with self._errors(), self._read() as conn:
+            row = store.pack_row(conn, name)
+            events = store.pack_events(conn, row["id"])
+            model = store.latest_model(conn, row["id"])
+        return row, events, model
+
+    def health(self, name: str, eol: float = DEFAULT_EOL) -> Health:
+        """Capacity, resistance and EFC per event, outliers, trend and end of life.
+
+        Parameters
+        ----------
+        name : str
+            The pack.
+        eol : float
+            End of life as a share of the reference capacity (0 < eol < 1).
+        """
+        row, events, model = self._pack_data(name)
+        return build_health(row, events, model, _check_eol(eol))
+
+    def events(self, name: str) -> EventTable:
+        """The stored events of a pack (without their curves)."""
+        _, events, _ = self._pack_data(name)
+        from .health import order_events
+
+        rows = [{k: e.get(k) for k in EVENT_COLUMNS} for e in order_events(events)]
+        return EventTable(pack=name, rows=rows)
+
+    def packs(self, eol: float = DEFAULT_EOL) -> PackTable:
+        """One row per pack: events, EFC, capacity today, resistance, end of life."""
+        from .fleet_report import pack_summary
+
+        keys = ("name", "events", "efc", "capacity_Ah", "capacity_fraction", "resistance_ohm",
+                "eol_efc", "eol_efc_interval95")
+        eol = _check_eol(eol)
+        rows = []
+        for name in self.pack_names():
+            summary = pack_summary((*self._pack_data(name), eol))
+            rows.append({k: summary[k] for k in keys})
+        return PackTable(rows=rows)
+
+    def fleet(self, eol: float = DEFAULT_EOL, executor=None, progress=None):
+        """Every pack's health, soonest end of life first (the fleet report).
+
+        Parameters
+        ----------
+        eol : float
+            End of life as a share of each pack's reference capacity.
+        executor : optional
+            Where each pack's figures are made (:func:`dischargelab.fleet.executor`; in
+            this process by default). The client reads the rows and sends them.
+        progress : callable, optional
+            ``progress(done, total, pack name)`` after each pack.
+
+        Returns
+        -------
+        dischargelab.logbook.fleet_report.FleetReport
+            ``.rows``, ``.retire_soon(efc)``, ``.to_html()``, ``.save(path)``.
+        """
+        from ..fleet import InProcessExecutor
+        from .fleet_report import FleetReport, pack_summary, retire_order
+
+        eol = _check_eol(eol)
+        names = self.pack_names()
+        jobs = ((*self._pack_data(name), eol) for name in names)
+        executor = executor or InProcessExecutor()
+        rows, failed = [], []
+        for done, (job, outcome) in enumerate(executor.map_unordered(pack_summary, jobs), 1):
+            if isinstance(outcome, DischargelabError):
+                failed.append((job[0]["name"], str(outcome).splitlines()[0]))
+            elif isinstance(outcome, BaseException):
+                raise outcome
+            else:
+                rows.append(outcome)
+            if progress is not None:
+                progress(done, len(names), job[0]["name"])
+        return FleetReport(rows=sorted(rows, key=retire_order), eol=eol,
+                           failed=sorted(failed))
+
+    def pack(self, name: str) -> Pack:
+        """A pack with its health today; ``.battery()`` is its model scaled to it."""
+        row, events, model = self._pack_data(name)
+        h = build_health(row, events, model, DEFAULT_EOL)
+        cap = h.capacity_now_Ah
+        if cap is None:
+            caps = [e.capacity_Ah for e in h.events if e.capacity_Ah is not None and not e.outlier]
+            cap = caps[-1] if caps else None
+        return Pack(name=name, label_capacity_Ah=row["label_capacity_Ah"],
+                    reference_capacity_Ah=h.reference_capacity_Ah, chemistry=row["chemistry"],
+                    cells=row["cells"], events=len(events), efc=h.efc_now, capacity_Ah=cap,
+                    resistance_ohm=h.resistance_now_ohm, health=h, _model=model,
+                    _fit=lambda: self._fit(name, h))
+
+    def raw(self, sha256: str) -> bytes:
+        """The stored bytes of a source file, by its SHA-256."""
+        from . import store
+
+        with self._errors(), self._read() as conn:
+            return store.raw_file(conn, sha256)
+
+    # ------------------------------------------------------------------ models
+    def fit(self, name: str, **fit_options):
+        """Fit the pack's model to its latest full discharge and store it.
+
+        ``fit_options`` go to :func:`dischargelab.fit` (``model``, ``bootstrap``...).
+        Returns the fitted Battery; ``extra["logbook_fit"]`` holds the capacity [Ah] and
+        step resistance [ohm] of the discharge it was fitted to (what
+        :meth:`Pack.battery` scales from).
+        """
+        from .refit import fit_job
+
+        return self._store_model(fit_job(self._job(name, self.health(name), fit_options)))
+
+    def fit_all(self, executor=None, progress=None, **fit_options) -> dict:
+        """Refit every pack from its latest full discharge: ``{name: Battery or reason}``.
+
+        Parameters
+        ----------
+        executor : optional
+            Where the fits run (:func:`dischargelab.fleet.executor`; in this process by
+            default). The client reads the jobs and stores each model as it comes back.
+        progress : callable, optional
+            ``progress(done, total, pack name)`` after each pack.
+        **fit_options
+            As :func:`dischargelab.fit` (``model``, ``bootstrap``...).
+        """
+        from ..fleet import InProcessExecutor
+        from .refit import fit_job
+
+        out: dict = {}
+        jobs = []
+        for name in self.pack_names():
+            try:
+                jobs.append(self._job(name, self.health(name), fit_options))
+            except LogbookError as exc:
+                out[name] = str(exc)
+        executor = executor or InProcessExecutor()
+        done = len(out)
+        total = len(out) + len(jobs)
+        for job, outcome in executor.map_unordered(fit_job, jobs):
+            done += 1
+            if isinstance(outcome, DischargelabError):
+                out[job["pack"]] = f"cannot fit it: {str(outcome).splitlines()[0]}"
+            elif isinstance(outcome, BaseException):
+                raise outcome
+            else:
+                out[job["pack"]] = self._store_model(outcome)
+            if progress is not None:
+                progress(done, total, job["pack"])
+        return dict(sorted(out.items()))
+
+    def pack_names(self) -> list[str]:
+        """Every pack's name, sorted."""
+        from . import store
+
+        with self._errors(), self._read() as conn:
+            return store.pack_names(conn)
+
+    def _job(self, name: str, health: Health, fit_options: dict) -> dict:
+        """The refit job of a pack (see :mod:`.refit`)."""
+        from . import store
+        from .refit import build_job, latest_full
+
+        last = latest_full(name, health)
+        with self._errors(), self._read() as conn:
+            source = store.source_of_event(conn, last.event_id)
+            data = store.raw_file(conn, source["sha256"])
+            row = store.pack_row(conn, name)
+        return build_job(name, health, source, data, row, fit_options)
+
+    def _store_model(self, model: dict):
+        """Store a fitted model (a :func:`.refit.fit_job` result); returns its Battery."""
+        from dataclasses import replace
+
+        from ..model import Battery
+        from . import schema, store
+
+        with self._errors(), schema.writing(self._engine) as conn:
+            row = store.pack_row(conn, model["pack"])
+            store.save_model(conn, row["id"], model["battery"], model["event_id"],
+                             model["capacity_Ah"], model["resistance_ohm"])
+        bat = Battery.from_dict(model["battery"])
+        extra = dict(bat.extra, logbook_fit={"capacity_Ah": model["capacity_Ah"],
+                                             "resistance_ohm": model["resistance_ohm"]})
+        return replace(bat, extra=extra)
+
+    def _fit(self, name: str, health: Health, **fit_options):
+        """Fit and store the model of one pack here; returns the stored model dict."""
+        from .refit import fit_job
+
+        model = fit_job(self._job(name, health, fit_options))
+        self._store_model(model)
+        return model
+
+    # ------------------------------------------------------------------ export
+    def export(self, path, format: str = "csv", force: bool = False) -> Path:
+        """Write every pack's events with their health figures (CSV or Parquet).
+
+        Raises
+        ------
+        LogbookError
+            Unknown format. OutputExistsError: the file exists and ``force`` is false.
+        MissingExtraError
+            Parquet without pyarrow (extra ``parquet``).
+        """
+        import pandas as pd
+
+        from ..atomic import atomic_path, check_outputs
+        from ..errors import require
+        from . import store
+
+        if format not in EXPORT_FORMATS:
+            raise LogbookError(f"format must be one of {', '.join(EXPORT_FORMATS)}; "
+                               f"got {format!r}")
+        if format == "parquet":
+            require("pyarrow", "parquet")
+        out = check_outputs([path], force=force)[0]
+        with self._errors(), self._read() as conn:
+            names = store.pack_names(conn)
+        frames = []
+        for name in names:
+            frame = self.health(name).to_pandas()
+            frame.insert(0, "pack", name)
+            frames.append(frame)
+        table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+        with atomic_path(out) as tmp:
+            if format == "csv":
+                table.to_csv(tmp, index=False)
+            else:
+                table.to_parquet(tmp, index=False)
+        return out
+
+
+
+
+
+def _check_eol(eol) -> float:
+    if not 0 < float(eol) < 1:
+        raise LogbookError(f"eol must lie between 0 and 1 (a share of the reference "
+                           f"capacity), got {eol!r}")
+    return float(eol)
+
+__all__ = ["Logbook", "Health", "Forecast", "Pack", "PackTable", "EventTable", "DEFAULT_EOL"]

@@ -1,0 +1,300 @@
+"""Client side of adding files: hash, skip what is known, summarise, write in batches.
+
+The client is the only writer of the database. For a list of files and folders it
+
+1. lists the files (folders: data files by suffix, see :data:`DATA_SUFFIXES`),
+2. hashes each file (SHA-256) and drops those whose hash the logbook already
+   holds, before any work is sent,
+3. runs :func:`~dischargelab.logbook.summarise.summarise_source` on the rest
+   through an executor (:mod:`dischargelab.fleet`: in this process by default, or
+   Dask workers, which get each file's path when they see it, else its bytes),
+4. writes the summaries in batches of :data:`BATCH_SOURCES`, one transaction each:
+   the raw file (zlib) in ``blobs``, the source, its events. ``sources.sha256`` and
+   ``(events.source_id, events.idx)`` are unique and inserts skip conflicts, so two
+   writers adding the same files store each event once.
+
+A file a reader cannot use is rejected with one line and the others go in; an
+error that is not a data problem (a bug) is raised after the finished batches are
+written, so nothing already read is lost. Ctrl-C writes what is summarised and
+stops: every transaction is whole, and a rerun skips the hashes already stored.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sqlalchemy import select
+
+from ..errors import DischargelabError, LogbookError
+from . import schema
+from .summarise import (
+    SourceSummary,
+    check_reader_options,
+    sha256_bytes,
+    sha256_file,
+    summarise_source,
+)
+
+#: Summaries written per transaction.
+BATCH_SOURCES = 25
+
+#: File suffixes taken from folders (a file named on its own is always tried).
+DATA_SUFFIXES = (".csv", ".txt", ".tsv", ".lvm", ".log", ".bin", ".ulg", ".bbl", ".bfl",
+                 ".dat")
+
+#: Files in folders whose names start with these are documentation, not data.
+SKIP_PREFIXES = ("license", "copying", "readme", "notice")
+
+#: Hashes looked up per query.
+LOOKUP_CHUNK = 500
+
+#: Accepted values of ``pack_from``.
+PACK_FROM = ("parent",)
+
+
+@dataclass
+class AddResult:
+    """What :meth:`dischargelab.Logbook.add` did.
+
+    Attributes
+    ----------
+    added : list of str
+        File names added.
+    skipped : list of str
+        File names already in the logbook (same SHA-256), or repeated in the request.
+    rejected : list of (str, str)
+        ``(path, one-line reason)`` of files that could not be read.
+    events : int
+        Events stored.
+    """
+
+    added: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    rejected: list[tuple[str, str]] = field(default_factory=list)
+    events: int = 0
+
+    def lines(self) -> list[str]:
+        """One line per skipped or rejected file, for printing."""
+        out = [f"{name}: already in the logbook" for name in self.skipped]
+        out += [f"{Path(path).name}: rejected: {reason}" for path, reason in self.rejected]
+        return out
+
+    def to_dict(self) -> dict:
+        return {"added": list(self.added), "skipped": list(self.skipped),
+                "rejected": [{"path": p, "reason": r} for p, r in self.rejected],
+                "events": int(self.events)}
+
+
+def _is_data_file(path: Path) -> bool:
+    name = path.name.lower()
+    return path.suffix.lower() in DATA_SUFFIXES and not name.startswith(SKIP_PREFIXES) \
+        and not name.startswith(".")
+
+
+def list_files(paths, *, pack: str | None, pack_from: str | None, recursive: bool
+               ) -> tuple[list[tuple[Path, str]], list[tuple[str, str]]]:
+    """``[(file, pack name)]`` for the paths given, and ``[(path, reason)]`` for missing ones."""
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    if pack is None and pack_from is None:
+        raise LogbookError("say which pack the files belong to: pack='NAME', or "
+                           "pack_from='parent' (each file's folder name)")
+    if pack is not None and pack_from is not None:
+        raise LogbookError("give pack or pack_from, not both")
+    if pack_from is not None and pack_from not in PACK_FROM:
+        raise LogbookError(f"pack_from must be one of {', '.join(PACK_FROM)}; got {pack_from!r}")
+    if pack is not None and not str(pack).strip():
+        raise LogbookError("the pack name is empty")
+    files, missing = [], []
+    for given in paths:
+        path = Path(given).expanduser()
+        if path.is_dir():
+            found = path.rglob("*") if recursive else path.glob("*")
+            for item in sorted(found):
+                if item.is_file() and _is_data_file(item):
+                    files.append(item)
+        elif path.is_file():
+            files.append(path)
+        else:
+            missing.append((str(path), "no such file or folder"))
+    named = [(f, str(pack).strip() if pack is not None else f.resolve().parent.name)
+             for f in files]
+    return named, missing
+
+
+def _insert(conn, table):
+    if conn.dialect.name == "postgresql":
+        from sqlalchemy.dialects.postgresql import insert
+    else:
+        from sqlalchemy.dialects.sqlite import insert
+    return insert(table)
+
+
+def known_hashes(conn, hashes: Iterable[str]) -> set[str]:
+    """The hashes among ``hashes`` already stored as sources."""
+    hashes = list(hashes)
+    found: set[str] = set()
+    for k in range(0, len(hashes), LOOKUP_CHUNK):
+        chunk = hashes[k:k + LOOKUP_CHUNK]
+        found.update(conn.execute(select(schema.sources.c.sha256)
+                                  .where(schema.sources.c.sha256.in_(chunk))).scalars())
+    return found
+
+
+def pack_ids(conn, names: Iterable[str]) -> dict[str, int]:
+    """Ids of the named packs, created when missing."""
+    out = {}
+    for name in sorted(set(names)):
+        conn.execute(_insert(conn, schema.packs).values(name=name, created_at=schema.now_iso())
+                     .on_conflict_do_nothing(index_elements=["name"]))
+        out[name] = conn.execute(select(schema.packs.c.id)
+                                 .where(schema.packs.c.name == name)).scalar_one()
+    return out
+
+
+def event_row(event: dict) -> dict:
+    """A summary event as a row of the ``events`` table (without the ids)."""
+    row = {name: event.get(name) for name in schema.EVENT_FLOATS}
+    interval = event.get("resistance_interval95") or (None, None)
+    row.update(resistance_low_ohm=interval[0], resistance_high_ohm=interval[1],
+               idx=int(event["index"]), kind=event["kind"], start_time=event.get("start_time"),
+               cycle=event.get("cycle"), reaches_knee=bool(event.get("reaches_knee")),
+               cells=event.get("cells"), samples=int(event.get("samples") or 0),
+               curve_json=json.dumps(event.get("curve") or {}))
+    return {k: (float(v) if k in schema.EVENT_FLOATS and v is not None else v)
+            for k, v in row.items()}
+
+
+def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
+                    result: AddResult) -> None:
+    """Store ``(summary, pack, original path)`` items in one transaction (the raw file
+    as the summary carries it, compressed)."""
+    if not batch:
+        return
+    with schema.writing(engine) as conn:
+        ids = pack_ids(conn, [pack for _, pack, _ in batch])
+        for summary, pack, path in batch:
+            conn.execute(_insert(conn, schema.blobs).values(
+                sha256=summary.sha256, compression="zlib", size_bytes=summary.size_bytes,
+                data=summary.raw_zlib).on_conflict_do_nothing(index_elements=["sha256"]))
+            source_id = conn.execute(_insert(conn, schema.sources).values(
+                sha256=summary.sha256, pack_id=ids[pack], file_name=summary.file_name,
+                path=path, size_bytes=summary.size_bytes, format=summary.format,
+                added_at=schema.now_iso(), options_json=json.dumps(summary.options),
+                notes_json=json.dumps(summary.notes),
+            ).on_conflict_do_nothing(index_elements=["sha256"])
+                .returning(schema.sources.c.id)).scalar()
+            if source_id is None:  # another writer stored it first
+                result.skipped.append(summary.file_name)
+                continue
+            rows = [dict(event_row(e), source_id=source_id, pack_id=ids[pack])
+                    for e in summary.events]
+            if rows:
+                conn.execute(schema.events.insert(), rows)
+            result.added.append(summary.file_name)
+            result.events += len(rows)
+
+
+def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, executor=None,
+              progress: Callable[[int, int, str], None] | None = None,
+              reader_options: dict | None = None) -> AddResult:
+    """Add files and folders to the logbook (see :meth:`dischargelab.Logbook.add`)."""
+    from ..fleet import InProcessExecutor
+
+    options = check_reader_options(reader_options)
+    files, missing = list_files(paths, pack=pack, pack_from=pack_from, recursive=recursive)
+    result = AddResult(rejected=list(missing))
+    total = len(files)
+    hashed: dict[str, tuple[Path, str, str]] = {}
+    for path, pack_name in files:
+        try:
+            sha = sha256_file(path)
+        except OSError as exc:
+            result.rejected.append((str(path), f"cannot read it ({exc.strerror or exc})"))
+            continue
+        if sha in hashed:
+            result.skipped.append(path.name)
+            continue
+        hashed[sha] = (path, pack_name, sha)
+    with schema.reading(engine) as conn:
+        known = known_hashes(conn, hashed)
+    for sha in known:
+        result.skipped.append(hashed.pop(sha)[0].name)
+    done = total - len(hashed)
+    if progress is not None and done:
+        progress(done, total, f"{done} already in the logbook")
+    by_path = {str(path): (path, pack_name, sha) for path, pack_name, sha in hashed.values()}
+    task = functools.partial(summarise_source, options=options)
+    executor = executor or InProcessExecutor()
+    batch: list = []
+    failure: BaseException | None = None
+    try:
+        for item, outcome in executor.map_unordered(task, _payloads(executor, by_path)):
+            key = item[0] if isinstance(item, tuple) else item
+            path, pack_name, sha = by_path[key]
+            done += 1
+            if isinstance(outcome, DischargelabError):
+                result.rejected.append((str(path), str(outcome).splitlines()[0]))
+            elif isinstance(outcome, BaseException):
+                failure = outcome
+                break
+            elif outcome.sha256 != sha:     # the worker read other bytes than were hashed
+                result.rejected.append((str(path), "the file changed while it was being "
+                                                   "added; add it again"))
+            else:
+                batch.append((outcome, pack_name, str(path.resolve())))
+            if progress is not None:
+                progress(done, total, path.name)
+            if len(batch) >= BATCH_SOURCES:
+                write_summaries(engine, batch, result)
+                batch = []
+    except KeyboardInterrupt:
+        # keep what is summarised (one transaction): a rerun only does what is missing
+        write_summaries(engine, batch, result)
+        raise
+    write_summaries(engine, batch, result)
+    if failure is not None:
+        raise failure
+    return result
+
+
+def _payloads(executor, by_path: dict):
+    """What the tasks get: each file's path when the executor's workers see this machine's
+    files (in process, a local cluster, a shared folder), else ``(path, bytes)`` read one at a
+    time as the executor asks for the next (so only the files in flight are in memory)."""
+    paths = list(by_path)
+    if not paths:
+        return iter(())
+    sees = getattr(executor, "sees", None)
+    if executor.shares_files or (sees is not None and sees(paths[0])):
+        return iter(paths)
+    return ((path, Path(path).read_bytes()) for path in paths)
+
+
+def add_upload(engine, file_name: str, data: bytes, pack: str,
+               reader_options: dict | None = None) -> AddResult:
+    """Add one file given as bytes (an upload; see :meth:`dischargelab.Logbook.add_bytes`)."""
+    if not str(pack or "").strip():
+        raise LogbookError("the pack name is empty")
+    name = Path(str(file_name)).name
+    result = AddResult()
+    sha = sha256_bytes(data)
+    with schema.reading(engine) as conn:
+        if known_hashes(conn, [sha]):
+            result.skipped.append(name)
+            return result
+    try:
+        summary = summarise_source((name, data), check_reader_options(reader_options))
+    except DischargelabError as exc:
+        result.rejected.append((name, str(exc).splitlines()[0]))
+        return result
+    write_summaries(engine, [(summary, str(pack).strip(), None)], result)
+    return result
+
+
+__all__ = ["AddResult", "add_files", "add_upload", "list_files", "write_summaries",
+           "known_hashes", "event_row", "DATA_SUFFIXES", "BATCH_SOURCES"]

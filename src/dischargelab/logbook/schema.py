@@ -1,0 +1,368 @@
+"""The logbook database: tables, schema version, forward migrations, connections.
+
+SQLAlchemy 2 Core, the same code for SQLite (the default: one file, no set-up) and
+PostgreSQL (``postgresql+psycopg://user@host/db`` for a team).
+
+Tables (all values SI, discharge positive; ``*_json`` columns hold JSON text)::
+
+    logbook_meta  key, value                     -- "schema_version"
+    packs         id, name (unique), label_capacity_Ah, chemistry, cells, created_at
+    blobs         sha256 (key), compression, size_bytes, data   -- raw files, zlib
+    sources       id, sha256 (unique), pack_id, file_name, path, size_bytes, format,
+                  added_at, options_json, notes_json
+    events        id, source_id, idx, pack_id, kind, start_time, cycle, duration_s,
+                  discharged_Ah, discharged_Wh, mean_current_A, max_current_A,
+                  rest_voltage_V, rest_after_V, rest_after_s, min_voltage_V,
+                  end_voltage_V, end_current_A, resistance_ohm, resistance_low_ohm,
+                  resistance_high_ohm, reaches_knee, cells, samples,
+                  temperature_start_C, temperature_max_C, ambient_C, cell_spread_V,
+                  curve_json                      -- unique (source_id, idx)
+    models        id, pack_id, fitted_at, reference_event_id, capacity_Ah,
+                  resistance_ohm, battery_json    -- the pack's fitted battery models
+
+Versions (``logbook_meta.schema_version``; a database is migrated forward when
+opened, a newer one is refused):
+
+* 1: packs, blobs, sources, events without ``cycle`` and ``cell_spread_V``.
+* 2: ``events.cycle`` (cycle number from the file name, for the equivalent full
+  cycles between logged ones), ``events.cell_spread_V``, and the ``models`` table.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from contextlib import contextmanager
+from datetime import UTC, datetime
+from pathlib import Path
+
+from sqlalchemy import (
+    BigInteger,
+    Boolean,
+    Column,
+    Float,
+    ForeignKey,
+    Integer,
+    LargeBinary,
+    MetaData,
+    String,
+    Table,
+    Text,
+    UniqueConstraint,
+    create_engine,
+    event,
+    inspect,
+    select,
+    text,
+)
+from sqlalchemy.engine import Engine, make_url
+from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
+
+from ..errors import LogbookError
+
+#: Version of the tables this code writes.
+SCHEMA_VERSION = 2
+
+#: File name of the default SQLite logbook in the user's data folder.
+DEFAULT_FILE_NAME = "logbook.sqlite"
+
+#: Environment variable naming the logbook (a path or a database URL).
+ENV_VARIABLE = "DISCHARGELAB_DB"
+
+#: Seconds a writer waits for another writer to finish (SQLite).
+BUSY_TIMEOUT_S = 60.0
+
+metadata = MetaData()
+
+logbook_meta = Table(
+    "logbook_meta", metadata,
+    Column("key", String(64), primary_key=True),
+    Column("value", Text, nullable=False),
+)
+
+packs = Table(
+    "packs", metadata,
+    Column("id", Integer, primary_key=True, autoincrement=True),
+    Column("name", String(200), nullable=False, unique=True),
+    Column("label_capacity_Ah", Float),
+    Column("chemistry", String(20)),
+    Column("cells", Integer),
+    Column("created_at", String(40), nullable=False),
+)
+
+blobs = Table(
+    "blobs", metadata,
+    Column("sha256", String(64), primary_key=True),
+    Column("compression", String(10), nullable=False),
+    Column("size_bytes", BigInteger, nullable=False),
+    Column("data", LargeBinary, nullable=False),
+)
+
+sources = Table(
+    "sources", metadata,
+    Column("id", Integer, primary_key=True, autoincrement=True),
+    Column("sha256", String(64), nullable=False, unique=True),
+    Column("pack_id", Integer, ForeignKey("packs.id"), nullable=False),
+    Column("file_name", String(500), nullable=False),
+    Column("path", Text),
+    Column("size_bytes", BigInteger, nullable=False),
+    Column("format", String(40), nullable=False),
+    Column("added_at", String(40), nullable=False),
+    Column("options_json", Text, nullable=False),
+    Column("notes_json", Text, nullable=False),
+)
+
+EVENT_FLOATS = (
+    "duration_s", "discharged_Ah", "discharged_Wh", "mean_current_A", "max_current_A",
+    "rest_voltage_V", "rest_after_V", "rest_after_s", "min_voltage_V", "end_voltage_V",
+    "end_current_A", "resistance_ohm", "resistance_low_ohm", "resistance_high_ohm",
+    "temperature_start_C", "temperature_max_C", "ambient_C", "cell_spread_V",
+)
+
+events = Table(
+    "events", metadata,
+    Column("id", Integer, primary_key=True, autoincrement=True),
+    Column("source_id", Integer, ForeignKey("sources.id"), nullable=False),
+    Column("idx", Integer, nullable=False),
+    Column("pack_id", Integer, ForeignKey("packs.id"), nullable=False),
+    Column("kind", String(20), nullable=False),
+    Column("start_time", String(40)),
+    Column("cycle", Integer),
+    *[Column(name, Float) for name in EVENT_FLOATS],
+    Column("reaches_knee", Boolean, nullable=False),
+    Column("cells", Integer),
+    Column("samples", Integer, nullable=False),
+    Column("curve_json", Text, nullable=False),
+    UniqueConstraint("source_id", "idx", name="uq_events_source_idx"),
+)
+
+models = Table(
+    "models", metadata,
+    Column("id", Integer, primary_key=True, autoincrement=True),
+    Column("pack_id", Integer, ForeignKey("packs.id"), nullable=False),
+    Column("fitted_at", String(40), nullable=False),
+    Column("reference_event_id", Integer, ForeignKey("events.id")),
+    Column("capacity_Ah", Float),
+    Column("resistance_ohm", Float),
+    Column("battery_json", Text, nullable=False),
+)
+
+
+def now_iso() -> str:
+    """The current UTC time, ISO 8601 to the second."""
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+# --------------------------------------------------------------------------- locations
+
+def user_data_dir() -> Path:
+    """The user's data folder for dischargelab, by the platform's convention.
+
+    Linux and other Unix: ``$XDG_DATA_HOME/dischargelab`` (default
+    ``~/.local/share/dischargelab``, XDG Base Directory Specification); macOS:
+    ``~/Library/Application Support/dischargelab``; Windows:
+    ``%LOCALAPPDATA%\\dischargelab``.
+    """
+    home = Path.home()
+    if sys.platform.startswith("win"):
+        base = Path(os.environ.get("LOCALAPPDATA") or home / "AppData" / "Local")
+    elif sys.platform == "darwin":
+        base = home / "Library" / "Application Support"
+    else:
+        base = Path(os.environ.get("XDG_DATA_HOME") or home / ".local" / "share")
+    return base / "dischargelab"
+
+
+def resolve_url(url=None) -> str:
+    """The database URL of a logbook location.
+
+    ``None``: ``$DISCHARGELAB_DB`` if set, else ``logbook.sqlite`` in
+    :func:`user_data_dir`; a path: a SQLite file there; ``sqlite:///...`` or
+    ``postgresql+psycopg://...``: used as given.
+    """
+    if url is None:
+        url = os.environ.get(ENV_VARIABLE) or None
+    if url is None:
+        return f"sqlite:///{user_data_dir() / DEFAULT_FILE_NAME}"
+    text_url = str(url)
+    if "://" in text_url:
+        return text_url
+    return f"sqlite:///{Path(text_url).expanduser().resolve()}"
+
+
+def shown_url(url: str) -> str:
+    """The URL without its password, for messages."""
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except ArgumentError:
+        return url
+
+
+# --------------------------------------------------------------------------- engines
+
+def _sqlite_pragmas(dbapi_connection, _record) -> None:
+    dbapi_connection.isolation_level = None  # transactions are begun by _sqlite_begin
+    cursor = dbapi_connection.cursor()
+    cursor.execute("PRAGMA foreign_keys=ON")
+    cursor.execute(f"PRAGMA busy_timeout={int(BUSY_TIMEOUT_S * 1000)}")
+    cursor.execute("PRAGMA journal_mode=WAL")
+    cursor.close()
+
+
+def _sqlite_begin(conn) -> None:
+    # a writer takes the write lock at BEGIN, so two writers queue instead of deadlocking
+    conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.info.get("write") else "BEGIN")
+
+
+def create(url: str) -> Engine:
+    """An engine for the URL (SQLite folder created; the driver must be installed).
+
+    Raises
+    ------
+    MissingExtraError
+        SQLAlchemy or the PostgreSQL driver is not installed (names the extra).
+    LogbookError
+        A URL that SQLAlchemy does not understand.
+    """
+    from ..errors import require
+
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        raise LogbookError(f"logbook location {url!r} is neither a file path nor a database "
+                           "URL such as postgresql+psycopg://user@host/db") from None
+    backend = parsed.get_backend_name()
+    if backend == "postgresql":
+        require("psycopg", "postgres")
+        if parsed.drivername != "postgresql+psycopg":
+            raise LogbookError(f"use postgresql+psycopg://... for PostgreSQL (got "
+                               f"{parsed.drivername}://)")
+        return create_engine(parsed, pool_pre_ping=True)
+    if backend != "sqlite":
+        raise LogbookError(f"the logbook stores in SQLite or PostgreSQL, not {backend}")
+    database = parsed.database
+    if not database or database == ":memory:":
+        raise LogbookError("give the logbook a file: an in-memory SQLite database is lost "
+                           "when it closes")
+    path = Path(database)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        engine = create_engine(parsed, connect_args={"timeout": BUSY_TIMEOUT_S})
+    except NoSuchModuleError:  # pragma: no cover - sqlite3 is in the standard library
+        raise LogbookError("this Python has no sqlite3 module") from None
+    event.listen(engine, "connect", _sqlite_pragmas)
+    event.listen(engine, "begin", _sqlite_begin)
+    return engine
+
+
+@contextmanager
+def writing(engine: Engine):
+    """A write transaction (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: read committed)."""
+    with engine.connect() as conn:
+        conn.info["write"] = True
+        try:
+            with conn.begin():
+                yield conn
+        finally:
+            conn.info.pop("write", None)
+
+
+@contextmanager
+def reading(engine: Engine):
+    """A read transaction."""
+    with engine.connect() as conn, conn.begin():
+        yield conn
+
+
+@contextmanager
+def database_errors(url: str):
+    """Turn the driver's errors into one line that names the logbook."""
+    try:
+        yield
+    except DBAPIError as exc:
+        where = shown_url(url)
+        if exc.connection_invalidated or "connect" in type(exc.orig).__name__.lower() or \
+                "could not connect" in str(exc.orig) or "connection" in str(exc.orig).lower():
+            raise LogbookError(f"cannot reach the logbook database {where}: is the server "
+                               "running and the URL (host, port, user, database) right?"
+                               ) from None
+        if "not a database" in str(exc.orig) or "unable to open" in str(exc.orig):
+            raise LogbookError(f"{where} is not a logbook database that can be opened "
+                               "(not an SQLite file, or no permission)") from None
+        raise
+
+
+# --------------------------------------------------------------------------- versions
+
+def _add_column(conn, table: str, column: str, sql_type: str) -> None:
+    quote = conn.dialect.identifier_preparer.quote  # mixed case stays mixed case
+    conn.execute(text(f"ALTER TABLE {quote(table)} ADD COLUMN {quote(column)} {sql_type}"))
+
+
+def _migrate_1_to_2(conn) -> None:
+    _add_column(conn, "events", "cycle", "INTEGER")
+    _add_column(conn, "events", "cell_spread_V", "FLOAT")
+    models.create(conn, checkfirst=True)
+
+
+#: Forward migrations: version -> function taking it to version + 1.
+MIGRATIONS = {1: _migrate_1_to_2}
+
+
+def schema_version(conn) -> int | None:
+    """The stored schema version, or None for an empty database."""
+    if not inspect(conn).has_table("logbook_meta"):
+        return None
+    value = conn.execute(select(logbook_meta.c.value)
+                         .where(logbook_meta.c.key == "schema_version")).scalar()
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        raise LogbookError(f"the logbook's schema version is unreadable ({value!r})") from None
+
+
+def prepare(engine: Engine, url: str) -> int:
+    """Create the tables of an empty database or migrate an older one forward.
+
+    Returns
+    -------
+    int
+        The schema version the database had when opened (0 when it was empty).
+
+    Raises
+    ------
+    LogbookError
+        The database was written by a newer dischargelab, or holds tables that are
+        not a logbook's.
+    """
+    with writing(engine) as conn:
+        if engine.dialect.name == "postgresql":  # one process creates or migrates at a time
+            conn.execute(text("SELECT pg_advisory_xact_lock(7283640151)"))
+        found = schema_version(conn)
+        if found is None:
+            present = set(inspect(conn).get_table_names())
+            clash = present & {t.name for t in metadata.sorted_tables}
+            if clash:
+                raise LogbookError(f"{shown_url(url)} holds tables named like a logbook's "
+                                   f"({', '.join(sorted(clash))}) but no schema version; "
+                                   "give another database")
+            metadata.create_all(conn)
+            conn.execute(logbook_meta.insert().values(key="schema_version",
+                                                      value=str(SCHEMA_VERSION)))
+            return 0
+        if found > SCHEMA_VERSION:
+            raise LogbookError(f"the logbook {shown_url(url)} has schema version {found}, newer "
+                               f"than this dischargelab understands ({SCHEMA_VERSION}); "
+                               "upgrade dischargelab")
+        for version in range(found, SCHEMA_VERSION):
+            MIGRATIONS[version](conn)
+        if found < SCHEMA_VERSION:
+            conn.execute(logbook_meta.update().where(logbook_meta.c.key == "schema_version")
+                         .values(value=str(SCHEMA_VERSION)))
+        return found
+
+
+__all__ = ["SCHEMA_VERSION", "MIGRATIONS", "metadata", "packs", "blobs", "sources", "events",
+           "models", "logbook_meta", "resolve_url", "user_data_dir", "create", "prepare",
+           "writing", "reading", "database_errors", "shown_url", "schema_version", "now_iso",
+           "EVENT_FLOATS", "ENV_VARIABLE"]

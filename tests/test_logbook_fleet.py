@@ -1,0 +1,168 @@
+"""The logbook on a Dask cluster: the same events as in process, faults, interruptions."""
+
+from __future__ import annotations
+
+import functools
+import shutil
+import threading
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("sqlalchemy")
+pytest.importorskip("distributed")
+
+from dask_cluster import Cluster
+from dischargelab.fleet import DaskExecutor, InProcessExecutor
+from dischargelab.logbook import Logbook
+from fleet_tasks import crash_on_file
+
+CELL_C = "samsung30q_ageing_cellC"
+
+#: Fields of an event that depend on when and where it was stored, not on the file.
+STORAGE_FIELDS = ("id",)
+
+
+@pytest.fixture(scope="module")
+def packs(shared_data, tmp_path_factory) -> Path:
+    """Three pack folders of cell C cycles, each copy changed (a trailing newline) so its
+    hash differs: 36 files."""
+    root = tmp_path_factory.mktemp("fleet") / "packs"
+    files = sorted((shared_data / CELL_C).glob("DischargeCycle*.txt"))
+    for k, pack in enumerate(("pack-a", "pack-b", "pack-c")):
+        folder = root / pack
+        folder.mkdir(parents=True)
+        for f in files[k::6]:
+            (folder / f.name).write_bytes(f.read_bytes() + b"\n" * (k + 1))
+    return root
+
+
+def stored(url: str) -> dict:
+    """Every pack's events as stored, keyed by (pack, source, index), storage ids left out."""
+    with Logbook(url) as lb:
+        out = {}
+        for name in lb.pack_names():
+            for row in lb.events(name).to_dict()["events"]:
+                key = (name, row["source"], row["idx"])
+                assert key not in out, f"event stored twice: {key}"
+                out[key] = {k: v for k, v in row.items() if k not in STORAGE_FIELDS}
+        return out
+
+
+def n_files(root: Path) -> int:
+    return sum(1 for _ in root.rglob("*.txt"))
+
+
+@pytest.fixture(scope="module")
+def in_process(packs, tmp_path_factory) -> dict:
+    url = str(tmp_path_factory.mktemp("inproc") / "lb.sqlite")
+    with Logbook(url) as lb:
+        result = lb.add(packs, pack_from="parent", recursive=True)
+    assert len(result.added) == n_files(packs) and not result.rejected
+    return stored(url)
+
+
+@pytest.mark.slow
+def test_local_cluster_stores_the_same_events_and_refits_and_reports_alike(
+        packs, in_process, tmp_path):
+    url = str(tmp_path / "lb.sqlite")
+    code, out, err = run_cli("logbook", "add", packs, "--pack-from", "parent", "-r",
+                             "--workers", "2", "--db", url)
+    assert code == 0, err
+    assert "running on 2 Dask worker(s)" in err
+    assert stored(url) == in_process
+    with Logbook(url) as lb, DaskExecutor(workers=2) as ex:
+        fleet = lb.fleet(executor=ex)
+        assert [r["name"] for r in fleet.rows] == [r["name"] for r in lb.fleet().rows]
+        assert fleet.to_dict() == lb.fleet().to_dict()
+        fitted = lb.fit_all(executor=ex, bootstrap=0)
+        local = lb.fit_all(bootstrap=0)
+    assert sorted(fitted) == ["pack-a", "pack-b", "pack-c"]
+    for name, battery in fitted.items():
+        assert battery.parameters.as_dict() == pytest.approx(
+            local[name].parameters.as_dict(), rel=1e-9)
+
+
+def run_cli(*args):
+    """The CLI in process, capturing its output (pytest's capsys is function-scoped)."""
+    import contextlib
+    import io
+
+    from dischargelab.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+            pytest.raises(SystemExit) as exc:
+        main([str(a) for a in args])
+    return exc.value.code, out.getvalue(), err.getvalue()
+
+
+@pytest.mark.slow
+def test_real_cluster_bytes_when_workers_cannot_see_and_a_worker_killed(packs, in_process,
+                                                                       tmp_path):
+    cluster = Cluster(workers=2)
+    try:
+        url = str(tmp_path / "lb.sqlite")
+        with DaskExecutor(scheduler=cluster.address) as ex, Logbook(url) as lb:
+            ex.client.wait_for_workers(2, timeout=60)
+            ex.sees = lambda path: False          # as if the cluster were elsewhere
+            sent = []
+
+            def progress(done, total, name):
+                sent.append(name)
+                if len(sent) == 5:              # kill one worker mid-run
+                    threading.Thread(target=cluster.kill, args=(cluster.workers[0],)).start()
+
+            result = lb.add(packs, pack_from="parent", recursive=True, executor=ex,
+                            progress=progress)
+        assert cluster.workers[0].poll() is not None
+        assert len(result.added) == n_files(packs) and not result.rejected
+        assert stored(url) == in_process        # nothing lost, nothing twice
+        # the same cluster through the command line, on a second database
+        url2 = str(tmp_path / "lb2.sqlite")
+        code, out, err = run_cli("logbook", "add", packs, "--pack-from", "parent", "-r",
+                                 "--scheduler", cluster.address, "--db", url2)
+        assert code == 0, err
+        assert stored(url2) == in_process
+    finally:
+        cluster.stop()
+    assert cluster.alive() == []
+
+
+@pytest.mark.slow
+def test_a_file_that_kills_workers_twice_is_rejected_and_the_rest_goes_in(packs, tmp_path):
+    victim = sorted((packs / "pack-b").glob("*.txt"))[2].name
+
+    class Crashing(DaskExecutor):
+        def map_unordered(self, func, items):
+            return super().map_unordered(functools.partial(crash_on_file, func, victim), items)
+
+    url = str(tmp_path / "lb.sqlite")
+    with Crashing(workers=2) as ex, Logbook(url) as lb:
+        result = lb.add(packs / "pack-b", pack="pack-b", executor=ex)
+    assert [Path(p).name for p, _ in result.rejected] == [victim]
+    assert "died twice" in result.rejected[0][1]
+    assert len(result.added) == n_files(packs / "pack-b") - 1
+
+
+def test_interrupted_add_keeps_whole_transactions_and_a_rerun_does_only_the_rest(
+        packs, in_process, tmp_path):
+    url = str(tmp_path / "lb.sqlite")
+    folder = tmp_path / "pack-a"
+    shutil.copytree(packs / "pack-a", folder)
+    total = n_files(folder)
+
+    def stop_after_seven(done, total, name):
+        if done == 7:
+            raise KeyboardInterrupt
+
+    with Logbook(url) as lb:
+        with pytest.raises(KeyboardInterrupt):
+            lb.add(folder, pack="pack-a", executor=InProcessExecutor(),
+                   progress=stop_after_seven)
+    first = stored(url)
+    assert len(first) == 7                       # what was summarised is kept, whole
+    with Logbook(url) as lb:
+        again = lb.add(folder, pack="pack-a")
+    assert len(again.added) == total - 7 and len(again.skipped) == 7
+    assert stored(url) == {k: v for k, v in in_process.items() if k[0] == "pack-a"}

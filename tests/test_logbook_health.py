@@ -1,0 +1,194 @@
+"""Health maths of the logbook without a database: summaries, capacity, EFC, outliers, forecast.
+
+Truths are computed here from the raw files with numpy, or built by hand.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dischargelab.errors import DataError
+from dischargelab.fleet import InProcessExecutor
+from dischargelab.logbook.forecast import crossing, fit_trend
+from dischargelab.logbook.health import (
+    equivalent_full_cycles,
+    flag_outliers,
+    observed_crossing,
+    pack_health,
+    value_today,
+)
+from dischargelab.logbook.results import scale_parameters
+from dischargelab.logbook.summarise import knee_ratio, step_resistance, summarise_source
+
+CELL_C = "samsung30q_ageing_cellC"
+
+
+def lvm_cut(path: Path, out: Path, share: float) -> float:
+    """Write the file up to ``share`` of its discharge charge; return the full charge [Ah]."""
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    start = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 1
+    data = [line for line in lines[start:] if line.strip()]
+    cols = np.array([[float(x) for x in line.split("\t")[:2]] for line in data])
+    current = np.where(cols[:, 1] < -1.0, -cols[:, 1], 0.0)
+    charge = np.concatenate(([0.0], np.cumsum(0.5 * (current[1:] + current[:-1])
+                                                * np.diff(cols[:, 0])))) / 3600.0
+    stop = int(np.searchsorted(charge, share * charge[-1])) + 1
+    out.write_text("".join(lines[:start] + data[:stop]), encoding="utf-8")
+    return float(charge[-1])
+
+
+def stored(summary, source_id: int) -> list[dict]:
+    """Summary events as the logbook returns them (ids, source name, resistance bounds)."""
+    out = []
+    for e in summary.events:
+        row = dict(e, id=source_id * 10 + e["index"], source=summary.file_name)
+        lo, hi = e["resistance_interval95"] or (None, None)
+        row.update(resistance_low_ohm=lo, resistance_high_ohm=hi)
+        out.append(row)
+    return out
+
+
+# --------------------------------------------------------------------------- summaries
+
+def test_summary_is_small_serialisable_and_pure(shared_data, tmp_path):
+    path = shared_data / CELL_C / "DischargeCycle100.txt"
+    summary = summarise_source(path)
+    again = summarise_source((path.name, path.read_bytes()))
+    assert summary.to_dict() == again.to_dict()  # path or upload: the same summary
+    assert pickle.loads(pickle.dumps(summary)).to_dict() == summary.to_dict()
+    text = json.dumps(summary.to_dict())
+    assert len(text) < 20_000  # numbers and a 101-point curve, never the 3,300 samples
+    (event,) = summary.events
+    assert event["cycle"] == 100 and event["kind"] == "discharge" and event["reaches_knee"]
+    assert event["start_time"].startswith("2024-")
+    with pytest.raises(DataError):
+        summarise_source(tmp_path / "missing.txt")
+
+
+def test_step_resistance_of_a_known_circuit():
+    """A 20 mOhm pack on a stepping load; its open-circuit voltage falls 1 mV/s, which moves
+    a 20 A step over 1 s by 1 mV / 20 A = 0.05 mOhm."""
+    t = np.arange(200.0)
+    current = np.where((t // 20) % 2 == 0, 10.0, 30.0)
+    voltage = 16.0 - 0.001 * t - 0.020 * current
+    r, (lo, hi) = step_resistance(t, voltage, current)
+    assert r == pytest.approx(0.020, abs=0.00005 + 1e-12)
+    assert lo <= r <= hi
+    assert step_resistance(t, voltage, np.full(t.size, 10.0)) == (None, None)
+
+
+def test_knee_ratio_tells_a_discharge_to_cutoff_from_one_stopped_early():
+    q = np.linspace(0, 3.0, 400)
+    v = 4.1 - 0.3 * q - 0.6 * np.exp((q - 3.0) / 0.05)  # falls 0.6 V over its last 5 %
+    assert knee_ratio(q, v) > 4
+    assert knee_ratio(q[:240], v[:240]) < 2
+
+
+# --------------------------------------------------------------------------- health
+
+def test_equivalent_full_cycles_count_unlogged_cycles():
+    events = [{"discharged_Ah": 3.0, "cycle": 1}, {"discharged_Ah": 2.0, "cycle": 11},
+              {"discharged_Ah": 2.0}]
+    # 3 + 9 cycles of (3+2)/2 + 2, then 2 more Ah
+    np.testing.assert_allclose(equivalent_full_cycles(events, 2.0),
+                               [1.5, (3 + 22.5 + 2) / 2, (3 + 22.5 + 4) / 2])
+
+
+def test_outliers_are_found_off_a_trend_and_not_at_its_ends():
+    rng = np.random.default_rng(1)
+    x = np.arange(40.0) * 10
+    y = 3.0 - 0.001 * x - 2e-6 * x ** 2 + rng.normal(0, 0.003, x.size)
+    y[17] += 0.05  # overcharged
+    y[30] -= 0.05  # undercharged
+    assert np.flatnonzero(flag_outliers(x, y)).tolist() == [17, 30]
+
+
+def test_value_today_and_observed_crossing():
+    x = np.arange(10.0)
+    y = 2.0 - 0.1 * x
+    assert value_today(x, y) == pytest.approx(2.0 - 0.9)
+    at, (a, b) = observed_crossing(x, y, 1.45)
+    assert at == pytest.approx(5.5) and (a, b) == (5.0, 6.0)
+    assert observed_crossing(x, y, 1.05) is None  # only the last one is below
+
+
+def test_partial_discharges_cut_at_60_percent_within_3_percent(shared_data, tmp_path):
+    """Each 60 % cut against the full integral, measured on the previous full discharge."""
+    cycles = [1, 10, 200, 210, 500, 510]
+    events = []
+    truth = {}
+    for k, c in enumerate(cycles):
+        path = shared_data / CELL_C / f"DischargeCycle{c:03d}.txt"
+        if k % 2:  # every second one cut
+            cut = tmp_path / path.name
+            truth[path.name] = lvm_cut(path, cut, 0.6)
+            path = cut
+        events += stored(summarise_source(path), k)
+    health, reference, _ = pack_health(events)
+    partial = [h for h in health if not h.full]
+    assert [h.source for h in partial] == [f"DischargeCycle{c:03d}.txt" for c in cycles[1::2]]
+    for h in partial:
+        assert h.capacity_Ah == pytest.approx(truth[h.source], rel=0.03)
+        lo, hi = h.capacity_interval95
+        assert lo < truth[h.source] < hi
+    assert reference == pytest.approx(health[0].capacity_Ah)
+
+
+# --------------------------------------------------------------------------- forecast
+
+def test_trend_band_and_crossing_of_a_straight_fade():
+    rng = np.random.default_rng(3)
+    x = np.linspace(1, 300, 40)
+    y = 3.0 - 0.002 * x + rng.normal(0, 0.005, x.size)
+    trend = fit_trend(x, y)
+    assert trend.slope == pytest.approx(-0.002, rel=0.05)
+    at, (lo, hi), band = crossing(trend, 2.4)
+    assert at == pytest.approx(300, rel=0.05)
+    assert lo < 300 < hi
+    assert band[0][0] == pytest.approx(x[-1])
+    flat = fit_trend(x, 3.0 + rng.normal(0, 0.005, x.size) + 1e-6 * x)
+    assert crossing(flat, 2.4)[0] is None
+
+
+@pytest.mark.slow
+def test_forecast_from_cycle_330_covers_the_observed_crossing(shared_data):
+    """Cell C: forecast from the cycles up to 330, checked against the crossing the later
+    cycles show (80 % of the first full discharge)."""
+    files = sorted((shared_data / CELL_C).glob("DischargeCycle*.txt"))
+    events = []
+    for k, path in enumerate(files):
+        events += stored(summarise_source(path), k)
+    everything, reference, _ = pack_health(events)
+    threshold = 0.8 * reference
+    usable = [h for h in everything if not h.outlier]
+    seen = observed_crossing([h.efc for h in usable], [h.capacity_Ah for h in usable], threshold)
+    assert seen is not None
+    early = [h for h in usable if h.cycle <= 330]
+    trend = fit_trend([h.efc for h in early], [h.capacity_Ah for h in early])
+    _, (lo, hi), _ = crossing(trend, threshold)
+    assert lo <= seen[0] and (hi is None or seen[0] <= hi)
+
+
+def test_scaled_parameters_keep_the_curve_shape_in_state_of_charge():
+    units = {"C_Ah": "Ah", "K_V_per_Ah": "V/Ah", "B_per_Ah": "1/Ah", "R_ohm": "ohm",
+             "E0_V": "V"}
+    values = {"C_Ah": 3.0, "K_V_per_Ah": 0.01, "B_per_Ah": 2.0, "R_ohm": 0.03, "E0_V": 3.7}
+    out = scale_parameters(values, units, 0.8, 0.005)
+    assert out == pytest.approx({"C_Ah": 2.4, "K_V_per_Ah": 0.0125, "B_per_Ah": 2.5,
+                                 "R_ohm": 0.035, "E0_V": 3.7})
+    assert scale_parameters(values, units, 1.0, -1.0)["R_ohm"] == 0.0
+
+
+def test_in_process_executor_hands_back_exceptions():
+    def task(x):
+        if x == 2:
+            raise DataError("bad item")
+        return x * 10
+
+    got = dict(InProcessExecutor().map_unordered(task, [1, 2, 3]))
+    assert got[1] == 10 and got[3] == 30 and isinstance(got[2], DataError)
