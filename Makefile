@@ -60,6 +60,8 @@ postgres:
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fit_speed.py
+	$(BIN)/python benchmarks/fit_latency.py
+	$(BIN)/python benchmarks/slow_to_fast.py
 	$(BIN)/python benchmarks/accuracy.py
 	$(BIN)/python benchmarks/mission_speed.py
 	$(BIN)/python benchmarks/io_read_speed.py

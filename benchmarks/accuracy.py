@@ -17,6 +17,8 @@ Data sets (real ones from ``../shared/data``, simulated ones from ``tests/data/v
 
 * ``samsung``: Samsung 30Q, C/10, 1C, 2C, 3C, 4C with the logged cell
   temperature, cutoff 2.5 V; ambient = the cell temperature at rest before the load.
+* ``samsung-notemp``: the same runs with the temperature column dropped, fitted on C/10,
+  on 1C and on C/10 + 4C (fits without a logged temperature).
 * ``enertech``: Enertech LCO pouch, 0.1C, 0.5C, 1C, 2C (current = C-rate x
   2.28 A; the files have no current column), cutoff 3.0 V, 25 degC. The
   temperature-rise files are not used: 0.1C has none, so a fit including it
@@ -27,12 +29,15 @@ Data sets (real ones from ``../shared/data``, simulated ones from ``tests/data/v
 * ``nmc``, ``lfp``, ``lco``: PyBaMM DFN virtual cells (``tests/data/virtual/index.json``:
   rate, current, ambient, cutoff); NMC 1C also at 10 and 40 degC ambient. The
   NMC mission (variable current) is not a constant-rate run and is not used.
+* ``nmc15`` ... ``lco35``: the same cells at 15 and 35 degC, fitted on 0.2C + 2C;
+  ``lfp-spme``, ``lfp-spme15``: the LFP plateau set (SPMe, to 2.5 V, 5 s samples),
+  fitted on 1C and on 0.2C + 2C.
 
 Nothing is tuned here: the fitter runs with its defaults and the numbers are
 what it produces. A fit or prediction that raises is reported as a failure
 with the exception and the library frame it came from.
 
-Usage: python benchmarks/accuracy.py [--sets samsung,enertech,k2,nmc,lfp,lco]
+Usage: python benchmarks/accuracy.py [--sets samsung,samsung-notemp,enertech,k2,nmc,...]
        [--families shepherd,...] [--bootstrap 30] [--detail]
 """
 
@@ -64,7 +69,7 @@ SAMSUNG_COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 K2_COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 #: Acceptance thresholds [%].
-SAMSUNG_1C_LIMIT = 3.0
+SAMSUNG_1C_LIMIT = 2.0
 VIRTUAL_LIMIT = 2.0
 MULTI_RATE_REAL_LIMIT = 2.0
 COVERAGE_GOAL = 90.0
@@ -118,6 +123,17 @@ def load_samsung(data: Path):
             [("1C",), ("C10", "4C"), ("C10", "1C", "4C")])
 
 
+def load_samsung_without_temperature(data: Path):
+    """Samsung 30Q with its temperature column dropped: fits without a logged temperature
+    (thermal families then simulate the self-heating with the thermal prior)."""
+    from dataclasses import replace
+
+    _, runs, _ = load_samsung(data)
+    runs = {k: make_run(k, replace(r.discharge, temperature_C=None), r.cutoff_V, r.ambient_C)
+            for k, r in runs.items()}
+    return ("Samsung 30Q, no temperature", runs, [("C10",), ("1C",), ("C10", "4C")])
+
+
 def load_enertech(data: Path):
     runs = {}
     for c in ("0.1", "0.5", "1", "2"):
@@ -139,33 +155,61 @@ def load_k2(data: Path):
 
 
 VIRTUAL_TRAININGS = {
-    "NMC": [("1C",), ("0.1C", "2C"), ("0.1C", "1C", "2C")],
+    "NMC": [("1C",), ("0.1C", "2C"), ("0.2C", "2C"), ("0.1C", "1C", "2C")],
     "LFP": [("1C",), ("0.2C", "2C"), ("0.1C", "1C", "2C")],
-    "LCO": [("1C",), ("0.1C", "3C"), ("0.1C", "1C", "3C")],
+    "LCO": [("1C",), ("0.1C", "3C"), ("0.2C", "2C"), ("0.1C", "1C", "3C")],
 }
 
+#: Extra virtual sets (``index.json`` "set" field, ambient [degC]): 0.2C + 2C fitted,
+#: 0.5C and 1C predicted (the plateau LFP also from 1C alone).
+EXTRA_VIRTUAL = {
+    "nmc15": ("NMC", 15.0), "nmc35": ("NMC", 35.0),
+    "lfp15": ("LFP", 15.0), "lfp35": ("LFP", 35.0),
+    "lco15": ("LCO", 15.0), "lco35": ("LCO", 35.0),
+    "lfp-spme": ("LFP SPMe 2.5 V", 25.0), "lfp-spme15": ("LFP SPMe 2.5 V", 15.0),
+}
+EXTRA_TRAININGS = [("0.2C", "2C")]
+SPME_TRAININGS = [("1C",), ("0.2C", "2C")]
+#: Ambients of the main 25 degC virtual sets (NMC 1C also at 10 and 40 degC).
+MAIN_AMBIENTS_C = (10.0, 25.0, 40.0)
 
-def load_virtual(chemistry: str):
+
+def load_virtual(chemistry: str, ambient_C: float | None = None):
+    """Loader of one virtual set: ``chemistry`` is the index's "set" (its chemistry
+    for the DFN runs); ``ambient_C`` None: the 25 degC set (with NMC's 10 and
+    40 degC 1C runs), else the runs at that ambient only."""
     def loader(_data: Path):
         index = json.loads((VIRTUAL / "index.json").read_text(encoding="utf-8"))
         runs = {}
         for entry in index["files"]:
-            if entry["chemistry"] != chemistry or entry.get("rate_C") is None:
+            if entry.get("set", entry["chemistry"]) != chemistry or entry.get("rate_C") is None:
+                continue
+            amb = entry["ambient_C"]
+            if ambient_C is None and not any(abs(amb - a) < 0.1 for a in MAIN_AMBIENTS_C):
+                continue
+            if ambient_C is not None and abs(amb - ambient_C) > 0.1:
                 continue
             label = f"{entry['rate_C']:g}C"
-            if abs(entry["ambient_C"] - 25.0) > 0.1:
-                label += f" {entry['ambient_C']:g}degC"
+            if ambient_C is None and abs(amb - 25.0) > 0.1:
+                label += f" {amb:g}degC"
             d = dl.read(VIRTUAL / entry["file"])
-            runs[label] = make_run(label, d, entry["cutoff_V"], entry["ambient_C"])
-        return (f"virtual {chemistry}", runs, VIRTUAL_TRAININGS[chemistry])
+            runs[label] = make_run(label, d, entry["cutoff_V"], amb)
+        if ambient_C is None:
+            title, trainings = f"virtual {chemistry}", VIRTUAL_TRAININGS[chemistry]
+        else:
+            title = f"virtual {chemistry} {ambient_C:g}degC"
+            trainings = SPME_TRAININGS if "SPMe" in chemistry else EXTRA_TRAININGS
+        return (title, runs, trainings)
     return loader
 
 
 SETS = {
-    "samsung": load_samsung, "enertech": load_enertech, "k2": load_k2,
+    "samsung": load_samsung, "samsung-notemp": load_samsung_without_temperature,
+    "enertech": load_enertech, "k2": load_k2,
     "nmc": load_virtual("NMC"), "lfp": load_virtual("LFP"), "lco": load_virtual("LCO"),
+    **{key: load_virtual(name, amb) for key, (name, amb) in EXTRA_VIRTUAL.items()},
 }
-REAL_SETS = ("samsung", "enertech", "k2")
+REAL_SETS = ("samsung", "samsung-notemp", "enertech", "k2")
 
 
 # ---- evaluation ----------------------------------------------------------------------------
@@ -391,49 +435,36 @@ def acceptance(rows, families):
         return [r for r in rows if r["set"] == set_name and r["family"] == fam
                 and r["train"] == train]
 
-    # 1. Samsung 1C-only, shepherd-thermal -> 2C, 3C, 4C within 3 %
-    sel = [r for r in pick("samsung", "shepherd-thermal", ("1C",)) if r["test"] in
-           ("2C", "3C", "4C")]
-    if sel:
-        ok = ok_rows(sel)
-        errs = ", ".join(f"{r['test']} {fmt_err(r)}" for r in sel)
-        good = len(ok) == 3 and all(abs(r["error_pct"]) <= SAMSUNG_1C_LIMIT for r in ok)
-        lines.append(f"- Samsung 30Q, shepherd-thermal fitted on 1C with logged temperature, "
-                     f"held-out 2C/3C/4C within {SAMSUNG_1C_LIMIT:g} % (no 2.33C run in the "
-                     f"data): {errs} -> {verdict(good)}")
-    # 2. LFP virtual 0.2C + 2C, ecm -> 0.5C, 1C within 2 %
-    sel = [r for r in pick("lfp", "ecm", ("0.2C", "2C")) if r["test"] in ("0.5C", "1C")]
-    if sel:
-        ok = ok_rows(sel)
-        errs = ", ".join(f"{r['test']} {fmt_err(r)}" for r in sel)
-        good = len(ok) == 2 and all(abs(r["error_pct"]) <= VIRTUAL_LIMIT for r in ok)
-        lines.append(f"- virtual LFP, ecm fitted on 0.2C + 2C, held-out 0.5C/1C within "
-                     f"{VIRTUAL_LIMIT:g} %: {errs} -> {verdict(good)}")
-    # 3. NMC / LCO virtual within 2 % (multi-run fits, held-out runs inside the fitted range)
-    for chem in ("nmc", "lco"):
-        parts = []
-        for fam in families:
-            sel = [r for r in rows if r["set"] == chem and r["family"] == fam
-                   and len(r["train"]) > 1]
-            if not sel:
-                continue
-            inside = [r for r in sel if "current outside" not in r["position"]]
-            outside = [r for r in sel if "current outside" in r["position"]]
-            w_in, f_in = worst(inside)
-            good = (w_in is not None and f_in == 0
-                    and abs(w_in["error_pct"]) <= VIRTUAL_LIMIT)
-            txt = f"{fam}: worst {fmt_worst(inside)} -> {verdict(good)}"
-            if outside:
-                txt += f" [outside the fitted currents: {fmt_worst(outside)}]"
-            parts.append(txt)
-        if parts:
-            lines.append(f"- virtual {chem.upper()}, two-/three-rate fits, held-out runs within "
-                         f"the fitted currents within {VIRTUAL_LIMIT:g} %: " + "; ".join(parts))
+    # 1. Samsung 1C-only -> 2C, 3C, 4C (auto: shepherd-thermal with the logged temperature)
+    for fam in families:
+        sel = [r for r in pick("samsung", fam, ("1C",)) if r["test"] in ("2C", "3C", "4C")]
+        if sel and fam in ("shepherd-thermal", "auto"):
+            ok = ok_rows(sel)
+            errs = ", ".join(f"{r['test']} {fmt_err(r)}" for r in sel)
+            good = len(ok) == 3 and all(abs(r["error_pct"]) <= SAMSUNG_1C_LIMIT for r in ok)
+            lines.append(f"- Samsung 30Q, {fam} fitted on 1C with logged temperature, "
+                         f"held-out 2C/3C/4C within {SAMSUNG_1C_LIMIT:g} %: {errs} -> "
+                         f"{verdict(good)}")
+    # 2. every virtual set: 0.2C + 2C -> 0.5C and 1C within 2 %
+    for fam in families:
+        sel = [r for r in rows if r["family"] == fam and r["train"] == ("0.2C", "2C")
+               and r["test"] in ("0.5C", "1C") and r["set"] not in REAL_SETS]
+        if not sel:
+            continue
+        w, n_fail = worst(sel)
+        good = w is not None and n_fail == 0 and abs(w["error_pct"]) <= VIRTUAL_LIMIT
+        per_set = ", ".join(
+            f"{r['set']} {r['test']} {fmt_err(r)}" for r in sel
+            if abs(r.get("error_pct", np.inf)) > 1.0 or r.get("failed"))
+        lines.append(f"- virtual cells, {fam} fitted on 0.2C + 2C, held-out 0.5C / 1C within "
+                     f"{VIRTUAL_LIMIT:g} % ({len(sel)} runs in "
+                     f"{len({r['set'] for r in sel})} sets): worst {fmt_worst(sel)} -> "
+                     f"{verdict(good)}" + (f" [over 1 %: {per_set}]" if per_set else ""))
     # 4. multi-rate fits on real cells (Samsung, Enertech) worst held-out <= 2 %
     parts = []
     for fam in families:
-        sel = [r for r in rows if r["set"] in ("samsung", "enertech") and r["family"] == fam
-               and len(r["train"]) > 1]
+        sel = [r for r in rows if r["set"] in ("samsung", "samsung-notemp", "enertech")
+               and r["family"] == fam and len(r["train"]) > 1]
         if sel:
             w, n_fail = worst(sel)
             good = w is not None and n_fail == 0 and abs(w["error_pct"]) <= MULTI_RATE_REAL_LIMIT
@@ -465,7 +496,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=default_data_dir())
     parser.add_argument("--sets", default=",".join(SETS))
-    parser.add_argument("--families", default=",".join(FAMILIES))
+    parser.add_argument("--families", default=",".join([*FAMILIES, "auto"]))
     parser.add_argument("--bootstrap", type=int, default=30,
                         help="bootstrap refits per fit (the interval draws; default 30)")
     parser.add_argument("--detail", action="store_true",
@@ -478,7 +509,7 @@ def main(argv=None):
     rows, failures, titles, seconds = [], [], {}, {}
     loaded = {}
     for name in set_names:
-        if name in ("nmc", "lfp", "lco") and not (VIRTUAL / "index.json").is_file():
+        if name not in REAL_SETS and not (VIRTUAL / "index.json").is_file():
             print(f"(set {name}: {VIRTUAL}/index.json not found; skipped)")
             continue
         loaded[name] = SETS[name](args.data)

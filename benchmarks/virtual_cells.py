@@ -16,6 +16,9 @@ Cases
   0.1C, 0.2C, 0.5C, 1C, 2C at 25 degC.
 * LCO  - ``Marquis2019`` (LiCoO2 / graphite, 0.68 Ah single-layer pouch):
   0.1C, 0.5C, 1C, 2C, 3C at 25 degC.
+* Every chemistry also at 0.2C, 0.5C, 1C, 2C at 15 and 35 degC (and 0.2C at 25 degC).
+* The LFP plateau set: ``Prada2013`` with SPMe, 0.2C, 0.5C, 1C, 2C to 2.5 V (on the
+  knee after the flat plateau), solver output every 5 s, at 25 and 15 degC.
 
 Every run: 10 s rest at 0 A from full charge (state of charge 1, i.e. the open
 circuit voltage equals the set's upper cut-off), then the load until the set's
@@ -51,6 +54,7 @@ import json
 import math
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -146,11 +150,17 @@ def make_model(kind: str, chem: str):
     return pybamm.lithium_ion.SPMe(options)
 
 
-def cc_steps(current_A: float, cutoff_V: float, capacity_Ah: float):
-    """Rest, then constant current until the cut-off (fine output for the first minute)."""
+def cc_steps(current_A: float, cutoff_V: float, capacity_Ah: float,
+             period_s: float | None = None):
+    """Rest, then constant current until the cut-off (fine output for the first minute,
+    or every ``period_s`` throughout)."""
     expected_s = 3600.0 * capacity_Ah / current_A
-    period = max(FINE_PERIOD_S, math.ceil(expected_s / 4000.0))
     until = f"{cutoff_V:g} V"
+    if period_s is not None:
+        return [pybamm.step.rest(REST_S, period=period_s),
+                pybamm.step.current(current_A, duration=20 * expected_s, termination=until,
+                                    period=period_s)]
+    period = max(FINE_PERIOD_S, math.ceil(expected_s / 4000.0))
     return [
         pybamm.step.rest(REST_S, period=FINE_PERIOD_S),
         pybamm.step.current(current_A, duration=EARLY_S[-1], termination=until,
@@ -257,15 +267,66 @@ def write_csv(path: Path, run: dict, rows: np.ndarray, meta: dict, notes: list[s
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
+@dataclass(frozen=True)
+class Case:
+    """One simulated run: chemistry, rate (None: the mission), ambient [degC], model
+    kind, a cut-off overriding the set's own [V] and a fixed sample period [s]
+    (None: fine first minute, then thinned; see :func:`thin`)."""
+
+    chem: str
+    rate: float | None
+    ambient: float
+    kind: str = "DFN"
+    cutoff_V: float | None = None
+    period_s: float | None = None
+
+    @property
+    def name(self) -> str:
+        prefix = self.chem if self.kind == "DFN" else f"{self.chem}-{self.kind.lower()}"
+        if self.cutoff_V is not None:
+            prefix += f"-{self.cutoff_V:g}V"
+        return f"{prefix}_{label(self.rate)}_{self.ambient:g}C.csv"
+
+    @property
+    def set_name(self) -> str:
+        """Group of runs a benchmark fits and predicts together."""
+        out = self.chem.upper()
+        if self.kind != "DFN":
+            out += f" {self.kind}"
+        if self.cutoff_V is not None:
+            out += f" {self.cutoff_V:g} V"
+        return out
+
+
+#: Rates simulated at the extra ambients (and at 25 degC where missing): the fit on
+#: 0.2C + 2C predicts 0.5C and 1C.
+AMBIENT_RATES_C = (0.2, 0.5, 1.0, 2.0)
+EXTRA_AMBIENTS_C = (15.0, 35.0)
+
+#: The LFP plateau case: PyBaMM SPMe, Prada2013, to 2.5 V, sampled every 5 s.
+PLATEAU_CUTOFF_V = 2.5
+PLATEAU_PERIOD_S = 5.0
+
+
 def cases():
-    """(chemistry, rate_C or None for the mission, ambient_C) in generation order."""
+    """Every :class:`Case` in generation order."""
     for chem, spec in CHEMISTRIES.items():
         for rate in spec["rates_C"]:
-            yield chem, rate, 25.0
+            yield Case(chem, rate, 25.0)
         if chem == "nmc":
-            yield chem, 1.0, 10.0
-            yield chem, 1.0, 40.0
-            yield chem, None, 25.0
+            yield Case(chem, 1.0, 10.0)
+            yield Case(chem, 1.0, 40.0)
+            yield Case(chem, None, 25.0)
+        for rate in AMBIENT_RATES_C:
+            if rate not in spec["rates_C"]:
+                yield Case(chem, rate, 25.0)
+        for ambient in EXTRA_AMBIENTS_C:
+            for rate in AMBIENT_RATES_C:
+                yield Case(chem, rate, ambient)
+    for ambient in (25.0, 15.0):
+        for rate in AMBIENT_RATES_C:
+            yield Case("lfp", rate, ambient, kind="SPMe", cutoff_V=PLATEAU_CUTOFF_V,
+                       period_s=PLATEAU_PERIOD_S)
 
 
 def main(argv=None) -> int:
@@ -275,7 +336,8 @@ def main(argv=None) -> int:
     parser.add_argument("--max-rows", type=int, default=1000,
                         help="rows per file after thinning (about)")
     parser.add_argument("--only", default=None,
-                        help="run only cases whose file name contains this text")
+                        help="run only cases whose file name contains one of these "
+                             "comma-separated texts")
     args = parser.parse_args(argv)
     global pybamm
     try:
@@ -290,23 +352,27 @@ def main(argv=None) -> int:
                   f"atol={ATOL:g}, default mesh")
     index, table = [], []
     wall_total = time.perf_counter()
-    for chem, rate, ambient in cases():
-        name = f"{chem}_{label(rate)}_{ambient:g}C.csv"
-        if args.only and args.only not in name:
+    for case in cases():
+        chem, rate, ambient, name = case.chem, case.rate, case.ambient, case.name
+        if args.only and not any(part in name for part in args.only.split(",")):
             continue
         spec = CHEMISTRIES[chem]
         values = pybamm.ParameterValues(spec["parameter_set"])
         capacity = float(values["Nominal cell capacity [A.h]"])
-        cutoff = float(values["Lower voltage cut-off [V]"])
+        cutoff = float(values["Lower voltage cut-off [V]"]) if case.cutoff_V is None \
+            else case.cutoff_V
+        kind = case.kind if case.kind != "DFN" else args.model
+        model_text = (f"{kind} (thermal=lumped), IDAKLUSolver rtol={RTOL:g} "
+                      f"atol={ATOL:g}, default mesh")
         if rate is None:
             steps = mission_steps(capacity, cutoff, capacity)
             current_text = ("variable: 60 s at 3C, then (50 s at 2C, 10 s at 3.5C) repeated; "
                             f"1C = {capacity:g} A")
         else:
-            steps = cc_steps(rate * capacity, cutoff, capacity)
+            steps = cc_steps(rate * capacity, cutoff, capacity, case.period_s)
             current_text = f"{rate * capacity:.6g}"
         wall = time.perf_counter()
-        raw, termination = simulate(args.model, chem, ambient, steps, cutoff)
+        raw, termination = simulate(kind, chem, ambient, steps, cutoff)
         wall = time.perf_counter() - wall
         run = truncate_at_cutoff(drop_coincident(raw), cutoff)
         if abs(run["v"][-1] - cutoff) > 1e-4 or "voltage" not in termination.lower():
@@ -319,9 +385,11 @@ def main(argv=None) -> int:
         # evenly spaced solver output: the mission from the load step, a constant
         # current after its first (finely sampled) minute
         uniform_from = t_load if rate is None else t_load + EARLY_S[-1]
-        rows = thin(run, args.max_rows, uniform_from)
+        rows = np.arange(run["t"].size) if case.period_s is not None else \
+            thin(run, args.max_rows, uniform_from)
         meta = {
-            "file": name, "chemistry": chem.upper(), "parameter_set": spec["parameter_set"],
+            "file": name, "chemistry": chem.upper(), "set": case.set_name,
+            "parameter_set": spec["parameter_set"],
             "cell": spec["cell"], "pybamm_version": version, "model": model_text,
             "rate_C": rate, "current_A": None if rate is None else rate * capacity,
             "current_A_text": current_text, "ambient_C": ambient, "capacity_Ah": capacity,
@@ -331,6 +399,7 @@ def main(argv=None) -> int:
             "rest_voltage_V": round(float(run["v"][load - 1]), 6),
             "load_start_s": round(t_load, 6), "rows": int(rows.size),
             "heat_transfer_W_m2K": H_STILL_AIR, "thermal": spec["thermal_note"],
+            "sample_period_s": case.period_s,
             "termination": termination,
         }
         if rate is None:
@@ -344,24 +413,32 @@ def main(argv=None) -> int:
             f"lumped thermal, h = {H_STILL_AIR:g} W/(m2 K), cell starts at ambient; "
             f"{spec['thermal_note']}",
             "columns: discharge current positive; temperature_C = volume-averaged cell "
-            "temperature; rows thinned from the solver output",
+            "temperature; " + ("rows thinned from the solver output" if case.period_s is None
+                               else f"solver output every {case.period_s:g} s, not thinned"),
         ]
         write_csv(out / name, run, rows, meta, notes)
         index.append({k: v for k, v in meta.items() if k != "current_A_text"})
-        table.append((chem.upper(), label(rate), meta["current_A"], ambient, time_to_cutoff,
-                      delivered, meta["peak_temperature_C"], wall))
-    (out / "index.json").write_text(json.dumps({
+        table.append((name.split("_")[0], label(rate), meta["current_A"], ambient,
+                      time_to_cutoff, delivered, meta["peak_temperature_C"], wall))
+    index_path = out / "index.json"
+    if index_path.is_file():  # keep the entries of runs not simulated this time (--only)
+        done = {e["file"] for e in index}
+        old = json.loads(index_path.read_text(encoding="utf-8"))["files"]
+        index = [e for e in old if e["file"] not in done] + index
+        order = [c.name for c in cases()]
+        index.sort(key=lambda e: order.index(e["file"]) if e["file"] in order else len(order))
+    index_path.write_text(json.dumps({
         "generator": "python benchmarks/virtual_cells.py --out tests/data/virtual",
-        "pybamm_version": version, "model": model_text,
+        "pybamm_version": version,
         "columns": ["time_s", "current_A", "voltage_V", "temperature_C"],
         "files": index}, indent=1) + "\n", encoding="utf-8")
 
     print(f"PyBaMM {version}; {model_text}; h = {H_STILL_AIR:g} W/(m2 K)")
-    print(f"{'chem':4} {'rate':>7} {'current A':>9} {'amb C':>5} {'t_cut s':>9} "
+    print(f"{'set':13} {'rate':>7} {'current A':>9} {'amb C':>5} {'t_cut s':>9} "
           f"{'Ah out':>7} {'Tmax C':>6} {'wall s':>6}")
     for chem, rate_text, current, ambient, t_cut, ah, tmax, wall in table:
         current_text = "var" if current is None else f"{current:.3f}"
-        print(f"{chem:4} {rate_text:>7} {current_text:>9} {ambient:5.0f} {t_cut:9.1f} "
+        print(f"{chem:13} {rate_text:>7} {current_text:>9} {ambient:5.0f} {t_cut:9.1f} "
               f"{ah:7.4f} {tmax:6.1f} {wall:6.2f}")
     print(f"total wall time {time.perf_counter() - wall_total:.1f} s; files in {out}")
     return 0

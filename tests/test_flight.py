@@ -259,20 +259,23 @@ def test_flight_options_need_a_flight_log(bundled_data, capsys):
 
 
 def test_validate_flies_a_flight_from_its_charge_at_take_off_at_the_ambient(fit29, logs):
-    """A thermal family fitted without a logged temperature keeps the cell at the ambient
-    (its resistances already hold the flight's heating), and validate starts the flight
-    from the charge the rest voltage before take-off gives: the same voltage as `flight`."""
-    from dischargelab.models.base import HELD_AT_AMBIENT_HEAT_CAPACITY
-
+    """A thermal family fitted without a logged temperature simulates the cells' heating
+    with the thermal prior (a 1.6 Ah LiPo cell of a 4S pack in the airflow of flight) in
+    the fit and in every replay, and validate starts the flight from the charge the rest
+    voltage before take-off gives: the same voltage as `flight`."""
     _, result = fit29
     battery = result.battery
-    assert battery.parameters["Cth_J_per_K"] == HELD_AT_AMBIENT_HEAT_CAPACITY
+    prior = battery.extra["thermal_prior"]
+    assert prior["cooling"] == "airflow" and prior["chemistry"] == "lipo"
+    assert battery.parameters["Cth_J_per_K"] == pytest.approx(prior["Cth_J_per_K"])
+    assert 20.0 < prior["Cth_J_per_K"] < 60.0         # 1.6 Ah x 3.7 V / 160 Wh/kg x 1 J/(g K)
+    assert 2.0 < prior["fit_virtual_rise_K"] < 40.0   # 144 s at 24 A (15C) warms the pack
     (case,) = dl.validate(battery, [logs / INA29], cutoff=3.3)
     row = case.to_dict()
     report = analyse_flight(logs / INA29, battery, capacity_Ah=LABEL_29_AH, cutoff=3.3)
     flown = report.flights[0].summary
+    # both read the rest sample at its idle current (about 0.25 A)
     assert row["initial_charge_Ah"] == pytest.approx(flown["initial_charge_model_Ah"], abs=0.005)
-    assert row["initial_charge_Ah"] > 0.01
     assert "from the rest voltage" in row["notes"][0]
     assert row["voltage_rmse_V"] < 0.15
 

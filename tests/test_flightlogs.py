@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_run import run
 from dischargelab.atomic import OutputExistsError, OutputIsInputError
 from dischargelab.cli import main
 from dischargelab.errors import DataError, MissingExtraError
@@ -440,3 +441,48 @@ def test_damaged_inflight_csv_reads_or_fails_in_one_line(logs, tmp_path):
             assert "\n" not in str(exc)
             continue
         assert np.isfinite(frame[["time_s", "voltage_V", "current_A"]].to_numpy()).all()
+
+
+def _glitch_cell(source: Path, target: Path, column: int, stretches: int, seed: int = 0):
+    """A copy of an INA3221 log whose cell ``column`` (0-based CSV column) reads 0 V or
+    saturates in ``stretches`` stretches of 1-11 samples; returns how many samples."""
+    rng = np.random.default_rng(seed)
+    lines = source.read_text(encoding="utf-8").splitlines()
+    starts = np.sort(rng.choice(np.arange(20, len(lines) - 40, 15), stretches, replace=False))
+    bad = 0
+    for k, start in enumerate(starts):
+        for j in range(start, start + int(rng.integers(1, 12))):
+            parts = lines[j].split(",")
+            parts[column] = ("0.00", "6.55", "0.26", "4.98")[k % 4]
+            lines[j] = ",".join(parts)
+            bad += 1
+    target.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return bad
+
+
+def test_a_glitching_cell_channel_is_masked_and_counted(logs, tmp_path, capsys):
+    """One cell channel of 28.csv reading outside 1.0-4.5 V in 17 stretches: the log
+    still reads, those cell samples are masked and counted, the pack voltage is kept."""
+    glitchy = tmp_path / "28_glitch.csv"
+    bad = _glitch_cell(logs / INA28, glitchy, column=4, stretches=17)
+    log = read_flight_log(glitchy)
+    series = log.batteries[0]
+    assert series.masked == {"cell3_V": bad}
+    assert f"cell 3: {bad} sample(s) in 17 stretch(es)" in " ".join(log.notes)
+    clean = read(logs, INA28).batteries[0]
+    assert series.rows == clean.rows
+    assert series.frame["voltage_V"].equals(clean.frame["voltage_V"])
+    assert int(series.frame["cell3_V"].isna().sum()) == bad
+    other = ["cell1_V", "cell2_V", "cell4_V"]
+    assert series.frame[other].equals(clean.frame[other])
+    assert "masked" in log.summary()
+    code, out, err = run(capsys, "flight", glitchy)
+    assert code == 0, err
+    assert f"masked {bad} sample(s) of cell3_V" in out + err
+
+
+def test_no_real_log_has_masked_cells(logs):
+    for name in README:
+        for series in read(logs, name).batteries:
+            assert not series.masked, name
+

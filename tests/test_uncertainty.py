@@ -15,9 +15,10 @@ from dischargelab.errors import DataError, SimulationError
 from dischargelab.mission import Mission, Phase, RepeatBlock, load_mission, run_mission
 from dischargelab.mission import fly as mission_module
 from dischargelab.model import PRESETS, Battery, CellParameters
-from dischargelab.models import FAMILIES
+from dischargelab.models import FAMILIES, get_family
 from dischargelab.simulate import simulate_current
 from dischargelab.uncertainty import (
+    EXTRAPOLATION_GROWTH,
     MIN_HELD_OUT_SD,
     PRIOR_RELATIVE_SD,
     PRIOR_WEIGHT_CURVES,
@@ -76,6 +77,40 @@ def test_model_error_prior_grows_with_the_extrapolation_ratio():
         pytest.approx(four, rel=1e-12)
 
 
+def test_one_rate_growth_widens_on_a_flat_plateau_and_for_ecm():
+    """A flat curve (the middle 60 % of the charge holds a tenth of the drop, LiFePO4)
+    multiplies the one-rate growth by (1/3) / ratio, at most 4; a sloped one keeps it;
+    ecm's own one-rate growth is 3."""
+    four = PRIOR_RELATIVE_SD * (1 + 2.0 * math.log(4.0))
+    sloped = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.35})
+    assert model_error_sd(sloped, 12.0) == pytest.approx(four, rel=1e-12)
+    flat = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.1})
+    growth = 2.0 * (1 / 3) / 0.1
+    assert model_error_sd(flat, 12.0) == pytest.approx(
+        PRIOR_RELATIVE_SD * (1 + growth * math.log(4.0)), rel=1e-12)
+    flattest = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.0})
+    assert model_error_sd(flattest, 12.0) == pytest.approx(
+        PRIOR_RELATIVE_SD * (1 + 8.0 * math.log(4.0)), rel=1e-12)
+    ecm = Battery(CellParameters(get_family("ecm").defaults()), fit_currents_A=(3.0,),
+                  model="ecm")
+    assert model_error_sd(ecm, 12.0) == pytest.approx(
+        PRIOR_RELATIVE_SD * (1 + 3.0 * math.log(4.0)), rel=1e-12)
+
+
+def test_plateau_ratio_of_measured_curves(shared_data):
+    """LiFePO4 (K2 26650) is flat, NMC (Samsung 30Q) sloped; a flight has none."""
+    import dischargelab as dl
+    from dischargelab.fit.result import plateau_ratio
+
+    cols = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
+    lfp = dl.read(shared_data / "k2_lfp26650" / "K2_Discharge_Test_20C.txt", columns=cols)
+    nmc = dl.read(shared_data / "samsung30q_S001" / "Q30_S001_1C.csv", columns=cols)
+    assert plateau_ratio(lfp.to_curve()) < 0.15 < 0.3 < plateau_ratio(nmc.to_curve())
+    curve = nmc.to_curve()
+    spiky = replace(curve, current_A=curve.current_A * (1 + 0.8 * np.sin(curve.time_s)))
+    assert plateau_ratio(spiky) is None
+
+
 def test_model_error_from_held_out_curves():
     def held_out(value, source="held-out"):
         return replace(ONE_RATE, extra={"model_error": {"relative_sd": value, "source": source}})
@@ -114,7 +149,10 @@ def test_held_out_model_error_uses_students_t():
 
 def test_held_out_errors_are_brought_back_to_the_fitted_currents():
     """A curve predicted from another one ten times its current carries the error of a
-    ten-fold extrapolation; inside the fitted currents the model error is smaller."""
+    ten-fold extrapolation of a one-rate fit: reported, not pooled into the error inside
+    the fitted currents; the curve ends left out are. From three curves, a curve left
+    out is predicted by a fit that still spans several rates: its error, divided by
+    1 + 0.8 ln r, joins the pool."""
     from dischargelab.fit import Curve, held_out_error
 
     def curve(current, name):
@@ -131,12 +169,17 @@ def test_held_out_errors_are_brought_back_to_the_fitted_currents():
     assert raw > 0.01
     # the curve ends left out: every rate stays in the fit, the error is at r = 1
     assert len(err["end_errors_pct"]) == 2 and err["end_rms"] is not None
-    sd, dof = held_out_posterior([e / 100 / (1 + 2.0 * math.log(r))
-                                  for e, r in zip(err["errors_pct"],
-                                                  err["extrapolation_ratios"])]
-                                 + [e / 100 for e in err["end_errors_pct"]])
-    assert err["relative_sd"] == pytest.approx(sd) and err["dof"] == dof == 6
-    assert err["relative_sd"] < raw
+    sd, dof = held_out_posterior([e / 100 for e in err["end_errors_pct"]])
+    assert err["relative_sd"] == pytest.approx(sd) and err["dof"] == dof == 4
+    assert err["pooled"] == 2 and err["relative_sd"] < raw
+
+    three = held_out_error([curve(4.1, "1C"), curve(12.3, "3C"), curve(41.0, "10C")],
+                           model="shepherd", cells_series=HACKER.cells_series)
+    assert len(three["errors_pct"]) == 3 and three["pooled"] == 6
+    normalised = [e / 100 / (1 + EXTRAPOLATION_GROWTH * math.log(r))
+                  for e, r in zip(three["errors_pct"], three["extrapolation_ratios"])]
+    sd, dof = held_out_posterior(normalised + [e / 100 for e in three["end_errors_pct"]])
+    assert three["relative_sd"] == pytest.approx(sd) and three["dof"] == dof == 8
 
 
 def test_peak_temperature_interval():

@@ -53,7 +53,8 @@ def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *
         model: str = "auto", cells: int | None = None, parallel: int = 1,
         bootstrap: int = DEFAULT_BOOTSTRAP, fixed: dict | None = None,
         bounds: dict | None = None, e0: float | None = None, paper_mode: bool = False,
-        use_rest: bool = True, seed: int = 0):
+        use_rest: bool = True, seed: int = 0, cooling: str | None = "still-air",
+        chemistry: str | None = None):
     """Fit a battery model to one or several discharges (shared parameters).
 
     Parameters
@@ -84,6 +85,12 @@ def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *
         Use the rest voltage before the load as a data point.
     seed : int
         Seed of the bootstrap.
+    cooling : {"still-air", "airflow"} or None
+        Cooling of the cells for the thermal prior of a thermal model fitted without a
+        logged temperature (its self-heating is simulated; None: held at the ambient).
+        Flights always use ``"airflow"``.
+    chemistry : {"lipo", "li-ion", "lifepo4"}, optional
+        For that thermal prior; default from the full cell's voltage.
 
     Returns
     -------
@@ -108,7 +115,8 @@ def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *
     cells = 1 if cells is None else cells
     return fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
                        bounds=bounds, paper_mode=paper_mode, use_rest=use_rest,
-                       bootstrap=bootstrap, seed=seed, model=model)
+                       bootstrap=bootstrap, seed=seed, model=model, cooling=cooling,
+                       chemistry=chemistry)
 
 
 def _fit_flights(flights, *, model, cells, parallel, bootstrap, fixed, bounds, use_rest, seed):

@@ -17,6 +17,34 @@ from .cell import charge_from_current
 from .errors import DataError
 
 
+def measured_time_to_cutoff(time_s, voltage_V, cutoff_V: float, hold_s: float = 0.0) -> float:
+    """Time [s] at which ``voltage_V`` goes to or below ``cutoff_V`` and stays there
+    ``hold_s`` [s] (NaN if it never does); ``hold_s = 0``: the first crossing.
+
+    The crossing is interpolated linearly between the sample above and the one
+    below; a stretch under the cutoff lasts until the next sample above it. A
+    stretch that lasts to the last sample counts however short it is: the
+    measurement (a test stopped at the cutoff, a flight landed on the alarm) or
+    the simulation ended there.
+    """
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(voltage_V, dtype=float)
+    below = v <= cutoff_V
+    if not below.any():
+        return float("nan")
+    edges = np.diff(np.r_[0, below.astype(np.int8), 0])
+    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        if a == 0:
+            crossing = float(t[0])
+        else:
+            v0, v1 = v[a - 1], v[a]
+            frac = (v0 - cutoff_V) / (v0 - v1) if v0 != v1 else 1.0
+            crossing = float(t[a - 1] + frac * (t[a] - t[a - 1]))
+        if b >= t.size or t[b] - crossing >= hold_s:
+            return crossing
+    return float("nan")
+
+
 @dataclass(frozen=True, eq=False)
 class Discharge:
     """One measured discharge at pack level.

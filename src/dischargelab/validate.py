@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .discharge import measured_time_to_cutoff
 from .errors import DataError
 from .model import Battery, charge_from_current, load_battery
 from .simulate import SimulationResult, Step, simulate
@@ -63,34 +64,6 @@ PREDICTION_STEPS = 200
 #: below it this long [s]: ArduPilot's default low-battery timer (``BATT_LOW_TIMER``
 #: = 10 s), which keeps a sag at a current peak from ending the flight.
 LOW_VOLTAGE_TIMER_S = 10.0
-
-
-def measured_time_to_cutoff(time_s, voltage_V, cutoff_V: float, hold_s: float = 0.0) -> float:
-    """Time [s] at which ``voltage_V`` goes to or below ``cutoff_V`` and stays there
-    ``hold_s`` [s] (NaN if it never does); ``hold_s = 0``: the first crossing.
-
-    The crossing is interpolated linearly between the sample above and the one
-    below; a stretch under the cutoff lasts until the next sample above it. A
-    stretch that lasts to the last sample counts however short it is: the
-    measurement (a test stopped at the cutoff, a flight landed on the alarm) or
-    the simulation ended there.
-    """
-    t = np.asarray(time_s, dtype=float)
-    v = np.asarray(voltage_V, dtype=float)
-    below = v <= cutoff_V
-    if not below.any():
-        return float("nan")
-    edges = np.diff(np.r_[0, below.astype(np.int8), 0])
-    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-        if a == 0:
-            crossing = float(t[0])
-        else:
-            v0, v1 = v[a - 1], v[a]
-            frac = (v0 - cutoff_V) / (v0 - v1) if v0 != v1 else 1.0
-            crossing = float(t[a - 1] + frac * (t[a] - t[a - 1]))
-        if b >= t.size or t[b] - crossing >= hold_s:
-            return crossing
-    return float("nan")
 
 
 def _is_constant(current: np.ndarray) -> bool:

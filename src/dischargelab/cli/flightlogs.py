@@ -267,7 +267,8 @@ def _print_flight_report(report) -> None:
         return format(value * scale, spec)
 
     def cells(values):
-        return "-" if not values else " / ".join(f"{x:.2f}" for x in values)
+        return "-" if not values else " / ".join("-" if x is None else f"{x:.2f}"
+                                                 for x in values)
 
     def rest(r):
         return "-" if r is None else f"{r['voltage_V']:.2f} V at {r['current_A']:.2f} A"
@@ -294,7 +295,8 @@ def _print_flight_report(report) -> None:
                  ("voltage RMSE, pack [mV]", lambda s: f(s.get("rmse_V"), ".0f", 1000)),
                  ("voltage RMSE, cells [mV]",
                   lambda s: "-" if not s.get("rmse_cell_V") else
-                  " / ".join(f"{1000 * x:.0f}" for x in s["rmse_cell_V"]))]
+                  " / ".join("-" if x is None else f"{1000 * x:.0f}"
+                             for x in s["rmse_cell_V"]))]
     rows.append(("under the cutoff: first dip / for good [s]",
                  lambda s: f"{f(s.get('cutoff_dip_at_s'), '.1f')} / "
                            f"{f(s.get('cutoff_reached_at_s'), '.1f')}"))

@@ -126,9 +126,10 @@ def _print_fit(result, battery_path=None):
               help="Override a parameter's bounds (repeatable).")
 @click.option("--model", "model_name", default="auto", show_default=True, metavar="NAME",
               help="Model family (see `dischargelab models`): shepherd, shepherd-thermal, ecm, "
-                   "or auto (one curve: shepherd, or shepherd-thermal when the file logs the "
-                   "cell temperature; several rates: the family with the smallest held-out "
-                   "error, whole curves and curve ends left out).")
+                   "or auto (one curve: shepherd-thermal, its self-heating from the logged "
+                   "cell temperature or else the thermal prior of --cooling; several rates: "
+                   "the family with the smallest error on curve ends left out and on the "
+                   "rate-capacity check between the currents).")
 @click.option("--paper-mode", is_flag=True,
               help="Reproduce the paper: E0 given (--e0), current fitted with R, K, A, B, C. "
                    "Degenerate by construction; prints why.")
@@ -143,6 +144,12 @@ def _print_fit(result, battery_path=None):
 @click.option("--name", default="", help="Label stored in the battery file.")
 @click.option("--chemistry", type=click.Choice(["lipo", "li-ion", "lifepo4"]),
               help="Chemistry stored in the battery file (sets default cutoffs later).")
+@click.option("--cooling", type=click.Choice(["still-air", "airflow", "none"]),
+              default="still-air", show_default=True,
+              help="Without a logged temperature, thermal models simulate the cells' "
+                   "self-heating with a prior from capacity, chemistry and pack size: cooled "
+                   "by still air (a bench) or the airflow of flight (flight logs always); "
+                   "none holds the cell at the ambient.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="Write the battery file (JSON) here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
@@ -156,8 +163,8 @@ def _print_fit(result, battery_path=None):
 @json_option
 def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, flights,
             battery_index, capacity, e0, fix, bound, model_name, paper_mode, bootstrap,
-            no_rest, nominal_capacity, name, chemistry, output, plot_path, force, strict, quiet,
-            as_json):
+            no_rest, nominal_capacity, name, chemistry, cooling, output, plot_path, force,
+            strict, quiet, as_json):
     """Fit the battery model to one or more discharge files.
 
     Several files (at different currents) are fitted together with shared
@@ -208,7 +215,9 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, fligh
             result = fit_battery(curves, cells_series=cells, strings_parallel=parallel,
                                  fixed=fixed, bounds=bounds, paper_mode=paper_mode,
                                  model=model_name, use_rest=not no_rest, bootstrap=bootstrap,
-                                 progress=progress_callback(status, "bootstrap refits"))
+                                 progress=progress_callback(status, "bootstrap refits"),
+                                 cooling=None if cooling == "none" else cooling,
+                                 chemistry=chemistry)
     battery = result.battery
     label = name or ", ".join(c.name for c in curves)
     from dataclasses import replace as _replace

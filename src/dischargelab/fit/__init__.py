@@ -47,8 +47,9 @@ import time
 
 from ..discharge import Curve
 from ..errors import FitError
-from .auto import AUTO, choose_model, fit_auto, selection_score
-from .family import HELD_OUT_TAIL, fit_family, guess_parameters, held_out_error
+from .auto import AUTO, choose_model, fit_auto, fit_with_model_error, selection_score
+from .family import guess_parameters
+from .heldout import HELD_OUT_TAIL, held_out_error, rate_capacity_error
 from .problem import CURRENT_SCALE, _resolve_e0_r, _spec, _stack  # noqa: F401  (benchmarks)
 from .result import FitResult
 
@@ -58,7 +59,8 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
                 weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
                 seed: int = 0, model="shepherd", model_error: bool = True,
-                progress=None) -> FitResult:
+                progress=None, bootstrap_method: str = "linearised",
+                cooling: str | None = "still-air", chemistry: str | None = None) -> FitResult:
     """Fit a model family to one or several discharges with shared parameters.
 
     Parameters
@@ -89,6 +91,17 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         they carry the parameter uncertainty into simulations.
     seed : int
         Seed of the bootstrap.
+    cooling : {"still-air", "airflow"} or None
+        How the cells are cooled, for the thermal prior of a thermal family fitted
+        without a logged temperature (:func:`dischargelab.fit.family.fit_self_heating`): still air
+        (a bench) or the airflow of flight; None holds the cell at the ambient.
+    chemistry : {"lipo", "li-ion", "lifepo4"}, optional
+        For that thermal prior; default from the full cell's voltage.
+    bootstrap_method : {"linearised", "refit"}
+        ``"linearised"``: each replica is the optimum plus one Gauss-Newton step
+        (exact for the linear parameters, the delta method for the others; about
+        the cost of one residual evaluation per replica); ``"refit"``: every replica
+        refitted (about one fit each).
     model : str or Family
         Model family name (``dischargelab.models.FAMILIES``), or ``"auto"``: pick
         by evidence (see :func:`choose_model`).
@@ -116,13 +129,19 @@ def fit_battery(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                          strings_parallel=strings_parallel, fixed=fixed, bounds=bounds,
                          guess=guess, paper_mode=paper_mode, use_rest=use_rest,
                          weighting=weighting, n_best=n_best, bootstrap=bootstrap, seed=seed,
-                         progress=progress)
-    return fit_family(curves, cells_series=cells_series, strings_parallel=strings_parallel,
-                      fixed=fixed, bounds=bounds, guess=guess, paper_mode=paper_mode,
-                      use_rest=use_rest, weighting=weighting, n_best=n_best,
-                      bootstrap=bootstrap, seed=seed, model=model, model_error=model_error,
-                      progress=progress)
+                         progress=progress, bootstrap_method=bootstrap_method,
+                         cooling=cooling, chemistry=chemistry)
+    res = fit_with_model_error(curves, cells_series=cells_series,
+                               strings_parallel=strings_parallel, fixed=fixed, bounds=bounds,
+                               guess=guess, paper_mode=paper_mode, use_rest=use_rest,
+                               weighting=weighting, n_best=n_best, bootstrap=bootstrap,
+                               seed=seed, model=model, model_error=model_error,
+                               progress=progress, bootstrap_method=bootstrap_method,
+                               cooling=cooling, chemistry=chemistry)
+    res.elapsed_s = time.perf_counter() - t_start
+    return res
 
 
 __all__ = ["Curve", "FitResult", "fit_battery", "guess_parameters", "held_out_error",
-           "choose_model", "selection_score", "AUTO", "CURRENT_SCALE", "HELD_OUT_TAIL"]
+           "choose_model", "selection_score", "rate_capacity_error", "AUTO", "CURRENT_SCALE",
+           "HELD_OUT_TAIL"]

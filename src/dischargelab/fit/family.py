@@ -1,5 +1,5 @@
 """Fitting one model family: starts, the bounded variable-projection fit, its
-thermal parameters, identifiability, and the model's own error from held-out data.
+thermal parameters and identifiability.
 
 See :mod:`dischargelab.fit` for the method and its references.
 """
@@ -13,7 +13,7 @@ from scipy.special import stdtrit
 
 from ..cell import CellParameters
 from ..discharge import Curve
-from ..errors import DataError, FitError
+from ..errors import FitError
 from ..identifiability import Identifiability, analyse, equilibrated_svd, plausibility, undetermined
 from ..models import Family, Samples, get_family
 from ..models.base import HELD_AT_AMBIENT_HEAT_CAPACITY, MIN_HEATING_K, fit_lumped_thermal
@@ -72,10 +72,45 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 fixed: dict | None = None, bounds: dict | None = None,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
                 weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
-                seed: int = 0, model="shepherd", model_error: bool = True,
-                progress=None) -> FitResult:
-    """Fit one model family (``model`` a family name, not ``"auto"``); see
-    :func:`dischargelab.fit.fit_battery` for the parameters."""
+                seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
+                max_samples: int = MAX_SAMPLES_PER_CURVE,
+                bootstrap_method: str = "linearised", cooling: str | None = "still-air",
+                chemistry: str | None = None) -> FitResult:
+    """Fit one model family (``model`` a family name, not ``"auto"``) without its
+    held-out model error (:func:`dischargelab.fit.heldout.held_out_error`); see
+    :func:`dischargelab.fit.fit_battery` for the parameters.
+
+    ``start`` (values of the nonlinear parameters, e.g. a fit to more of the same
+    data) skips the multi-start search and refines from there: a warm start.
+    ``max_samples`` thins each curve to at most that many samples. A thermal family
+    fitted without a logged temperature gets the thermal prior of ``cooling`` and
+    ``chemistry`` (:func:`fit_self_heating`; ``cooling``
+    None holds the cell at the ambient instead)."""
+    if needs_prior(curves, model, cooling):
+        return fit_self_heating(
+            curves, cooling=cooling, chemistry=chemistry, cells_series=cells_series,
+            strings_parallel=strings_parallel, fixed=fixed, bounds=bounds, guess=guess,
+            paper_mode=paper_mode, use_rest=use_rest, weighting=weighting, n_best=n_best,
+            bootstrap=bootstrap, seed=seed, model=model, progress=progress, start=start,
+            max_samples=max_samples, bootstrap_method=bootstrap_method)
+    return fit_once(curves, cells_series=cells_series, strings_parallel=strings_parallel,
+                    fixed=fixed, bounds=bounds, guess=guess, paper_mode=paper_mode,
+                    use_rest=use_rest, weighting=weighting, n_best=n_best, bootstrap=bootstrap,
+                    seed=seed, model=model, progress=progress, start=start,
+                    max_samples=max_samples, bootstrap_method=bootstrap_method)
+
+
+def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
+             fixed: dict | None = None, bounds: dict | None = None,
+             guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
+             weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
+             seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
+             max_samples: int = MAX_SAMPLES_PER_CURVE, bootstrap_method: str = "linearised",
+             virtual_temperature=None, thermal_prior: dict | None = None) -> FitResult:
+    """One fit of one family (see :func:`fit_family`); ``virtual_temperature`` (per
+    curve, a simulated cell temperature [degC]) stands in for the unlogged temperature,
+    and ``thermal_prior`` (``Cth_J_per_K``, ``Rth_K_per_W``, ``note``) gives a thermal
+    family fitted without a logged temperature its heat capacity and resistance."""
     t_start = time.perf_counter()
     curves = [curves] if isinstance(curves, Curve) else list(curves)
     if not curves:
@@ -85,7 +120,8 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         raise FitError("cells in series and strings in parallel must be at least 1")
     if weighting not in ("equal", "samples"):
         raise FitError(f"weighting must be 'equal' or 'samples', got {weighting!r}")
-    stack = _stack(curves, cells_series, strings_parallel, use_rest, weighting)
+    stack = _stack(curves, cells_series, strings_parallel, use_rest, weighting,
+                   max_samples=max_samples, virtual_temperature=virtual_temperature)
     requested_fixed = dict(fixed or {})
     if paper_mode:
         if "E0_V" not in requested_fixed:
@@ -96,7 +132,7 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     notes, warnings = [], []
     _resolve_e0_r(family, stack, fixed, notes, warnings)
     for c in curves:
-        used = _thin(c.time_s.size, MAX_SAMPLES_PER_CURVE).size
+        used = _thin(c.time_s.size, max_samples).size
         if used < c.time_s.size:
             notes.append(f"curve {c.name or '?'}: {used} of {c.time_s.size} samples used "
                          f"(evenly thinned in time)")
@@ -107,10 +143,22 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     starts, lo, hi = _starts(mdl, bnds, guess)
     nfev = 0
     theta = np.empty(0)
-    if mdl.nonlinear:
+    warm = None
+    if mdl.nonlinear and start is not None and all(n in start for n in mdl.nonlinear):
+        warm = _defined_start(mdl, np.clip([float(start[n]) for n in mdl.nonlinear], lo, hi),
+                              hi)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            if not np.all(np.isfinite(mdl.varpro_residual(warm))):
+                warm = None  # the start is undefined on these data: search instead
+    if warm is not None:
+        sol = _varpro_solve(mdl, warm, lo, hi)
+        nfev += sol.nfev
+        theta = sol.x
+    elif mdl.nonlinear:
         # coarse to fine: search on a thinned copy of the data, refine on all of it
         coarse = _Model(family, _stack(curves, cells_series, strings_parallel, use_rest,
-                                       weighting, max_samples=SEARCH_SAMPLES_PER_CURVE),
+                                       weighting, max_samples=SEARCH_SAMPLES_PER_CURVE,
+                                       virtual_temperature=virtual_temperature),
                         fixed, bnds)
         cost = coarse.grid_costs(starts)
         nfev += len(starts)
@@ -164,7 +212,7 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
 
     thermal = None
     if family.thermal:
-        params, thermal = _thermal(family, params, stack, notes)
+        params, thermal = _thermal(family, params, stack, notes, thermal_prior)
     ident = analyse(jac, mdl.free, values, bnds, paper_mode=paper_mode, svd=svd)
     _physical_limits(family, ident, notes)
     warnings += ident.warnings
@@ -174,7 +222,8 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     warnings += implausible + undetermined(family, params, ci95, fixed)
     samples = None
     if bootstrap:
-        samples = _bootstrap(mdl, values, residual, bnds, int(bootstrap), seed, progress)
+        samples = _bootstrap(mdl, values, residual, bnds, int(bootstrap), seed, progress,
+                             method=bootstrap_method)
         if thermal is not None:
             for name in ("Cth_J_per_K", "Rth_K_per_W"):
                 samples[:, names_all.index(name)] = params[name]
@@ -188,16 +237,8 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
         n_starts=len(starts), bootstrap=samples, model=family.name,
         ambient_C=float(stack.ambient_C), thermal=thermal, implausible=implausible,
     )
-    if model_error and not paper_mode:
-        result.model_error = held_out_error(
-            curves, model=family.name, cells_series=cells_series,
-            strings_parallel=strings_parallel, fixed=requested_fixed, bounds=bounds,
-            use_rest=use_rest, weighting=weighting)
     result.elapsed_s = time.perf_counter() - t_start
     return result
-
-
-#: ``model`` value that picks the family by evidence.
 
 
 def _interval95(value: float, stderr: float, t_crit: float, positive: bool) -> tuple:
@@ -231,8 +272,16 @@ def _physical_limits(family: Family, ident: Identifiability, notes: list) -> Non
     ident.at_bounds = keep
 
 
-def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list):
-    """Heat capacity and thermal resistance from the logged temperature (else defaults)."""
+def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list,
+             prior: dict | None = None):
+    """Heat capacity and thermal resistance from the logged temperature, else from the
+    thermal prior, else held at the ambient (else defaults)."""
+    if not stack.has_temperature and prior is not None:
+        params = params.replace(Cth_J_per_K=prior["Cth_J_per_K"],
+                                Rth_K_per_W=prior["Rth_K_per_W"])
+        return params, {"Cth_J_per_K": float(prior["Cth_J_per_K"]),
+                        "Rth_K_per_W": float(prior["Rth_K_per_W"]),
+                        "source": "prior (no temperature logged): " + prior["note"]}
     if not stack.has_temperature:
         # the fit took the cell at the ambient, so its resistances already hold whatever
         # heating the runs had: predictions keep the cell at the ambient too
@@ -266,110 +315,123 @@ def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list
     return params, dict(fitted, source=source)
 
 
-def _several_rates(curves) -> bool:
-    """Two or more curves whose mean currents differ by 20 % or more."""
-    currents = [c.mean_current_A for c in curves]
-    return len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
+# ---- self-heating without a logged temperature ----------------------------------------
+
+#: The prior's simulated heating is kept unless it makes the voltage fit worse than
+#: this factor, and this margin [V], times / above the fit with the cell at the ambient
+#: (data whose voltage does not show the heating the prior predicts).
+PRIOR_RMSE_FACTOR = 1.1
+PRIOR_RMSE_MARGIN_V = 0.001
+
+#: Refits at most, and the change of the simulated temperature [K] that ends them.
+VIRTUAL_ITERATIONS = 10
+VIRTUAL_TOLERANCE_K = 0.2
+
+def needs_prior(curves, model, cooling) -> bool:
+    """True for a thermal family, fitted without a logged temperature, with a cooling."""
+    curves = [curves] if isinstance(curves, Curve) else list(curves)
+    return (cooling is not None and get_family(model).thermal
+            and not all(c.temperature_C is not None for c in curves))
 
 
-#: Fraction of a curve's duration left out at its end by :func:`held_out_error`.
-HELD_OUT_TAIL = 0.2
+def prior_for(result, curves, cooling: str, chemistry: str | None) -> dict:
+    """The thermal prior of the fitted cell (capacity per cell from the fit, chemistry
+    given or from the full cell's voltage, the pack's cells sharing its surface)."""
+    from ..thermalprior import chemistry_from_full_voltage, thermal_prior
+
+    if chemistry is None:
+        full = result.battery.voltage(0.0, 0.0) / result.cells_series
+        chemistry = chemistry_from_full_voltage(float(np.asarray(full).ravel()[0]))
+    capacity = float(result.parameters["C_Ah"])
+    return thermal_prior(capacity, chemistry, cells=result.cells_series * result.strings_parallel,
+                         cooling=cooling)
 
 
-def held_out_error(curves, *, model, cells_series=1, strings_parallel=1, fixed=None,
-                   bounds=None, use_rest=True, weighting="equal") -> dict | None:
-    """The model's own error of the time to cutoff, from data left out of the fit.
+def virtual_temperature(result: FitResult, curve: Curve, prior: dict,
+                        temperature) -> np.ndarray:
+    """Cell temperature [degC] at the samples of ``curve`` by the lumped thermal model with
+    the prior's heat capacity and resistance, heated by the fitted model's irreversible
+    heat ``i (U_ocv - V)`` at the samples (its resistances read at ``temperature``, the
+    previous estimate); exact over each sample interval for the interval's mean heat."""
+    family, p = result.family, result.parameters
+    t_all = curve.time_s - curve.time_s[0]
+    data = _stack([curve], result.cells_series, result.strings_parallel, False, "samples",
+                  virtual_temperature=[np.asarray(temperature, dtype=float)])
+    with np.errstate(invalid="ignore", over="ignore"):
+        v = family.fit_voltage(p, data)
+        state = {st.name: (data.charge if st.kind == "charge" else data.temperature
+                           if st.kind == "thermal" else data.current) for st in family.states}
+        heat = data.current * (family.open_circuit_voltage(p, state) - v)
+    heat = np.where(np.isfinite(heat), np.maximum(heat, 0.0), 0.0)
+    ambient = curve.ambient_C if curve.ambient_C is not None else result.ambient_C
+    rth, tau = prior["Rth_K_per_W"], prior["Rth_K_per_W"] * prior["Cth_J_per_K"]
+    decay = np.exp(-np.diff(data.time) / tau)
+    mean_heat = 0.5 * (heat[1:] + heat[:-1])
+    out = np.empty(data.time.size)
+    out[0] = ambient
+    for k in range(decay.size):
+        out[k + 1] = ambient + (out[k] - ambient) * decay[k] + mean_heat[k] * rth * (1 - decay[k])
+    return np.interp(t_all, data.time, out)
 
-    Two kinds of folds, each predicting the time to the left-out curve's last
-    voltage at its mean current (thermal families from its starting temperature):
 
-    * **whole curves**: each curve in turn is left out and the model fitted to the
-      others. The prediction is an extrapolation by the current ratio ``r_k``
-      between the left-out curve and the fitted ones, so its error is brought back
-      to the fitted currents by dividing it by ``1 + g_k ln r_k``, ``g_k`` being
-      the growth :func:`dischargelab.uncertainty.extrapolation_growth` of that
-      smaller fit (one rate: the prior's; several: the held-out one);
-    * **curve ends**: each curve in turn loses its last :data:`HELD_OUT_TAIL` of
-      duration (the knee and the cutoff) and the model is fitted to that and every
-      other curve. Every rate stays in the fit, so this is an error at the fitted
-      currents, the one a two-curve fit is used for (leaving one of two curves out
-      leaves a one-rate fit).
+def fit_self_heating(curves, *, cooling: str, chemistry: str | None = None, **kw):
+    """Fit a thermal family to curves without a logged temperature, its self-heating
+    simulated with the thermal prior; ``kw`` as :func:`fit_once`.
 
-    Needs two or more curves whose currents differ by 20 % or more.
+    Fitting a thermal family to data without a logged temperature: the self-heating the
+    runs had is simulated with a thermal prior instead of ignored.
 
-    Returns
-    -------
-    dict or None
-        ``relative_sd`` and ``dof``: the model error inside the fitted currents,
-        every normalised error pooled with the prior
-        (:func:`dischargelab.uncertainty.held_out_posterior`); ``held_out_rms`` /
-        ``end_rms``: RMS of the raw errors of each kind [-] (None when none could
-        be computed); ``errors_pct``, ``extrapolation_ratios``, ``curves``
-        (whole curves left out) and ``end_errors_pct``; ``source = "held-out"``.
+    Without a temperature log the fit used to take the cell at the ambient throughout, and
+    predictions kept it there: the resistances then hold whatever heating the fitted runs
+    had, and a prediction at a higher current misses the heating it adds (a slow drain
+    says nothing about how warm a 3.5C drain gets, and a warm cell sags less). Here:
+
+    1. the family is fitted with the cell at the ambient;
+    2. the thermal prior (:func:`dischargelab.thermalprior.thermal_prior`: heat capacity and
+       thermal resistance from the cell's capacity, its chemistry, the cells in the pack
+       and the cooling) turns the fitted model's irreversible heat at every sample of a
+       run into a simulated cell temperature from the ambient
+       (:func:`virtual_temperature`);
+    3. the family is fitted again with that temperature standing in for the unlogged one
+       (its Arrhenius resistances read it), warm-started, and 2-3 repeat until the simulated
+       temperature moves by less than :data:`VIRTUAL_TOLERANCE_K` (the prior's heat
+       capacity and resistance become the fit's).
+
+    Predictions then simulate the heating with the same prior. A slow drain hardly heats,
+    so its fit is the cold cell's; a fast drain heats and its resistances fall with the
+    family's Arrhenius prior. When the simulated heating makes the voltage fit worse
+    (:data:`PRIOR_RMSE_FACTOR`, :data:`PRIOR_RMSE_MARGIN_V`), the data argue against it
+    and the cell is held at the ambient, as without a prior.
     """
-    from dataclasses import replace as _replace
-
-    from ..uncertainty import extrapolation_growth, held_out_posterior
-
-    if not _several_rates(curves):
-        return None
-    common = dict(cells_series=cells_series, strings_parallel=strings_parallel, fixed=fixed,
-                  bounds=bounds, use_rest=use_rest, weighting=weighting, model=model)
-    errors, ratios, normalised, names, ends = [], [], [], [], []
-    for k, left in enumerate(curves):
-        rest = [c for j, c in enumerate(curves) if j != k]
-        fold = _held_out_fold(rest, left, common)
-        if fold is not None:
-            error, battery = fold
-            ratio = battery.extrapolation_ratio(left.mean_current_A / strings_parallel)
-            growth = extrapolation_growth(
-                battery, "held-out" if _several_rates(rest) else "prior")
-            errors.append(100.0 * error)
-            ratios.append(float(ratio))
-            normalised.append(error / (1.0 + growth * np.log(ratio)))
-            names.append(left.name)
-        t = left.time_s
-        keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
-        cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
-               "current_A": left.current_A[keep]}
-        if left.temperature_C is not None:
-            cut["temperature_C"] = left.temperature_C[keep]
-        try:
-            shortened = _replace(left, **cut)
-        except DataError:
-            continue
-        fold = _held_out_fold([shortened if j == k else c for j, c in enumerate(curves)],
-                              left, common)
-        if fold is not None:
-            ends.append(fold[0])
-    if not errors and not ends:
-        return None
-    sd, dof = held_out_posterior(normalised + ends)
-
-    def rms(values):
-        return float(np.sqrt(np.mean(np.square(values)))) if values else None
-
-    return {"relative_sd": sd, "dof": dof,
-            "held_out_rms": None if not errors else rms(errors) / 100.0,
-            "end_rms": rms(ends), "errors_pct": errors, "extrapolation_ratios": ratios,
-            "curves": names, "end_errors_pct": [100.0 * e for e in ends],
-            "source": "held-out"}
-
-
-def _held_out_fold(fitted, left, common):
-    """(relative error of the predicted time to ``left``'s last voltage, battery) of a
-    fit to ``fitted``; None when the fit or the prediction fails."""
-    from ..errors import SimulationError
-    from ..simulate import simulate_current
-
-    try:
-        res = fit_family(fitted, model_error=False, **common)
-        sim = simulate_current(res.battery, left.mean_current_A,
-                               cutoff_pack_V=float(left.voltage_V[-1]),
-                               ambient_C=left.ambient_C)
-    except (FitError, SimulationError, DataError):
-        return None
-    measured = float(left.time_s[-1] - left.time_s[0])
-    if not np.isfinite(sim.time_to_cutoff_s) or measured <= 0:
-        return None
-    return (sim.time_to_cutoff_s - measured) / measured, res.battery
+    curves = [curves] if isinstance(curves, Curve) else list(curves)
+    held = res = fit_once(curves, **kw)
+    prior = prior_for(res, curves, cooling, chemistry)
+    temps = [np.full(c.time_s.size, c.ambient_C if c.ambient_C is not None else res.ambient_C,
+                     dtype=float) for c in curves]
+    change, rounds, worse = np.inf, 0, False
+    while rounds < VIRTUAL_ITERATIONS:
+        rounds += 1
+        new = [virtual_temperature(res, c, prior, tc) for c, tc in zip(curves, temps)]
+        change = max(float(np.max(np.abs(a - b))) for a, b in zip(new, temps))
+        temps = new
+        res = fit_once(curves, **dict(kw, thermal_prior=prior, virtual_temperature=temps,
+                                      start=res.parameters.as_dict()))
+        worse = res.rmse_V > max(PRIOR_RMSE_FACTOR * held.rmse_V,
+                                 held.rmse_V + PRIOR_RMSE_MARGIN_V)
+        if change < VIRTUAL_TOLERANCE_K or worse:
+            break
+    if worse:
+        held.notes.append(
+            f"no temperature logged: the self-heating the {prior['note']} predicts makes the "
+            f"fit worse (RMSE {1000 * held.rmse_V:.1f} -> {1000 * res.rmse_V:.1f} mV): the "
+            f"voltage does not show that heating, so the cell is held at the ambient")
+        return held
+    rise = max(float(np.max(tc) - tc[0]) for tc in temps)
+    converged = "" if change < VIRTUAL_TOLERANCE_K else (
+        f"; not settled after {rounds} refits (last change {change:.2g} K)")
+    res.notes.append(f"no temperature logged: the self-heating is simulated with the "
+                     f"{prior['note']}; the fitted runs heat the cell by up to {rise:.1f} K "
+                     f"in that simulation, and the fit reads its resistances at that "
+                     f"temperature ({rounds} refit(s){converged})")
+    res.thermal_prior = dict(prior, fit_virtual_rise_K=rise)
+    return res

@@ -42,8 +42,11 @@ def _thin(n: int, limit: int) -> np.ndarray:
 
 
 def _stack(curves, cells_series, strings_parallel, use_rest, weighting,
-           max_samples=MAX_SAMPLES_PER_CURVE) -> Samples:
-    """Cell-level samples of all curves (thinned), rest points appended as i = 0, q = 0."""
+           max_samples=MAX_SAMPLES_PER_CURVE, virtual_temperature=None) -> Samples:
+    """Cell-level samples of all curves (thinned), rest points appended as i = 0, q = 0.
+
+    ``virtual_temperature``: per curve, a simulated cell temperature at its samples
+    [degC] used where no temperature was logged (``has_temperature`` stays False)."""
     parts = []
     has_temp = all(c.temperature_C is not None for c in curves)
     ambients = [c.ambient_C for c in curves if c.ambient_C is not None]
@@ -55,7 +58,12 @@ def _stack(curves, cells_series, strings_parallel, use_rest, weighting,
         q0 = float(c.initial_charge_Ah) / strings_parallel
         q = c.charge_Ah[keep] / strings_parallel + q0
         t = c.time_s[keep] - c.time_s[0]
-        temp = c.temperature_C[keep] if has_temp else np.full(v.size, ambient)
+        if has_temp:
+            temp = c.temperature_C[keep]
+        elif virtual_temperature is not None:
+            temp = np.asarray(virtual_temperature[k], dtype=float)[keep]
+        else:
+            temp = np.full(v.size, ambient)
         w = np.full(v.size, 1.0 / np.sqrt(v.size) if weighting == "equal" else 1.0)
         rest = np.zeros(v.size, bool)
         if use_rest and c.rest_voltage_V is not None:
@@ -319,34 +327,84 @@ def _block_length(residual, stack: Samples) -> int:
     return max(1, int(np.ceil((1 + rho) / (1 - rho))))
 
 
-def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed: int,
-               progress=None):
-    """Parameter sets refitted to the fit plus block-resampled residuals.
+#: Bootstrap methods: ``"linearised"`` moves each replica by one Gauss-Newton step from
+#: the optimum (exact for the linear parameters, the delta method for the others);
+#: ``"refit"`` refits every replica from the optimum.
+BOOTSTRAP_METHODS = ("linearised", "refit")
 
-    Circular moving-block bootstrap of the residuals within each curve (blocks as
-    long as the residuals' correlation length, so the smooth model-misfit pattern
-    is resampled, not only the noise); each replica is refitted from the optimum.
-    Returns an array (n, parameters) in the family's order; fixed parameters constant.
-    """
-    from dataclasses import replace as _replace
 
+def _resampled_residuals(residual, stack: Samples, n: int, seed: int):
+    """``n`` circular moving-block resamples of the residuals within each curve (0 at
+    the rest samples), as an (n, samples) array."""
     rng = np.random.default_rng(seed)
-    stack = model.s
-    fitted = stack.voltage + residual
     block = _block_length(residual, stack)
-    theta0 = np.array([values[k] for k in model.nonlinear])
-    lo = np.array([bounds[k][0] for k in model.nonlinear])
-    hi = np.array([bounds[k][1] for k in model.nonlinear])
-    out = np.empty((n, len(model.family.names)))
+    out = np.zeros((n, residual.size))  # rest samples: the replica keeps the model's value
+    curves = [np.flatnonzero((stack.curve == k) & ~stack.is_rest) for k in range(stack.n_curves)]
     for b in range(n):
-        voltage = fitted.copy()
-        for k in range(stack.n_curves):
-            idx = np.flatnonzero((stack.curve == k) & ~stack.is_rest)
+        for idx in curves:
             m = idx.size
             length = min(block, max(1, m // 4))
             starts = rng.integers(0, m, int(np.ceil(m / length)))
             pick = ((starts[:, None] + np.arange(length)[None, :]) % m).ravel()[:m]
-            voltage[idx] = fitted[idx] - residual[idx][pick]
+            out[b, idx] = residual[idx][pick]
+    return out
+
+
+def _bootstrap(model: _Model, values: dict, residual, bounds: dict, n: int, seed: int,
+               progress=None, method: str = "linearised"):
+    """Parameter sets fitted to the fit plus block-resampled residuals.
+
+    Circular moving-block bootstrap of the residuals within each curve (blocks as
+    long as the residuals' correlation length, so the smooth model-misfit pattern
+    is resampled, not only the noise) [Efron & Tibshirani 1993, ch. 8.6]. Each
+    replica's data are the fitted voltage minus a resampled residual series.
+
+    * ``"linearised"`` (default): each replica's parameters are the optimum plus one
+      Gauss-Newton step, ``-(W J)^+ W r_b`` with the Jacobian ``J`` of the free
+      parameters at the optimum (parameters at a bound held there, others clipped
+      into their bounds). Exact for the linear parameters (E0, R, K, A; ecm's OCV
+      and resistances) and first-order for the others: the spread of small
+      perturbations, at the cost of one pseudo-inverse.
+    * ``"refit"``: each replica is refitted from the optimum (variable projection),
+      about one fit per replica.
+
+    Returns an array (n, parameters) in the family's order; fixed parameters constant.
+    """
+    from dataclasses import replace as _replace
+
+    if method not in BOOTSTRAP_METHODS:
+        raise FitError(f"bootstrap method must be one of {', '.join(BOOTSTRAP_METHODS)}, "
+                       f"got {method!r}")
+    stack = model.s
+    fitted = stack.voltage + residual
+    resampled = _resampled_residuals(residual, stack, n, seed)
+    out = np.empty((n, len(model.family.names)))
+    if method == "linearised":
+        free = list(model.free)
+        x0 = np.array([values[k] for k in free])
+        lo = np.array([bounds[k][0] for k in free])
+        hi = np.array([bounds[k][1] for k in free])
+        span = np.where(np.isfinite(hi - lo), hi - lo, np.abs(x0) + 1.0)
+        moving = (x0 > lo + 1e-9 * span) & (x0 < hi - 1e-9 * span)
+        w = stack.weight
+        jac = model.jacobian(values, [k for k, m in zip(free, moving) if m]) * w[:, None]
+        norm = np.linalg.norm(jac, axis=0)
+        norm[norm == 0] = 1.0
+        step = -np.linalg.pinv(jac / norm, rcond=1e-10) @ (resampled * w).T / norm[:, None]
+        for b in range(n):
+            x = x0.copy()
+            x[moving] += step[:, b]
+            x = np.clip(x, lo, hi)
+            params, _ = model.params(dict(values, **dict(zip(free, x))))
+            out[b] = params.as_array(model.family.names)
+            if progress is not None:
+                progress(b + 1, n)
+        return out
+    theta0 = np.array([values[k] for k in model.nonlinear])
+    lo = np.array([bounds[k][0] for k in model.nonlinear])
+    hi = np.array([bounds[k][1] for k in model.nonlinear])
+    for b in range(n):
+        voltage = fitted - resampled[b]
         # the filtered currents in the cache depend on time and current only: shared
         replica = _Model(model.family, _replace(stack, voltage=voltage), model.fixed, bounds)
         theta = _varpro_solve(replica, theta0, lo, hi).x if model.nonlinear else theta0
@@ -406,9 +464,12 @@ def _varpro_solve(model: _Model, theta0, lo, hi, max_iter: int = 200,
     nfev = 1
     lam = None
     for _ in range(max_iter):
-        jac = model.varpro_jacobian(x)
-        grad = jac.T @ r
-        hess = jac.T @ jac
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            jac = model.varpro_jacobian(x)
+            grad = jac.T @ r
+            hess = jac.T @ jac
+        if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(hess))):
+            break  # a sample at the empty cell: the last defined point is the solution
         at_lo = (x <= lo) & (grad > 0)
         at_hi = (x >= hi) & (grad < 0)
         free = ~(at_lo | at_hi)

@@ -14,6 +14,27 @@ from ..model import Battery
 from ..models import Family, get_family
 from .problem import CURRENT_SCALE, _stack
 
+#: Current spread (coefficient of variation) up to which a curve counts as one
+#: constant-current discharge for :func:`plateau_ratio`.
+CONSTANT_CURRENT_CV = 0.25
+
+
+def plateau_ratio(curve: Curve) -> float | None:
+    """How flat a constant-current discharge is [-]: the voltage drop over the middle
+    60 % of its delivered charge (20 % to 80 %) divided by the drop from its first to
+    its last sample. About 0.3-0.4 for NMC and LCO cells, 0.1 for LiFePO4's plateau;
+    None for a curve whose current varies (a flight) or that has no drop."""
+    i = curve.current_A
+    if i.size < 10 or not np.mean(i) > 0 or np.std(i) > CONSTANT_CURRENT_CV * np.mean(i):
+        return None
+    q = curve.charge_Ah
+    v = curve.voltage_V
+    drop = float(v[0] - v[-1])
+    if not drop > 0 or not q[-1] > 0:
+        return None
+    v20, v80 = np.interp([0.2 * q[-1], 0.8 * q[-1]], q, v)
+    return float(np.clip((v20 - v80) / drop, 0.0, 1.0))
+
 
 @dataclass
 class FitResult:
@@ -46,6 +67,9 @@ class FitResult:
     thermal: dict | None = None
     model_error: dict | None = None
     implausible: list = field(default_factory=list)
+    #: The thermal prior of a thermal family fitted without a logged temperature
+    #: (:mod:`dischargelab.fit.selfheating`), else None.
+    thermal_prior: dict | None = None
 
     @property
     def physical(self) -> bool:
@@ -90,6 +114,11 @@ class FitResult:
                  if c.temperature_C is not None]
         if rises:
             extra["fit_temperature_rise_K"] = max(rises)
+        if self.thermal_prior is not None:
+            extra["thermal_prior"] = dict(self.thermal_prior)
+        plateau = plateau_ratio(self.curves[lowest])
+        if plateau is not None:
+            extra["fit_plateau_ratio"] = plateau
         if self.bootstrap is not None:
             extra["bootstrap"] = {"names": list(self.family.names),
                                   "samples": np.round(self.bootstrap, 12).tolist()}

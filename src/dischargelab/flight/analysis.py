@@ -181,6 +181,7 @@ def analyse_flight(path, model=None, *, flights=None, battery: int | None = None
         Not a flight log, no flight, no such battery or flight, no cell count.
     """
     from ..io.flightlog import choose_battery, read_flight_log
+    from ..io.flightlog_base import masked_text
     from ..model import CUTOFF_CELL_VOLTAGE_V
 
     path = Path(path)
@@ -194,6 +195,8 @@ def analyse_flight(path, model=None, *, flights=None, battery: int | None = None
         raise DataError(f"parallel must be at least 1, got {parallel}")
     log = read_flight_log(path)
     series, notes = choose_battery(log, battery)
+    if masked_text(series):
+        notes.append(f"{series.describe()}: {masked_text(series)}")
     numbers = flight_numbers(log, flights)
     bat = None
     if model is not None:
@@ -208,7 +211,10 @@ def analyse_flight(path, model=None, *, flights=None, battery: int | None = None
     cutoff = float(cutoff) if cutoff is not None else CUTOFF_CELL_VOLTAGE_V[chemistry]
     settings = Settings(cells, parallel, capacity, chemistry, cutoff, replay_every_s,
                          recent_load_s, window_s, float(low_timer_s))
-    if bat is not None and "fit_temperature_rise_K" not in bat.extra and bat.family.thermal:
+    if bat is not None and "thermal_prior" in bat.extra:
+        notes.append("the cell temperature is simulated with the model's thermal prior (no "
+                     "temperature logged): " + str(bat.extra["thermal_prior"].get("note", "")))
+    elif bat is not None and "fit_temperature_rise_K" not in bat.extra and bat.family.thermal:
         notes.append("the cell temperature is held at the ambient: the model was fitted to data "
                      "without heating, and the log has no battery temperature")
     if capacity is None:
@@ -318,7 +324,8 @@ def _sag(part: FlightSamples, frame, cells) -> dict:
     if rest is not None:
         out["sag_V"] = rest.voltage_V - out["peak_voltage_V"]
         if rest.cells_V is not None:
-            out["sag_cells_V"] = [float(r - frame[c].iloc[k]) for r, c in zip(rest.cells_V, cells)]
+            sags = [float(r - frame[c].iloc[k]) for r, c in zip(rest.cells_V, cells)]
+            out["sag_cells_V"] = [x if np.isfinite(x) else None for x in sags]
     return out
 
 

@@ -359,8 +359,9 @@ def _flight_notes(fc: FlightCurves, bat, series) -> list[str]:
                  "voltage is determined there only"
                  + ("" if bat is not None else f"; outside it the {fc.chemistry} prior is used"))
     if "temperature_C" not in series.frame:
-        notes.append("the log has no battery temperature: temperature effects are not "
-                     "determined (the fit is isothermal)")
+        notes.append("the log has no battery temperature: the fit simulates the cells' "
+                     "self-heating with a thermal prior for a pack in the airflow of flight "
+                     "(see the fit's notes)")
     notes += _coulomb_checks(fc)
     return notes
 
@@ -458,7 +459,8 @@ def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: 
         all_bounds.pop("C_Ah", None)
     result = fit_battery(list(flights.curves), cells_series=cells or flights.cells_series,
                          strings_parallel=strings_parallel, fixed=all_fixed, bounds=all_bounds,
-                         use_rest=use_rest, bootstrap=bootstrap, seed=seed, model=name)
+                         use_rest=use_rest, bootstrap=bootstrap, seed=seed, model=name,
+                         cooling="airflow", chemistry=flights.chemistry)
     notes = list(flights.notes)
     if steady:
         notes.insert(0, "model ecm chosen for flights, with its RC pairs and diffusion state "

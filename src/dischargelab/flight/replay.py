@@ -43,7 +43,8 @@ PX4_VOLTAGE_WINDOW_S = 1.0
 
 def _engine_params(bat) -> dict:
     params = {n: float(bat.parameters[n]) for n in bat.family.names}
-    if bat.family.thermal and "fit_temperature_rise_K" not in bat.extra:
+    if bat.family.thermal and "fit_temperature_rise_K" not in bat.extra \
+            and "thermal_prior" not in bat.extra:
         params["Cth_J_per_K"] = HELD_AT_AMBIENT_HEAT_CAPACITY
     return params
 
@@ -51,8 +52,10 @@ def _engine_params(bat) -> dict:
 def _initial_model_charge(part: FlightSamples, series, bat, notes: list) -> tuple[float, str]:
     rest = part.rest_before
     if rest is not None:
-        return model_charge_at_rest(bat, rest.voltage_V), \
-            f"rest voltage {rest.voltage_V:.3f} V before take-off through the model's OCV"
+        # at the idle current the pack sat at, as validate reads the same rest sample
+        return model_charge_at_rest(bat, rest.voltage_V, rest.current_A), \
+            (f"rest voltage {rest.voltage_V:.3f} V at {rest.current_A:.2f} A before take-off "
+             f"through the model")
     remaining = log_remaining_at(series, part.frame["time_s"].iloc[0])
     if remaining is not None:
         return (1.0 - remaining) * bat.capacity_Ah, \
@@ -112,8 +115,12 @@ def fly_model(part: FlightSamples, series, s: Settings, bat, notes: list):
     cells = [c for c in frame.columns if c.startswith("cell") and c.endswith("_V")]
     if cells and err.size:
         per_cell = predicted[inside] / s.cells
-        summary["rmse_cell_V"] = [float(np.sqrt(np.mean((per_cell - frame[c].to_numpy()[inside])
-                                                        ** 2))) for c in cells]
+        rmse = []
+        for c in cells:  # masked (glitched) cell samples are NaN: left out
+            diff = per_cell - frame[c].to_numpy(dtype=float)[inside]
+            diff = diff[np.isfinite(diff)]
+            rmse.append(float(np.sqrt(np.mean(diff ** 2))) if diff.size else None)
+        summary["rmse_cell_V"] = rmse
     last = max(states) if states else None
     if last is not None:
         q_end = float(states[last]["charge_Ah"][0]) * bat.strings_parallel

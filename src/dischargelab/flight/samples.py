@@ -152,7 +152,7 @@ def _rest(frame: pd.DataFrame, rows: np.ndarray, which: str,
     last = t[rows[-1]]
     rows = rows[t[rows] >= last - REST_WINDOW_S]
     cells = [c for c in frame.columns if c.startswith("cell") and c.endswith("_V")]
-    cells_V = tuple(float(np.median(frame[c].to_numpy(dtype=float)[rows])) for c in cells) \
+    cells_V = tuple(_finite_median(frame[c].to_numpy(dtype=float)[rows]) for c in cells) \
         if cells else None
     return RestVoltage(
         voltage_V=float(np.median(frame["voltage_V"].to_numpy(dtype=float)[rows])),
@@ -314,3 +314,9 @@ class Settings:
     @property
     def cutoff_pack_V(self) -> float:
         return self.cutoff_cell_V * self.cells
+
+
+def _finite_median(values: np.ndarray) -> float:
+    """Median of the finite values (a masked cell sample is NaN); NaN when none."""
+    finite = values[np.isfinite(values)]
+    return float(np.median(finite)) if finite.size else float("nan")

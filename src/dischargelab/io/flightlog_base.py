@@ -148,6 +148,9 @@ class BatterySeries:
         Everything inferred or dropped, one sentence each.
     dropped : dict
         Records dropped, by reason (keys of :data:`DROP_REASONS`).
+    masked : dict
+        Samples of one column set to NaN while the record is kept, by column (e.g. a
+        glitching cell channel: ``{"cell3_V": 75}``).
     current_offset_A : float or None
         Median current [A] while disarmed or before take-off (not subtracted).
     idle_samples : int
@@ -161,6 +164,7 @@ class BatterySeries:
     capacity_mAh: float | None = None
     notes: list[str] = field(default_factory=list)
     dropped: dict[str, int] = field(default_factory=dict)
+    masked: dict[str, int] = field(default_factory=dict)
     current_offset_A: float | None = None
     idle_samples: int = 0
 
@@ -215,7 +219,8 @@ class BatterySeries:
                "duration_s": self.duration_s, "columns": list(frame.columns),
                "charge_mAh": self.charge_mAh(), "log_counter_mAh": self.counter_mAh(),
                "current_offset_A": self.current_offset_A, "idle_samples": self.idle_samples,
-               "dropped": {k: v for k, v in self.dropped.items() if v}, "notes": list(self.notes)}
+               "dropped": {k: v for k, v in self.dropped.items() if v},
+               "masked": {k: v for k, v in self.masked.items() if v}, "notes": list(self.notes)}
         if self.rows:
             v = frame["voltage_V"].to_numpy(dtype=float)
             i = frame["current_A"].to_numpy(dtype=float)
@@ -334,7 +339,18 @@ def _battery_sentence(series: BatterySeries, whole: bool = True) -> str:
     if dropped:
         text += ("; dropped " if whole else "; dropped in the whole log ") + ", ".join(
             f"{v} {k.replace('_', ' ')}" for k, v in dropped.items())
+    if masked_text(series):
+        text += "; " + masked_text(series)
     return text + ". "
+
+
+def masked_text(series: BatterySeries) -> str:
+    """``"masked 75 samples of cell3_V (kept the records)"`` or ``""``."""
+    masked = {k: v for k, v in series.masked.items() if v}
+    if not masked:
+        return ""
+    return "masked " + ", ".join(f"{v} sample(s) of {k}" for k, v in masked.items()) + \
+        " (glitches; the records, their pack voltage and current kept)"
 
 
 
@@ -392,7 +408,8 @@ def _restrict(log: FlightLog, span: FlightSpan) -> FlightLog:
     for series in log.batteries:
         keep = series.frame["flight"].to_numpy() == span.number
         batteries.append(replace(series, frame=series.frame[keep].reset_index(drop=True),
-                                 notes=list(series.notes), dropped=dict(series.dropped)))
+                                 notes=list(series.notes), dropped=dict(series.dropped),
+                                 masked=dict(series.masked)))
     events = [e for e in log.events if span.start_s <= e["time_s"] <= span.end_s]
     return replace(log, batteries=batteries, spans=[span], events=events,
                    notes=list(log.notes), flight_number=span.number)

@@ -14,10 +14,15 @@ no header row, a trailing comma, and the columns
 
 The layout is recognised from the values, never from the file name: the
 first column rises, and the columns after the pack voltage add up to it
-(cell voltages). Negative current readings near zero are sensor noise and are
-kept; the unplug artefact the logger writes at the end (a cell voltage
-collapsing with no current) is dropped with a note (see
+(cell voltages) in most rows. Negative current readings near zero are sensor
+noise and are kept; the unplug artefact the logger writes at the end (a cell
+voltage collapsing with no current) is dropped with a note (see
 :mod:`dischargelab.io.flightlog`).
+
+Loggers glitch: a cell channel may read 0 V or saturate for a few samples. Such
+cell samples (outside :data:`PLAUSIBLE_CELL_V`) are masked (NaN), counted in the
+notes and in ``BatterySeries.masked``; the record, its pack voltage and current
+are kept.
 """
 
 from __future__ import annotations
@@ -39,8 +44,13 @@ CELL_RANGE_V = (0.5, 5.0)
 #: The cells must add up to the pack within max(this [V], PACK_TOLERANCE_FRACTION * pack).
 PACK_TOLERANCE_V = 0.05
 PACK_TOLERANCE_FRACTION = 0.005
-#: Share of rows that must satisfy the sum for the layout to be recognised.
+#: Share of rows that must satisfy the sum (and hold cell voltages in every cell
+#: column) for the layout to be recognised: a glitching channel may miss it in a few.
 MATCH_SHARE = 0.9
+#: A cell of a flying lithium pack reads between these [V]: 1.0 V is a cell
+#: over-discharged far past any cutoff, 4.5 V above a LiHV cell's 4.35 V full charge.
+#: Outside, the channel glitched and the sample is masked.
+PLAUSIBLE_CELL_V = (1.0, 4.5)
 #: Fewest rows to recognise the layout from.
 MIN_ROWS = 5
 
@@ -81,8 +91,9 @@ def find_layout(table: np.ndarray) -> CellLayout | None:
 
     The first column must rise (time); a column between 1 and 100 V must be
     the sum of the 2 to 16 columns right after it, each a plausible cell
-    voltage, in at least :data:`MATCH_SHARE` of the rows; the column after
-    the cells is the current.
+    voltage, in at least :data:`MATCH_SHARE` of the rows (a glitching cell
+    channel may read nonsense in the others); the column after the cells is
+    the current.
     """
     if table.ndim != 2 or table.shape[1] < 5:
         return None
@@ -98,7 +109,8 @@ def find_layout(table: np.ndarray) -> CellLayout | None:
             continue
         for cells in range(MIN_CELLS, min(MAX_CELLS, width - pack - 2) + 1):
             block = table[:, pack + 1:pack + 1 + cells]
-            if not np.all((block > CELL_RANGE_V[0]) & (block < CELL_RANGE_V[1])):
+            in_range = (block > CELL_RANGE_V[0]) & (block < CELL_RANGE_V[1])
+            if np.mean(in_range[:, -1]) < MATCH_SHARE:
                 break
             tolerance = np.maximum(PACK_TOLERANCE_V, PACK_TOLERANCE_FRACTION * v)
             if np.mean(np.abs(block.sum(axis=1) - v) <= tolerance) >= MATCH_SHARE:
@@ -151,10 +163,23 @@ def read_inflight_csv(path) -> FlightLog:
         "voltage_V": values[:, layout.pack],
         "current_A": values[:, layout.current] * 1e-3,
     })
+    masked = {}
     for k in range(layout.cells):
-        frame[f"cell{k + 1}_V"] = values[:, layout.first_cell + k]
+        cell = values[:, layout.first_cell + k].copy()
+        bad = np.isfinite(cell) & ~((cell >= PLAUSIBLE_CELL_V[0]) & (cell <= PLAUSIBLE_CELL_V[1]))
+        if bad.any():
+            stretches = int(np.count_nonzero(np.diff(np.r_[0, bad.astype(np.int8)]) == 1))
+            masked[f"cell{k + 1}_V"] = int(bad.sum())
+            notes.append(f"cell {k + 1}: {int(bad.sum())} sample(s) in {stretches} stretch(es) "
+                         f"outside {PLAUSIBLE_CELL_V[0]:g}-{PLAUSIBLE_CELL_V[1]:g} V masked (a "
+                         f"glitching cell channel; readings {np.nanmin(cell[bad]):.3g} to "
+                         f"{np.nanmax(cell[bad]):.3g} V); the pack voltage and current of "
+                         f"those records are kept")
+            cell[bad] = np.nan
+        frame[f"cell{k + 1}_V"] = cell
     series = BatterySeries(index=0, label="pack", frame=frame, cells=layout.cells,
-                           dropped={"malformed": malformed} if malformed else {})
+                           dropped={"malformed": malformed} if malformed else {},
+                           masked=masked)
     t = frame["time_s"].to_numpy()
     start = float(np.nanmin(t)) if np.isfinite(t).any() else 0.0
     return build_flight_log(path, "inflight-csv", [series], start_s=start, notes=notes)

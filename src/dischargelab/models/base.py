@@ -242,6 +242,14 @@ class Family:
     states: tuple[State, ...] = (State("charge_Ah", "Ah", "charge"),)
     #: Parameters shown in plot titles and short summaries.
     headline: tuple[str, ...] = ()
+    #: True when what sets the family apart is a logged temperature: without one it
+    #: reduces to another family, and ``model="auto"`` does not try it.
+    needs_temperature: bool = False
+    #: Growth with ln(extrapolation ratio) of the relative error of a time to cutoff
+    #: predicted from a fit to ONE rate, for a sloped discharge curve
+    #: (:func:`dischargelab.uncertainty.extrapolation_growth`; calibrated by
+    #: ``benchmarks/accuracy.py``).
+    one_rate_growth: float = 2.0
 
     # ---- parameters -------------------------------------------------------------
     @property

@@ -64,6 +64,7 @@ class ShepherdThermal(Family):
     """Eq. (6) with Arrhenius R and K, linear E0(T) and C(T), and a lumped thermal state."""
 
     name = "shepherd-thermal"
+    needs_temperature = True  # without a logged temperature it is eq. 6 held at the ambient
     version = 1
     title = "modified Shepherd with temperature (Tremblay/Simscape) + lumped thermal model"
     description = ("eq. 6 with R, K Arrhenius in T, E0 and C linear in T, and a lumped thermal "

@@ -1,0 +1,152 @@
+"""Latency of a whole fit against one plain eq. 6 fit of the same data, in one run.
+
+The case users wait for: ``dischargelab fit`` of three rates of the bundled Samsung 30Q
+(C/10 + 1C + 4C, about 40,000 samples) with the defaults, i.e. ``model="auto"`` (every
+family fitted, each scored on held-out curves, ends and the rate-capacity check) and the
+default uncertainty (100 bootstrap replicas). Timed three ways:
+
+* **CLI**: ``dischargelab fit C10 1C 4C --columns ... -o cell.json`` run in this process
+  (reading the three files, fitting, writing the battery file, printing);
+* **library**: ``dischargelab.fit(runs, bootstrap=100)`` on runs already read;
+* **baseline**: one ``scipy.optimize.least_squares`` fit of eq. 6 (``shepherd``: trf,
+  bounds, 2-point numeric Jacobian) to every sample of the same three curves, from the
+  family's ``guess()``: the plain fit the paper describes, with no choice of family, no
+  held-out error and no uncertainty.
+
+Each is repeated and the minimum taken (the 2 cores are shared: the minimum is the
+least disturbed run); the load average is printed. Goal: CLI <= 20x the baseline
+(stretch goal 10x).
+
+Usage: python benchmarks/fit_latency.py [--repeats N] [--bootstrap N]
+"""
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import contextlib
+import io
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import dischargelab as dl  # noqa: E402
+from _machine import machine_line  # noqa: E402
+from dischargelab.fit import _resolve_e0_r, _spec, _stack  # noqa: E402
+from dischargelab.models import get_family  # noqa: E402
+
+BUNDLED = HERE.parent / "src" / "dischargelab" / "data" / "samsung30q"
+FILES = [BUNDLED / f"Q30_S001_{r}.csv" for r in ("C10", "1C", "4C")]
+COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
+GOAL_RATIO, STRETCH_RATIO = 20.0, 10.0
+#: Residual [V] where eq. 6 is undefined (q >= C): least_squares needs finite residuals.
+UNDEFINED_RESIDUAL_V = 10.0
+
+
+def baseline_fit(curves):
+    """Plain bounded least_squares of eq. 6 on every sample; returns (RMSE [V], nfev)."""
+    family = get_family("shepherd")
+    stack = _stack(curves, 1, 1, True, "equal", max_samples=10**9)
+    fixed, bounds = _spec(family, None, None, stack, False)
+    _resolve_e0_r(family, stack, fixed, [], [])
+    free = [n for n in family.names if n not in fixed]
+    lo = np.array([bounds[n][0] for n in free])
+    hi = np.array([bounds[n][1] for n in free])
+    guess = family.guess(stack)
+    span = hi - lo
+    x0 = np.clip([guess[n] for n in free], lo + 1e-9 * span, hi - 1e-9 * span)
+    base = {n: fixed.get(n, guess.get(n)) for n in family.names}
+    w = stack.weight
+
+    def resid(x):
+        p = dict(base)
+        p.update(zip(free, x))
+        with np.errstate(invalid="ignore", over="ignore"):
+            r = (family.fit_voltage(p, stack) - stack.voltage) * w
+        return np.where(np.isfinite(r), r, UNDEFINED_RESIDUAL_V)
+
+    sol = least_squares(resid, x0, jac="2-point", bounds=(lo, hi), method="trf",
+                        x_scale="jac")
+    load = ~stack.is_rest
+    r = resid(sol.x) / w
+    return float(np.sqrt(np.mean(r[load] ** 2))), int(sol.nfev), int(stack.voltage.size)
+
+
+def cli_fit(out: Path, bootstrap: int | None):
+    from dischargelab.cli import main as cli_main
+
+    args = ["fit", *map(str, FILES), "--columns", COLUMNS, "-o", str(out), "--force"]
+    if bootstrap is not None:
+        args += ["--bootstrap", str(bootstrap)]
+    sink = io.StringIO()
+    with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(io.StringIO()):
+        try:
+            cli_main(args)
+            code = 0
+        except SystemExit as exc:  # the entry point always exits with its status
+            code = exc.code
+    if code not in (0, None):
+        raise RuntimeError(f"dischargelab fit exited with {code}")
+
+
+def best_of(func, repeats):
+    """(minimum wall time [s], minimum process CPU time [s], last value)."""
+    walls, cpus, value = [], [], None
+    for _ in range(repeats):
+        c0, t0 = time.process_time(), time.perf_counter()
+        value = func()
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    return min(walls), min(cpus), value
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5, help="timed runs each (default 5)")
+    parser.add_argument("--bootstrap", type=int, default=None,
+                        help="bootstrap replicas (default: the CLI's default)")
+    args = parser.parse_args(argv)
+    load_before = os.getloadavg()[0]
+    runs = [dl.read(p, columns=COLUMNS) for p in FILES]
+    curves = [r.to_curve() for r in runs]
+    samples = sum(c.time_s.size for c in curves)
+    boot = 100 if args.bootstrap is None else args.bootstrap
+
+    base_s, base_cpu, (rmse, nfev, n_stack) = best_of(lambda: baseline_fit(curves),
+                                                        args.repeats)
+    lib_s, lib_cpu, res = best_of(lambda: dl.fit(runs, bootstrap=boot), args.repeats)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "cell.json"
+        cli_s, cli_cpu, _ = best_of(lambda: cli_fit(out, args.bootstrap), args.repeats)
+
+    print(f"## Whole fit against one plain eq. 6 fit: Samsung 30Q C/10 + 1C + 4C, "
+          f"{samples:,} samples (minimum of {args.repeats} runs each)\n")
+    print("| what | wall [s] | CPU [s] | x baseline |")
+    print("|---|---:|---:|---:|")
+    print(f"| baseline: `least_squares` of eq. 6, numeric Jacobian, all {n_stack:,} samples "
+          f"({nfev} evaluations, RMSE {1000 * rmse:.1f} mV) | {base_s:.3f} | {base_cpu:.3f} "
+          f"| 1.0 |")
+    print(f"| library: `dl.fit(runs, bootstrap={boot})` (auto picked `{res.model}`, RMSE "
+          f"{1000 * res.rmse_V:.1f} mV) | {lib_s:.3f} | {lib_cpu:.3f} | "
+          f"{lib_s / base_s:.1f} |")
+    print(f"| CLI: `dischargelab fit C10 1C 4C --columns ... -o cell.json` (read, fit, write, "
+          f"print) | {cli_s:.3f} | {cli_cpu:.3f} | {cli_s / base_s:.1f} |")
+    ratio = cli_s / base_s
+    verdict = "met" if ratio <= GOAL_RATIO else "NOT met"
+    stretch = "met" if ratio <= STRETCH_RATIO else "not met"
+    print(f"\nGoal: CLI <= {GOAL_RATIO:g}x the baseline: {ratio:.1f}x -> {verdict} "
+          f"(stretch goal {STRETCH_RATIO:g}x: {stretch}).")
+    print(f"Machine: {machine_line()}; load average {load_before:.1f} before, "
+          f"{os.getloadavg()[0]:.1f} after (shared machine)")
+
+
+if __name__ == "__main__":
+    main()
