@@ -68,6 +68,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/calibration_table1.py
 	$(BIN)/python benchmarks/acquire_throughput.py
 	$(BIN)/python benchmarks/logbook.py
+	$(BIN)/python benchmarks/fleet.py
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache
