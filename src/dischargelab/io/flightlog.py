@@ -225,7 +225,8 @@ def _check_fields(fields) -> dict:
 
 
 def read_flight_discharge(path, *, flight=None, battery=None, current_A=None, sign="auto",
-                          segment="auto", rest_sample="auto") -> tuple[pd.DataFrame, dict]:
+                          segment="auto", rest_sample="auto", log: FlightLog | None = None
+                          ) -> tuple[pd.DataFrame, dict]:
     """One flight of one battery as :func:`dischargelab.io.read_discharge` returns it.
 
     ``flight`` None takes the longest flight (``segment`` N, when given, picks
@@ -234,13 +235,15 @@ def read_flight_discharge(path, *, flight=None, battery=None, current_A=None, si
     every other reader (:func:`dischargelab.io.prepare.prepare`); the sign is
     known (discharge positive) unless ``sign`` says otherwise. The idle sample
     just before the flight, when there is one within :data:`MAX_PAUSE_S`,
-    becomes ``meta["rest_sample"]``.
+    becomes ``meta["rest_sample"]``. ``log``: the log of ``path`` already read by
+    :func:`read_flight_log` (several flights of one log read once; it is not changed).
     """
     from .columns import CanonicalTable
     from .prepare import check_segment_option, prepare, summary_sentence
 
     segment = check_segment_option(segment)
-    log = read_flight_log(path)
+    if log is None:
+        log = read_flight_log(path)
     series, notes = choose_battery(log, battery)
     if flight is None and isinstance(segment, int):
         flight = segment

@@ -27,6 +27,7 @@ Per event (sign convention: discharge current positive; pack values):
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import re
 import tempfile
@@ -173,16 +174,28 @@ def summarise_source(source, options: dict | None = None) -> SourceSummary:
     return _summarise_path(path, path.name, data, options)
 
 
-def _summarise_path(path: Path, name: str, data: bytes, options: dict) -> SourceSummary:
-    from ..io import read_discharge
+def _reader(path: Path, options: dict):
+    """``read(segment=...)`` of one file; a flight log is parsed once for all its flights."""
+    from ..io import check_current_option, read_discharge
+    from ..io.flightlog import detect_flight_log, read_flight_discharge, read_flight_log
 
-    first_frame, first_meta = read_discharge(path, **options)
+    if detect_flight_log(path) is None:
+        return functools.partial(read_discharge, path, **options)
+    return functools.partial(read_flight_discharge, path, log=read_flight_log(path),
+                             battery=options.get("battery"),
+                             current_A=check_current_option(options.get("current_A")),
+                             sign=options.get("sign") or "auto")
+
+
+def _summarise_path(path: Path, name: str, data: bytes, options: dict) -> SourceSummary:
+    read = _reader(path, options)
+    first_frame, first_meta = read()
     segments = first_meta.get("segments") or []
     reads = [(first_frame, first_meta)]
     if len(segments) > 1:
-        reads = [read_discharge(path, segment=s["number"], **options) for s in segments]
+        reads = [read(segment=s["number"]) for s in segments]
     try:
-        whole, whole_meta = read_discharge(path, segment="none", **options)
+        whole, whole_meta = read(segment="none")
     except DataError:
         whole, whole_meta = None, None
     fmt = str(first_meta.get("format", "unknown"))
