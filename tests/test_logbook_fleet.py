@@ -13,6 +13,7 @@ pytest.importorskip("sqlalchemy")
 pytest.importorskip("distributed")
 
 from dask_cluster import Cluster
+from dischargelab.errors import LogbookError
 from dischargelab.fleet import DaskExecutor, InProcessExecutor
 from dischargelab.logbook import Logbook
 from fleet_tasks import crash_on_file
@@ -170,3 +171,28 @@ def test_interrupted_add_keeps_whole_transactions_and_a_rerun_does_only_the_rest
         again = lb.add(folder, pack="pack-a")
     assert len(again.added) == total - 7 and len(again.skipped) == 7
     assert stored(url) == {k: v for k, v in in_process.items() if k[0] == "pack-a"}
+
+
+def test_without_keeping_the_bytes_the_path_serves_until_the_file_changes(packs, tmp_path):
+    folder = tmp_path / "pack-c"
+    shutil.copytree(packs / "pack-c", folder)
+    url = str(tmp_path / "lb.sqlite")
+    kept = str(tmp_path / "kept.sqlite")
+    with Logbook(url) as lb, Logbook(kept) as full:
+        lean = lb.add(folder, pack="pack-c", keep_raw=False)
+        full.add(folder, pack="pack-c")
+        assert lean.added and stored(url) == stored(kept)
+        lean_events = lb.health("pack-c").events   # the same health as with kept bytes
+        assert [e.capacity_Ah for e in lean_events] == [
+            e.capacity_Ah for e in full.health("pack-c").events]
+        first = sorted(folder.glob("*.txt"))[0]
+        from dischargelab.logbook.summarise import sha256_file
+
+        digest = sha256_file(first)
+        assert lb.raw(digest) == first.read_bytes()
+        battery = lb.fit("pack-c", bootstrap=0)   # refits read the file at its path
+        assert battery.capacity_Ah > 0
+        first.write_bytes(first.read_bytes() + b"\n")
+        with pytest.raises(LogbookError, match="no longer there as it was"):
+            lb.raw(digest)
+    assert (tmp_path / "lb.sqlite").stat().st_size < 0.5 * (tmp_path / "kept.sqlite").stat().st_size

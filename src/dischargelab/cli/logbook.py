@@ -90,11 +90,14 @@ def logbook_group() -> None:
 @click.option("--chemistry", type=click.Choice(["lipo", "li-ion", "lifepo4"]),
               help="The pack's chemistry (for rest-voltage states of charge).")
 @click.option("--cells", type=click.IntRange(1), help="The pack's cells in series.")
+@click.option("--keep-raw/--no-keep-raw", default=True, show_default=True,
+              help="Keep each file's bytes (compressed) in the logbook, or record only its "
+                   "path and SHA-256 (a smaller database; the files must stay where they are).")
 @executor_options
 @db_option
 @json_option
 def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
-            label_capacity_Ah, chemistry, cells, workers, scheduler, db, as_json):
+            label_capacity_Ah, chemistry, cells, keep_raw, workers, scheduler, db, as_json):
     """Add test files, logger files and flight logs to a pack.
 
     Each file is kept by its SHA-256 (adding it again adds nothing and says so);
@@ -127,7 +130,7 @@ def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
         bar, progress = progress_bar("adding")
         with open_executor(workers, scheduler) as executor, bar:
             result = lb.add(list(paths), pack=pack, pack_from=pack_from, recursive=recursive,
-                            executor=executor, progress=progress,
+                            executor=executor, progress=progress, keep_raw=keep_raw,
                             **{k: v for k, v in options.items() if v})
     if as_json:
         print_json(result.to_dict())

@@ -97,7 +97,8 @@ class Logbook:
 
     # ------------------------------------------------------------------ writing
     def add(self, paths, pack: str | None = None, pack_from: str | None = None,
-            recursive: bool = False, executor=None, progress=None, **reader_options):
+            recursive: bool = False, executor=None, progress=None, keep_raw: bool = True,
+            **reader_options):
         """Add files and folders (tests, logger files, flight logs) to a pack.
 
         Parameters
@@ -115,6 +116,10 @@ class Logbook:
             by default).
         progress : callable, optional
             ``progress(done, total, message)`` after each file.
+        keep_raw : bool
+            Keep each file's bytes (compressed) in the database, so every figure can be
+            recomputed from it. False records only its path and SHA-256: a fleet's
+            database stays small, and the files must stay where they are.
         **reader_options
             As :func:`dischargelab.read` (``columns``, ``current_A``, ``sign``...).
 
@@ -129,7 +134,7 @@ class Logbook:
         with self._errors():
             return add_files(self._engine, paths, pack=pack, pack_from=pack_from,
                              recursive=recursive, executor=executor, progress=progress,
-                             reader_options=reader_options)
+                             reader_options=reader_options, keep_raw=keep_raw)
 
     def add_bytes(self, file_name: str, data: bytes, pack: str, **reader_options):
         """Add one file given as bytes (an upload); returns an AddResult."""

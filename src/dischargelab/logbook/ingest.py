@@ -185,9 +185,10 @@ def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
     with schema.writing(engine) as conn:
         ids = pack_ids(conn, [pack for _, pack, _ in batch])
         for summary, pack, path in batch:
-            conn.execute(_insert(conn, schema.blobs).values(
-                sha256=summary.sha256, compression="zlib", size_bytes=summary.size_bytes,
-                data=summary.raw_zlib).on_conflict_do_nothing(index_elements=["sha256"]))
+            if summary.raw_zlib:          # else only the path is recorded (keep_raw=False)
+                conn.execute(_insert(conn, schema.blobs).values(
+                    sha256=summary.sha256, compression="zlib", size_bytes=summary.size_bytes,
+                    data=summary.raw_zlib).on_conflict_do_nothing(index_elements=["sha256"]))
             source_id = conn.execute(_insert(conn, schema.sources).values(
                 sha256=summary.sha256, pack_id=ids[pack], file_name=summary.file_name,
                 path=path, size_bytes=summary.size_bytes, format=summary.format,
@@ -208,7 +209,7 @@ def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
 
 def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, executor=None,
               progress: Callable[[int, int, str], None] | None = None,
-              reader_options: dict | None = None) -> AddResult:
+              reader_options: dict | None = None, keep_raw: bool = True) -> AddResult:
     """Add files and folders to the logbook (see :meth:`dischargelab.Logbook.add`)."""
     from ..fleet import InProcessExecutor
 
@@ -235,7 +236,7 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
     if progress is not None and done:
         progress(done, total, f"{done} already in the logbook")
     by_path = {str(path): (path, pack_name, sha) for path, pack_name, sha in hashed.values()}
-    task = functools.partial(summarise_source, options=options)
+    task = functools.partial(summarise_source, options=options, keep_raw=keep_raw)
     executor = executor or InProcessExecutor()
     batch: list = []
     failure: BaseException | None = None

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import zlib
+from pathlib import Path
 
 from sqlalchemy import func, select
 
@@ -75,13 +77,25 @@ def save_model(conn, pack_id: int, battery_dict: dict, reference_event_id: int |
 
 
 def raw_file(conn, sha256: str) -> bytes:
-    """The stored bytes of a source file."""
+    """The stored bytes of a source file; for a source added with ``keep_raw=False``, the
+    file at its recorded path when its SHA-256 still matches."""
     row = conn.execute(select(schema.blobs.c.compression, schema.blobs.c.data)
                        .where(schema.blobs.c.sha256 == sha256)).first()
-    if row is None:
+    if row is not None:
+        compression, data = row
+        return zlib.decompress(data) if compression == "zlib" else bytes(data)
+    path = conn.execute(select(schema.sources.c.path)
+                        .where(schema.sources.c.sha256 == sha256)).scalar()
+    if path is None:
         raise LogbookError(f"no stored file with SHA-256 {sha256}")
-    compression, data = row
-    return zlib.decompress(data) if compression == "zlib" else bytes(data)
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        data = b""
+    if hashlib.sha256(data).hexdigest() != sha256:
+        raise LogbookError(f"{path} was added without keeping its bytes and is no longer there "
+                           "as it was; add it again (keeping its bytes) to recompute from it")
+    return data
 
 
 def source_of_event(conn, event_id: int) -> dict:

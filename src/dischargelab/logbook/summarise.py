@@ -95,7 +95,8 @@ class SourceSummary:
         Reader options used.
     raw_zlib : bytes
         The file's bytes, zlib-compressed (what the logbook keeps to recompute any
-        figure; compressed here, on the worker, so the client only writes it).
+        figure; compressed here, on the worker, so the client only writes it); empty
+        when the logbook records only the file's path.
     """
 
     sha256: str
@@ -140,7 +141,8 @@ def check_reader_options(options: dict | None) -> dict:
     return {k: v for k, v in options.items() if v is not None}
 
 
-def summarise_source(source, options: dict | None = None) -> SourceSummary:
+def summarise_source(source, options: dict | None = None, keep_raw: bool = True
+                     ) -> SourceSummary:
     """Read one file and summarise every discharge or flight in it.
 
     Parameters
@@ -149,6 +151,8 @@ def summarise_source(source, options: dict | None = None) -> SourceSummary:
         A file, or a file name and its bytes (an upload).
     options : dict, optional
         Reader options (:data:`READER_OPTIONS`, as :func:`dischargelab.io.read_discharge`).
+    keep_raw : bool
+        Also return the file's bytes compressed (``raw_zlib``), for the logbook to keep.
 
     Returns
     -------
@@ -166,12 +170,12 @@ def summarise_source(source, options: dict | None = None) -> SourceSummary:
         with tempfile.TemporaryDirectory(prefix="dischargelab-") as folder:
             path = Path(folder) / name
             path.write_bytes(data)
-            return _summarise_path(path, name, data, options)
+            return _summarise_path(path, name, data, options, keep_raw)
     path = Path(source)
     if not path.is_file():
         raise DataError(f"{path}: no such file")
     data = path.read_bytes()
-    return _summarise_path(path, path.name, data, options)
+    return _summarise_path(path, path.name, data, options, keep_raw)
 
 
 def _reader(path: Path, options: dict):
@@ -187,7 +191,8 @@ def _reader(path: Path, options: dict):
                              sign=options.get("sign") or "auto")
 
 
-def _summarise_path(path: Path, name: str, data: bytes, options: dict) -> SourceSummary:
+def _summarise_path(path: Path, name: str, data: bytes, options: dict,
+                    keep_raw: bool = True) -> SourceSummary:
     read = _reader(path, options)
     first_frame, first_meta = read()
     segments = first_meta.get("segments") or []
@@ -213,7 +218,7 @@ def _summarise_path(path: Path, name: str, data: bytes, options: dict) -> Source
     notes = list(dict.fromkeys(n for _, meta in reads for n in meta.get("notes", [])))
     return SourceSummary(sha256=sha256_bytes(data), file_name=name, size_bytes=len(data),
                          format=fmt, notes=notes, events=events, options=options,
-                         raw_zlib=zlib.compress(data, RAW_ZLIB_LEVEL))
+                         raw_zlib=zlib.compress(data, RAW_ZLIB_LEVEL) if keep_raw else b"")
 
 
 def _start_time(meta: dict) -> str | None:
