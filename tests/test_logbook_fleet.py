@@ -196,3 +196,29 @@ def test_without_keeping_the_bytes_the_path_serves_until_the_file_changes(packs,
         with pytest.raises(LogbookError, match="no longer there as it was"):
             lb.raw(digest)
     assert (tmp_path / "lb.sqlite").stat().st_size < 0.5 * (tmp_path / "kept.sqlite").stat().st_size
+
+
+def test_fleet_report_page_lists_packs_soonest_end_of_life_first(packs, tmp_path):
+    import json
+
+    url = str(tmp_path / "lb.sqlite")
+    with Logbook(url) as lb:
+        lb.add(packs, pack_from="parent", recursive=True)
+        expected = lb.fleet()
+    page = tmp_path / "fleet.html"
+    code, out, err = run_cli("logbook", "report", "--fleet", "-o", page, "--within", "1000",
+                             "--db", url, "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    names = [p["name"] for p in doc["packs"]]
+    assert names == [r["name"] for r in expected.rows] and sorted(names) == [
+        "pack-a", "pack-b", "pack-c"]
+    left = [p["efc_left"] for p in doc["packs"] if not p["observed"]]
+    assert left == sorted(left)
+    assert doc["retire_soon"] == expected.retire_soon(1000)
+    html = page.read_text(encoding="utf-8")
+    assert html.index("pack-a") > 0 and all(html.index(a) < html.index(b)
+                                            for a, b in zip(names, names[1:]))
+    assert html.count("<svg") == 6 and "<script" not in html and "http" not in html
+    code, out, err = run_cli("logbook", "report", "--fleet", "-o", page, "--db", url)
+    assert code == 2 and "already exists" in err and "--force" in err
