@@ -60,6 +60,8 @@ CELLS, CAPACITY_AH = 3, 12.0
 R0_OHM, R1_OHM, TAU1_S, TAU_D_S, BETA_K = 0.0028, 0.0015, 60.0, 300.0, 3000.0
 CTH_J_PER_K, RTH_BENCH, RTH_FLIGHT = 305.0, 7.5, 3.0
 AMBIENT_C = 25.0
+#: Idle current of the logged rest before each run [A].
+REST_A = 0.05
 LEAD_PER_TAU = 4.493409457909064 ** 2 / 15.0
 GOAL_ENDURANCE_PCT, GOAL_RMS_PCT = 5.0, 1.3
 
@@ -91,11 +93,18 @@ def truth(current_of, *, dt, rth, stop, t_max):
     return [np.array(c) for c in zip(*out)]
 
 
-def write_ina(path, t, i, v, rest_s=20.0, rest_A=0.05):
+def rest_pack_V(rest_A=REST_A):
+    """Pack voltage of the full, rested pack at the idle current ``rest_A`` [A] (the
+    truth's open-circuit voltage less the series drop; the RC pair and the diffusion
+    lead are relaxed)."""
+    return CELLS * (float(ocv_from_soc(1.0, "lipo")) - R0_OHM * rest_A)
+
+
+def write_ina(path, t, i, v, rest_s=20.0, rest_A=REST_A):
     """INA3221-style CSV (time ms, pack V, equal cells, current mA, shunt mV), after
-    ``rest_s`` at rest at the first voltage."""
+    ``rest_s`` at rest, full, at the idle current ``rest_A``."""
     n_rest = int(rest_s)
-    rows = [(k * 1.0, rest_A, v[0] + 0.002) for k in range(n_rest)]
+    rows = [(k * 1.0, rest_A, rest_pack_V(rest_A)) for k in range(n_rest)]
     rows += [(rest_s + tk, ik, vk) for tk, ik, vk in zip(t, i, v)]
     with open(path, "w", encoding="utf-8") as fh:
         for tk, ik, vk in rows:
@@ -140,7 +149,7 @@ def synthetic_runs(folder: Path):
 def slow_discharge(slow) -> Discharge:
     """The slow drain as a bench discharge (no temperature), rest voltage first."""
     return Discharge(slow["t"], slow["v"], slow["i"], None,
-                     float(slow["v"][0]) + 0.002, "slow drain (bench)")
+                     rest_pack_V(0.0), "slow drain (bench)")
 
 
 def pct_rms(row, pack_mean_V):
