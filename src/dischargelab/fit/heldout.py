@@ -13,14 +13,7 @@ import numpy as np
 
 from ..discharge import measured_time_to_cutoff
 from ..errors import DataError, FitError, SimulationError
-from .family import fit_family
-
-
-def several_rates(curves) -> bool:
-    """Two or more curves whose mean currents differ by 20 % or more."""
-    currents = [c.mean_current_A for c in curves]
-    return len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
-
+from .family import fit_family, several_rates
 
 #: Fraction of a curve's duration left out at its end by :func:`held_out_error`.
 HELD_OUT_TAIL = 0.2
