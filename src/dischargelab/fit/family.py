@@ -110,6 +110,11 @@ def steady_dynamics(curves, model, fixed: dict | None, bounds: dict | None):
     return dict(held, **(fixed or {})), note
 
 
+#: Relative decrease of the cost below which a warm-started fit stops (the solver's
+#: default: converged to round-off).
+WARM_FTOL = 1e-12
+
+
 def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 fixed: dict | None = None, bounds: dict | None = None,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
@@ -117,13 +122,14 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
                 max_samples: int = MAX_SAMPLES_PER_CURVE,
                 bootstrap_method: str = "linearised", cooling: str | None = "still-air",
-                chemistry: str | None = None) -> FitResult:
+                chemistry: str | None = None, warm_ftol: float = WARM_FTOL) -> FitResult:
     """Fit one model family (``model`` a family name, not ``"auto"``) without its
     held-out model error (:func:`dischargelab.fit.heldout.held_out_error`); see
     :func:`dischargelab.fit.fit_battery` for the parameters.
 
     ``start`` (values of the nonlinear parameters, e.g. a fit to more of the same
-    data) skips the multi-start search and refines from there: a warm start.
+    data) skips the multi-start search and refines from there: a warm start, which
+    stops when a step lowers the cost by less than ``warm_ftol`` of it.
     ``max_samples`` thins each curve to at most that many samples. A thermal family
     fitted without a logged temperature gets the thermal prior of ``cooling`` and
     ``chemistry`` (:func:`fit_self_heating`; ``cooling``
@@ -137,7 +143,7 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                          bootstrap=bootstrap, seed=seed, model=model, progress=progress,
                          start=start, max_samples=max_samples,
                          bootstrap_method=bootstrap_method, cooling=cooling,
-                         chemistry=chemistry)
+                         chemistry=chemistry, warm_ftol=warm_ftol)
         res.notes.insert(0, steady_note)
         return res
     if needs_prior(curves, model, cooling):
@@ -146,12 +152,13 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             strings_parallel=strings_parallel, fixed=fixed, bounds=bounds, guess=guess,
             paper_mode=paper_mode, use_rest=use_rest, weighting=weighting, n_best=n_best,
             bootstrap=bootstrap, seed=seed, model=model, progress=progress, start=start,
-            max_samples=max_samples, bootstrap_method=bootstrap_method)
+            max_samples=max_samples, bootstrap_method=bootstrap_method, warm_ftol=warm_ftol)
     return fit_once(curves, cells_series=cells_series, strings_parallel=strings_parallel,
                     fixed=fixed, bounds=bounds, guess=guess, paper_mode=paper_mode,
                     use_rest=use_rest, weighting=weighting, n_best=n_best, bootstrap=bootstrap,
                     seed=seed, model=model, progress=progress, start=start,
-                    max_samples=max_samples, bootstrap_method=bootstrap_method)
+                    max_samples=max_samples, bootstrap_method=bootstrap_method,
+                    warm_ftol=warm_ftol)
 
 
 def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
@@ -160,7 +167,8 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
              weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
              seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
              max_samples: int = MAX_SAMPLES_PER_CURVE, bootstrap_method: str = "linearised",
-             virtual_temperature=None, thermal_prior: dict | None = None) -> FitResult:
+             virtual_temperature=None, thermal_prior: dict | None = None,
+             warm_ftol: float = WARM_FTOL) -> FitResult:
     """One fit of one family (see :func:`fit_family`); ``virtual_temperature`` (per
     curve, a simulated cell temperature [degC]) stands in for the unlogged temperature,
     and ``thermal_prior`` (``Cth_J_per_K``, ``Rth_K_per_W``, ``note``) gives a thermal
@@ -205,7 +213,7 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             if not np.all(np.isfinite(mdl.varpro_residual(warm))):
                 warm = None  # the start is undefined on these data: search instead
     if warm is not None:
-        sol = _varpro_solve(mdl, warm, lo, hi)
+        sol = _varpro_solve(mdl, warm, lo, hi, ftol=warm_ftol)
         nfev += sol.nfev
         theta = sol.x
     elif mdl.nonlinear:
