@@ -24,6 +24,14 @@ thermal prior: eq. 6). Each fit is checked with ``dischargelab.validate`` on the
 drain (endurance to 3.3 V/cell held 10 s, its 95 % interval, the extrapolation warning)
 and on the 27 A flight (voltage RMS in % of the mean pack voltage).
 
+**Slow drains of measured and virtual cells** (no model writes them; the truth at every
+faster rate is measured): the slowest run of each cell with a rate series, its temperature
+column dropped, is fitted the two ways above (``ecm`` on one steady rate holds its dynamics
+absent, with the airflow prior, as the flight-log path does; ``auto`` as a bench discharge)
+and predicts every faster run's time to its cutoff (``Battery.predict`` at its mean current
+and ambient): Samsung 30Q C/10, Enertech LCO 0.1C, the PyBaMM NMC, LCO and LFP cells at 0.1C
+(``benchmarks/accuracy.py`` loads them).
+
 **Real logs** (``../shared/data/flight_logs/ina3221_fpv_4s``): the 29.csv flight (a
 Dinogy 1600 mAh 4S, 24 A mean) is fitted as a flight log, with and without the thermal
 prior, and flies its own log and the 28.csv flight (a CNHL 1500 mAh 4S, 28 A mean, another
@@ -32,7 +40,7 @@ the slow -> fast figure itself is measured on the synthetic pack only.
 
 Goals (issue): endurance within 5 %, voltage RMS <= 1.3 % on ~27 A flights.
 
-Usage: python benchmarks/slow_to_fast.py [--data DIR]
+Usage: python benchmarks/slow_to_fast.py [--data DIR] [--cells samsung,enertech,...|none]
 """
 
 import os
@@ -146,10 +154,59 @@ def synthetic_runs(folder: Path):
     return slow, fast
 
 
+def delivered(run, until_s=None) -> float:
+    """Charge [Ah] a synthetic run delivered (up to ``until_s`` [s])."""
+    keep = run["t"] <= (run["t"][-1] if until_s is None else until_s)
+    return float(np.trapezoid(run["i"][keep], run["t"][keep]) / 3600.0)
+
+
 def slow_discharge(slow) -> Discharge:
     """The slow drain as a bench discharge (no temperature), rest voltage first."""
     return Discharge(slow["t"], slow["v"], slow["i"], None,
                      rest_pack_V(0.0), "slow drain (bench)")
+
+
+#: Cells with a rate series whose slowest run is fitted alone (``accuracy.SETS`` keys):
+#: (the slowest run, the faster ones predicted).
+SLOW_CELLS = {
+    "samsung": ("C10", ("1C", "2C", "3C", "4C")),
+    "enertech": ("0.1C", ("0.5C", "1C", "2C")),
+    "nmc": ("0.1C", ("0.5C", "1C", "2C", "3C")),
+    "lco": ("0.1C", ("0.5C", "1C", "2C", "3C")),
+    "lfp": ("0.1C", ("0.5C", "1C", "2C")),
+}
+
+
+def slow_cells(data: Path, names):
+    """Slowest run of each cell fitted as a flight log's steady drain would be and as a
+    bench discharge, predicting the faster runs: one table row per cell and way."""
+    from dataclasses import replace
+
+    import accuracy
+
+    print("\n## Slow drains of measured and virtual cells (temperature dropped): the "
+          "faster runs predicted\n")
+    print("| cell | fitted on | way | model | faster runs: endurance error (in / OUT: "
+          "the 95 % interval covers / misses) |")
+    print("|---|---|---|---|---|")
+    for name in names:
+        title, runs, _ = accuracy.SETS[name](data)
+        slow_key, fast_keys = SLOW_CELLS[name]
+        drain = replace(runs[slow_key].discharge, temperature_C=None)
+        for way, kw in (("flight-log rule: ecm, airflow prior", dict(model="ecm",
+                                                                    cooling="airflow")),
+                        ("bench: auto, still-air prior", {})):
+            res = dl.fit(drain, bootstrap=20, **kw)
+            cells = []
+            for key in fast_keys:
+                run = runs[key]
+                out = res.battery.predict(current=run.current_A, cutoff=run.cutoff_V,
+                                          ambient=run.ambient_C).to_dict()
+                lo, hi = out["interval95"]["time_to_cutoff_s"]
+                err = 100.0 * (out["time_to_cutoff_s"] / run.measured_s - 1.0)
+                cells.append(f"{key} {err:+.1f} % "
+                             f"({'in' if lo <= run.measured_s <= hi else 'OUT'})")
+            print(f"| {title} | {slow_key} | {way} | {res.model} | {', '.join(cells)} |")
 
 
 def pct_rms(row, pack_mean_V):
@@ -161,6 +218,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=None,
                         help="shared data folder (default: ../shared/data beside the repo)")
+    parser.add_argument("--cells", default=",".join(SLOW_CELLS),
+                        help="cells whose slowest run is fitted alone (default all; 'none')")
     args = parser.parse_args(argv)
     data = args.data
     if data is None:
@@ -183,7 +242,12 @@ def main(argv=None):
               f"{np.mean(fast['i']):.1f} A mean, {np.max(fast['i']):.0f} A peaks, 3.3 V/cell "
               f"held 10 s after {true_s:.0f} s, heats {np.max(fast['T']) - AMBIENT_C:.1f} K; "
               f"27 A flight: {np.mean(flight_v[flying, 1]) / 1000:.1f} A mean, pack "
-              f"{mean_27:.2f} V mean.\n")
+              f"{mean_27:.2f} V mean. The slow drain delivers {delivered(slow):.2f} Ah to "
+              f"3.0 V/cell, the fast drain {delivered(fast, true_s):.2f} Ah "
+              f"({100 * delivered(fast, true_s) / delivered(slow):.0f} %): the diffusion "
+              f"lead alone costs {LEAD_PER_TAU * TAU_D_S / 3600:.3f} Ah per ampere "
+              f"({100 * LEAD_PER_TAU * TAU_D_S / 3600:.0f} % of "
+              f"the capacity per C).\n")
         fits = [
             ("flight log, auto (ecm, dynamics absent, thermal prior: airflow)",
              lambda: dl.fit(flight_curves(folder / "slow.csv"), bootstrap=0)),
@@ -210,6 +274,9 @@ def main(argv=None):
             print(f"| {label} | {res.model} | {row['endurance_error_pct']:+.1f} % | {ivs} | "
                   f"{warn} | {pct_rms(row, fast_mean):.2f} % | "
                   f"{pct_rms(row27, mean_27):.2f} % |")
+    names = [n for n in args.cells.split(",") if n and n != "none"]
+    if names and data is not None and (data / "samsung30q_S001").is_dir():
+        slow_cells(data, names)
     if data is not None and (data / "flight_logs" / "ina3221_fpv_4s").is_dir():
         folder = data / "flight_logs" / "ina3221_fpv_4s"
         print("\n## Real logs: 29.csv fitted as a flight log, flying 29.csv and 28.csv\n")
