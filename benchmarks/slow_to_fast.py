@@ -16,8 +16,9 @@ current; no temperature):
   pack stays under 3.3 V/cell for 10 s, in flight, 10 Hz;
 * **27 A flight**: 200 s around 27 A (+-8 A, bursts to 60 A) from full, in flight, 10 Hz.
 
-The slow drain is fitted (``dischargelab.fit``) three ways: as a flight log (``auto``:
-ecm with its dynamics held absent, the thermal prior for airflow), as a bench discharge
+The slow drain is fitted (``dischargelab.fit``) four ways: as a flight log (``auto``:
+ecm with its dynamics held absent, the thermal prior for airflow), the same with ecm's RC
+pairs and diffusion state fitted anyway (their bounds given), as a bench discharge
 (``auto``: shepherd-thermal with the thermal prior for still air), and as a bench
 discharge with the cell held at the ambient (``cooling=None``: the behaviour without a
 thermal prior: eq. 6). Each fit is checked with ``dischargelab.validate`` on the fast
@@ -26,11 +27,11 @@ and on the 27 A flight (voltage RMS in % of the mean pack voltage).
 
 **Slow drains of measured and virtual cells** (no model writes them; the truth at every
 faster rate is measured): the slowest run of each cell with a rate series, its temperature
-column dropped, is fitted the two ways above (``ecm`` on one steady rate holds its dynamics
-absent, with the airflow prior, as the flight-log path does; ``auto`` as a bench discharge)
-and predicts every faster run's time to its cutoff (``Battery.predict`` at its mean current
-and ambient): Samsung 30Q C/10, Enertech LCO 0.1C, the PyBaMM NMC, LCO and LFP cells at 0.1C
-(``benchmarks/accuracy.py`` loads them).
+column dropped, is fitted three of the ways above (``ecm`` on one steady rate holds its
+dynamics absent, with the airflow prior, as the flight-log path does; ``ecm`` with them
+fitted anyway; ``auto`` as a bench discharge) and predicts every faster run's time to its
+cutoff (``Battery.predict`` at its mean current and ambient): Samsung 30Q C/10, Enertech LCO
+0.1C, the PyBaMM NMC, LCO and LFP cells at 0.1C (``benchmarks/accuracy.py`` loads them).
 
 **Real logs** (``../shared/data/flight_logs/ina3221_fpv_4s``): the 29.csv flight (a
 Dinogy 1600 mAh 4S, 24 A mean) is fitted as a flight log, with and without the thermal
@@ -177,6 +178,16 @@ SLOW_CELLS = {
 }
 
 
+def dynamics_free() -> dict:
+    """Bounds (the family's own) on the ecm parameters a fit to one steady drain holds
+    absent: given bounds, the fit fits them instead."""
+    from dischargelab.models import get_family
+
+    family = get_family("ecm")
+    return {n: (family.parameter(n).lower, family.parameter(n).upper)
+            for n in family.steady_fixed}
+
+
 def slow_cells(data: Path, names):
     """Slowest run of each cell fitted as a flight log's steady drain would be and as a
     bench discharge, predicting the faster runs: one table row per cell and way."""
@@ -195,6 +206,8 @@ def slow_cells(data: Path, names):
         drain = replace(runs[slow_key].discharge, temperature_C=None)
         for way, kw in (("flight-log rule: ecm, airflow prior", dict(model="ecm",
                                                                     cooling="airflow")),
+                        ("ecm, dynamics fitted anyway, airflow prior",
+                         dict(model="ecm", cooling="airflow", bounds=dynamics_free())),
                         ("bench: auto, still-air prior", {})):
             res = dl.fit(drain, bootstrap=20, **kw)
             cells = []
@@ -251,6 +264,9 @@ def main(argv=None):
         fits = [
             ("flight log, auto (ecm, dynamics absent, thermal prior: airflow)",
              lambda: dl.fit(flight_curves(folder / "slow.csv"), bootstrap=0)),
+            ("flight log, ecm with its dynamics fitted anyway (bounds given)",
+             lambda: dl.fit(flight_curves(folder / "slow.csv"), model="ecm",
+                            bounds=dynamics_free(), bootstrap=0)),
             ("bench discharge, auto (shepherd-thermal, thermal prior: still air)",
              lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30)),
             ("bench discharge, auto, cooling=None (held at the ambient: eq. 6)",
