@@ -262,7 +262,8 @@ def evaluate(set_name, title, runs, trainings, family, bootstrap, failures):
         for label, run in runs.items():
             if label in train:
                 continue
-            row = dict(set=set_name, family=family, train=train, test=label, fit_s=fit_s,
+            row = dict(set=set_name, family=family, model=res.model, train=train, test=label,
+                       fit_s=fit_s,
                        current_A=run.current_A, ambient_C=run.ambient_C,
                        measured_s=run.measured_s, position=position(run, train_runs),
                        interval=None)
@@ -424,6 +425,27 @@ def summary_table(rows, families):
               f"{med} | {n_fail} |")
 
 
+def split_table(rows, families):
+    """Each family on the runs where ``auto`` picks it and where it is forced on data
+    ``auto`` gives to another family (coverage, median half-width, worst error)."""
+    picked = {(r["set"], r["train"]): r.get("model") for r in rows if r["family"] == "auto"}
+    print("| family | where | held-out runs | coverage of 95 % intervals | median half-width | "
+          "worst error |")
+    print("|---|---|---:|---:|---:|---|")
+    for fam in families:
+        if fam == "auto":
+            continue
+        for where, keep in (("auto picks it", True), ("forced (auto picks another)", False)):
+            sel = [r for r in rows if r["family"] == fam and "covered" in r
+                   and (picked.get((r["set"], r["train"])) == fam) == keep]
+            if not sel:
+                continue
+            cov = sum(r["covered"] for r in sel)
+            print(f"| {fam} | {where} | {len(sel)} | {100 * cov / len(sel):.0f} % "
+                  f"({cov}/{len(sel)}) | "
+                  f"{np.median([r['half_width_pct'] for r in sel]):.2f} % | {fmt_worst(sel)} |")
+
+
 def verdict(ok: bool | None) -> str:
     return "n/a" if ok is None else ("met" if ok else "NOT met")
 
@@ -528,6 +550,9 @@ def main(argv=None):
         detail_table(rows)
     print("\n## Summary per family (held-out runs only)\n")
     summary_table(rows, families)
+    if "auto" in families:
+        print("\n## Each family where auto picks it and where it is forced\n")
+        split_table(rows, families)
     print("\n## Peak cell temperature (thermal families, runs with a logged temperature)\n")
     peak_table(rows, families)
     print("\n## Acceptance figures\n")

@@ -52,6 +52,7 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 
 from _machine import machine_line  # noqa: E402
 from dischargelab.fit import Curve, _resolve_e0_r, _spec, _stack, fit_battery  # noqa: E402
+from dischargelab.fit.family import steady_dynamics  # noqa: E402
 from dischargelab.io import read_discharge  # noqa: E402
 from dischargelab.model import cell_voltage  # noqa: E402
 from dischargelab.models import FAMILIES, get_family  # noqa: E402
@@ -75,13 +76,15 @@ UNDEFINED_RESIDUAL_V = 10.0
 def baseline_fit(curve: Curve, family_name: str):
     """Plain bounded least_squares with a 2-point numeric Jacobian.
 
-    Same stacked samples, free parameters, bounds and start (the family's
-    ``guess``) as :func:`dischargelab.fit.fit_battery`. Returns (RMSE [V] over the
+    Same stacked samples, free parameters (a family's ``steady_fixed`` held as the fit
+    holds them on one constant current), bounds and start (the family's ``guess``) as
+    :func:`dischargelab.fit.fit_battery`. Returns (RMSE [V] over the
     load samples, function evaluations, number of free parameters).
     """
     family = get_family(family_name)
     stack = _stack([curve], 1, 1, True, "equal")
-    fixed, bounds = _spec(family, None, None, stack, False)
+    held, _ = steady_dynamics([curve], family_name, None, None)  # as the fit holds them
+    fixed, bounds = _spec(family, held, None, stack, False)
     _resolve_e0_r(family, stack, fixed, [], [])
     free = [n for n in family.names if n not in fixed]
     lo = np.array([bounds[n][0] for n in free])

@@ -16,13 +16,22 @@ current; no temperature):
   pack stays under 3.3 V/cell for 10 s, in flight, 10 Hz;
 * **27 A flight**: 200 s around 27 A (+-8 A, bursts to 60 A) from full, in flight, 10 Hz.
 
-The slow drain is fitted (``dischargelab.fit``) three ways: as a flight log (``auto``:
-ecm with its dynamics held absent, the thermal prior for airflow), as a bench discharge
+The slow drain is fitted (``dischargelab.fit``) four ways: as a flight log (``auto``:
+ecm with its dynamics held absent, the thermal prior for airflow), the same with ecm's RC
+pairs and diffusion state fitted anyway (their bounds given), as a bench discharge
 (``auto``: shepherd-thermal with the thermal prior for still air), and as a bench
 discharge with the cell held at the ambient (``cooling=None``: the behaviour without a
 thermal prior: eq. 6). Each fit is checked with ``dischargelab.validate`` on the fast
 drain (endurance to 3.3 V/cell held 10 s, its 95 % interval, the extrapolation warning)
 and on the 27 A flight (voltage RMS in % of the mean pack voltage).
+
+**Slow drains of measured and virtual cells** (no model writes them; the truth at every
+faster rate is measured): the slowest run of each cell with a rate series, its temperature
+column dropped, is fitted three of the ways above (``ecm`` on one steady rate holds its
+dynamics absent, with the airflow prior, as the flight-log path does; ``ecm`` with them
+fitted anyway; ``auto`` as a bench discharge) and predicts every faster run's time to its
+cutoff (``Battery.predict`` at its mean current and ambient): Samsung 30Q C/10, Enertech LCO
+0.1C, the PyBaMM NMC, LCO and LFP cells at 0.1C (``benchmarks/accuracy.py`` loads them).
 
 **Real logs** (``../shared/data/flight_logs/ina3221_fpv_4s``): the 29.csv flight (a
 Dinogy 1600 mAh 4S, 24 A mean) is fitted as a flight log, with and without the thermal
@@ -32,7 +41,7 @@ the slow -> fast figure itself is measured on the synthetic pack only.
 
 Goals (issue): endurance within 5 %, voltage RMS <= 1.3 % on ~27 A flights.
 
-Usage: python benchmarks/slow_to_fast.py [--data DIR]
+Usage: python benchmarks/slow_to_fast.py [--data DIR] [--cells samsung,enertech,...|none]
 """
 
 import os
@@ -60,6 +69,8 @@ CELLS, CAPACITY_AH = 3, 12.0
 R0_OHM, R1_OHM, TAU1_S, TAU_D_S, BETA_K = 0.0028, 0.0015, 60.0, 300.0, 3000.0
 CTH_J_PER_K, RTH_BENCH, RTH_FLIGHT = 305.0, 7.5, 3.0
 AMBIENT_C = 25.0
+#: Idle current of the logged rest before each run [A].
+REST_A = 0.05
 LEAD_PER_TAU = 4.493409457909064 ** 2 / 15.0
 GOAL_ENDURANCE_PCT, GOAL_RMS_PCT = 5.0, 1.3
 
@@ -91,11 +102,18 @@ def truth(current_of, *, dt, rth, stop, t_max):
     return [np.array(c) for c in zip(*out)]
 
 
-def write_ina(path, t, i, v, rest_s=20.0, rest_A=0.05):
+def rest_pack_V(rest_A=REST_A):
+    """Pack voltage of the full, rested pack at the idle current ``rest_A`` [A] (the
+    truth's open-circuit voltage less the series drop; the RC pair and the diffusion
+    lead are relaxed)."""
+    return CELLS * (float(ocv_from_soc(1.0, "lipo")) - R0_OHM * rest_A)
+
+
+def write_ina(path, t, i, v, rest_s=20.0, rest_A=REST_A):
     """INA3221-style CSV (time ms, pack V, equal cells, current mA, shunt mV), after
-    ``rest_s`` at rest at the first voltage."""
+    ``rest_s`` at rest, full, at the idle current ``rest_A``."""
     n_rest = int(rest_s)
-    rows = [(k * 1.0, rest_A, v[0] + 0.002) for k in range(n_rest)]
+    rows = [(k * 1.0, rest_A, rest_pack_V(rest_A)) for k in range(n_rest)]
     rows += [(rest_s + tk, ik, vk) for tk, ik, vk in zip(t, i, v)]
     with open(path, "w", encoding="utf-8") as fh:
         for tk, ik, vk in rows:
@@ -137,10 +155,71 @@ def synthetic_runs(folder: Path):
     return slow, fast
 
 
+def delivered(run, until_s=None) -> float:
+    """Charge [Ah] a synthetic run delivered (up to ``until_s`` [s])."""
+    keep = run["t"] <= (run["t"][-1] if until_s is None else until_s)
+    return float(np.trapezoid(run["i"][keep], run["t"][keep]) / 3600.0)
+
+
 def slow_discharge(slow) -> Discharge:
     """The slow drain as a bench discharge (no temperature), rest voltage first."""
     return Discharge(slow["t"], slow["v"], slow["i"], None,
-                     float(slow["v"][0]) + 0.002, "slow drain (bench)")
+                     rest_pack_V(0.0), "slow drain (bench)")
+
+
+#: Cells with a rate series whose slowest run is fitted alone (``accuracy.SETS`` keys):
+#: (the slowest run, the faster ones predicted).
+SLOW_CELLS = {
+    "samsung": ("C10", ("1C", "2C", "3C", "4C")),
+    "enertech": ("0.1C", ("0.5C", "1C", "2C")),
+    "nmc": ("0.1C", ("0.5C", "1C", "2C", "3C")),
+    "lco": ("0.1C", ("0.5C", "1C", "2C", "3C")),
+    "lfp": ("0.1C", ("0.5C", "1C", "2C")),
+}
+
+
+def dynamics_free() -> dict:
+    """Bounds (the family's own) on the ecm parameters a fit to one steady drain holds
+    absent: given bounds, the fit fits them instead."""
+    from dischargelab.models import get_family
+
+    family = get_family("ecm")
+    return {n: (family.parameter(n).lower, family.parameter(n).upper)
+            for n in family.steady_fixed}
+
+
+def slow_cells(data: Path, names):
+    """Slowest run of each cell fitted as a flight log's steady drain would be and as a
+    bench discharge, predicting the faster runs: one table row per cell and way."""
+    from dataclasses import replace
+
+    import accuracy
+
+    print("\n## Slow drains of measured and virtual cells (temperature dropped): the "
+          "faster runs predicted\n")
+    print("| cell | fitted on | way | model | faster runs: endurance error (in / OUT: "
+          "the 95 % interval covers / misses) |")
+    print("|---|---|---|---|---|")
+    for name in names:
+        title, runs, _ = accuracy.SETS[name](data)
+        slow_key, fast_keys = SLOW_CELLS[name]
+        drain = replace(runs[slow_key].discharge, temperature_C=None)
+        for way, kw in (("flight-log rule: ecm, airflow prior", dict(model="ecm",
+                                                                    cooling="airflow")),
+                        ("ecm, dynamics fitted anyway, airflow prior",
+                         dict(model="ecm", cooling="airflow", bounds=dynamics_free())),
+                        ("bench: auto, still-air prior", {})):
+            res = dl.fit(drain, bootstrap=20, **kw)
+            cells = []
+            for key in fast_keys:
+                run = runs[key]
+                out = res.battery.predict(current=run.current_A, cutoff=run.cutoff_V,
+                                          ambient=run.ambient_C).to_dict()
+                lo, hi = out["interval95"]["time_to_cutoff_s"]
+                err = 100.0 * (out["time_to_cutoff_s"] / run.measured_s - 1.0)
+                cells.append(f"{key} {err:+.1f} % "
+                             f"({'in' if lo <= run.measured_s <= hi else 'OUT'})")
+            print(f"| {title} | {slow_key} | {way} | {res.model} | {', '.join(cells)} |")
 
 
 def pct_rms(row, pack_mean_V):
@@ -152,6 +231,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=None,
                         help="shared data folder (default: ../shared/data beside the repo)")
+    parser.add_argument("--cells", default=",".join(SLOW_CELLS),
+                        help="cells whose slowest run is fitted alone (default all; 'none')")
     args = parser.parse_args(argv)
     data = args.data
     if data is None:
@@ -174,10 +255,18 @@ def main(argv=None):
               f"{np.mean(fast['i']):.1f} A mean, {np.max(fast['i']):.0f} A peaks, 3.3 V/cell "
               f"held 10 s after {true_s:.0f} s, heats {np.max(fast['T']) - AMBIENT_C:.1f} K; "
               f"27 A flight: {np.mean(flight_v[flying, 1]) / 1000:.1f} A mean, pack "
-              f"{mean_27:.2f} V mean.\n")
+              f"{mean_27:.2f} V mean. The slow drain delivers {delivered(slow):.2f} Ah to "
+              f"3.0 V/cell, the fast drain {delivered(fast, true_s):.2f} Ah "
+              f"({100 * delivered(fast, true_s) / delivered(slow):.0f} %): the diffusion "
+              f"lead alone costs {LEAD_PER_TAU * TAU_D_S / 3600:.3f} Ah per ampere "
+              f"({100 * LEAD_PER_TAU * TAU_D_S / 3600:.0f} % of "
+              f"the capacity per C).\n")
         fits = [
             ("flight log, auto (ecm, dynamics absent, thermal prior: airflow)",
              lambda: dl.fit(flight_curves(folder / "slow.csv"), bootstrap=0)),
+            ("flight log, ecm with its dynamics fitted anyway (bounds given)",
+             lambda: dl.fit(flight_curves(folder / "slow.csv"), model="ecm",
+                            bounds=dynamics_free(), bootstrap=0)),
             ("bench discharge, auto (shepherd-thermal, thermal prior: still air)",
              lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30)),
             ("bench discharge, auto, cooling=None (held at the ambient: eq. 6)",
@@ -201,6 +290,9 @@ def main(argv=None):
             print(f"| {label} | {res.model} | {row['endurance_error_pct']:+.1f} % | {ivs} | "
                   f"{warn} | {pct_rms(row, fast_mean):.2f} % | "
                   f"{pct_rms(row27, mean_27):.2f} % |")
+    names = [n for n in args.cells.split(",") if n and n != "none"]
+    if names and data is not None and (data / "samsung30q_S001").is_dir():
+        slow_cells(data, names)
     if data is not None and (data / "flight_logs" / "ina3221_fpv_4s").is_dir():
         folder = data / "flight_logs" / "ina3221_fpv_4s"
         print("\n## Real logs: 29.csv fitted as a flight log, flying 29.csv and 28.csv\n")

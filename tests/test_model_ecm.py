@@ -396,3 +396,38 @@ def test_a_log_whose_ambient_drifts_more_than_the_cell_heats_keeps_the_defaults(
     assert any("thermal model: default (the logged temperature could not be used)" in n
                for n in res.notes)
     assert res.parameters["Rth_K_per_W"] < 100.0
+
+
+# ---- (7) one steady rate: the dynamics held absent --------------------------------------------
+def test_one_steady_rate_holds_the_dynamics_absent():
+    """One constant current cannot show RC pairs or the diffusion lead (time under load
+    and charge drawn are proportional): the fit holds them absent and says so, unless
+    the caller fixes or bounds them; two rates or a varying current fit them."""
+    from dataclasses import replace
+
+    from dischargelab.fit.family import one_steady_rate, steady_current
+    from synthetic import synthetic_curve
+
+    slow = synthetic_curve(1.0, seed=3, dt_s=4.0)
+    absent = {"R1_ohm": 0.0, "R2_ohm": 0.0, "tau_d_s": 1.0}
+    assert ECM.steady_fixed == absent
+    res = fit_battery(slow, model="ecm", model_error=False)
+    assert {n: res.parameters[n] for n in absent} == absent
+    assert set(absent) <= set(res.fixed) and "cannot show the cell's dynamics" in res.notes[0]
+    # the caller's choice wins
+    res = fit_battery(slow, model="ecm", model_error=False, fixed={"R1_ohm": 0.002},
+                      bounds={"tau_d_s": (50.0, 500.0)})
+    assert res.parameters["R1_ohm"] == 0.002 and res.parameters["R2_ohm"] == 0.0
+    assert 50.0 <= res.parameters["tau_d_s"] <= 500.0 and "tau_d_s" not in res.fixed
+    # several rates, or one varying current, show them
+    fast = synthetic_curve(3.0, seed=4)
+    assert not one_steady_rate([slow, fast])
+    res = fit_battery([slow, fast], model="ecm", model_error=False)
+    assert not set(absent) & set(res.fixed)
+    assert not any("dynamics" in n for n in res.notes)
+    varying = replace(slow, current_A=slow.current_A * (1.0 + 0.5 * np.sin(slow.time_s / 60)))
+    assert not steady_current(varying.current_A) and not one_steady_rate(varying)
+    assert one_steady_rate(slow) and one_steady_rate([slow, synthetic_curve(1.1, seed=5)])
+    # a family without dynamics is untouched
+    assert fit_battery(slow, model="shepherd", model_error=False).notes[0].find(
+        "dynamics") < 0

@@ -13,7 +13,7 @@ EXAMPLES = sorted((REPO / "examples").glob("*.py"))
 BENCHMARKS = {
     "fit_speed.py": (["--repeats", "3"], "speed-up"),
     "fit_latency.py": (["--repeats", "1", "--bootstrap", "10"], "x the baseline"),
-    "slow_to_fast.py": ([], "endurance error"),
+    "slow_to_fast.py": (["--cells", "enertech"], "endurance error"),
     "accuracy.py": (["--sets", "enertech"], "endurance error"),
     "mission_speed.py": (["--repeats", "1"], "Table 5"),
     "io_read_speed.py": (["--repeats", "1", "--rows", "20000"], "ms"),

@@ -110,3 +110,26 @@ def test_paper_presets_simulate():
     for bat in PRESETS.values():
         r = simulate_current(bat, bat.fit_currents_A[0], cutoff_cell_V=2.5)
         assert 0.8 < r.capacity_Ah / bat.parameters.C_Ah < 1.0
+
+
+def test_a_longer_longest_step_keeps_the_time_to_cutoff():
+    """The engine's 60 s longest step bounds a slow discharge's steps; lifted (as the
+    fit's held-out checks do), a C/10 discharge takes its 50 points and reaches the same
+    cutoff: exactly for an isothermal cell, to 1e-4 with self-heating."""
+    from dataclasses import replace
+
+    from dischargelab.models import get_family
+
+    slow = dict(cutoff_cell_V=3.0, points=50)
+    capped = simulate_current(CELL, 0.31, **slow)
+    free = simulate_current(CELL, 0.31, max_step_s=float("inf"), **slow)
+    assert capped.time_s.size > 500 and free.time_s.size < 60
+    assert free.time_to_cutoff_s == pytest.approx(capped.time_to_cutoff_s, rel=1e-9)
+    thermal = get_family("shepherd-thermal")
+    warm = replace(CELL, model="shepherd-thermal", parameters=CellParameters(dict(
+        thermal.defaults(), **CELL.parameters.as_dict(), Cth_J_per_K=45.0,
+        Rth_K_per_W=20.0)))
+    capped = simulate_current(warm, 1.0, **slow)
+    free = simulate_current(warm, 1.0, max_step_s=float("inf"), **slow)
+    assert capped.peak_temperature_C > warm.ambient_C + 0.5
+    assert free.time_to_cutoff_s == pytest.approx(capped.time_to_cutoff_s, rel=1e-4)

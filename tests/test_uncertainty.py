@@ -77,10 +77,10 @@ def test_model_error_prior_grows_with_the_extrapolation_ratio():
         pytest.approx(four, rel=1e-12)
 
 
-def test_one_rate_growth_widens_on_a_flat_plateau_and_for_ecm():
+def test_one_rate_growth_widens_on_a_flat_plateau():
     """A flat curve (the middle 60 % of the charge holds a tenth of the drop, LiFePO4)
     multiplies the one-rate growth by (1/3) / ratio, at most 4; a sloped one keeps it;
-    ecm's own one-rate growth is 3."""
+    ecm (its dynamics held absent on one steady rate) has the same growth as eq. 6."""
     four = PRIOR_RELATIVE_SD * (1 + 2.0 * math.log(4.0))
     sloped = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.35})
     assert model_error_sd(sloped, 12.0) == pytest.approx(four, rel=1e-12)
@@ -93,8 +93,7 @@ def test_one_rate_growth_widens_on_a_flat_plateau_and_for_ecm():
         PRIOR_RELATIVE_SD * (1 + 8.0 * math.log(4.0)), rel=1e-12)
     ecm = Battery(CellParameters(get_family("ecm").defaults()), fit_currents_A=(3.0,),
                   model="ecm")
-    assert model_error_sd(ecm, 12.0) == pytest.approx(
-        PRIOR_RELATIVE_SD * (1 + 3.0 * math.log(4.0)), rel=1e-12)
+    assert model_error_sd(ecm, 12.0) == pytest.approx(four, rel=1e-12)
 
 
 def test_plateau_ratio_of_measured_curves(shared_data):
@@ -150,8 +149,10 @@ def test_held_out_model_error_uses_students_t():
 def test_held_out_errors_are_brought_back_to_the_fitted_currents():
     """A curve predicted from another one ten times its current carries the error of a
     ten-fold extrapolation of a one-rate fit: reported, not pooled into the error inside
-    the fitted currents; the curve ends left out are. From three curves, a curve left
-    out is predicted by a fit that still spans several rates: its error, divided by
+    the fitted currents. A curve's end left out is predicted from the knees at the other
+    currents: its error, divided by 1 + 0.8 ln r (r the ratio to the nearest other
+    current; 1 between two others), is pooled. From three curves, a curve left out is
+    predicted by a fit that still spans several rates: its error, divided by
     1 + 0.8 ln r, joins the pool."""
     from dischargelab.fit import Curve, held_out_error
 
@@ -167,19 +168,49 @@ def test_held_out_errors_are_brought_back_to_the_fitted_currents():
     assert err["extrapolation_ratios"] == pytest.approx([10.0, 10.0], rel=0.02)
     raw = err["held_out_rms"]
     assert raw > 0.01
-    # the curve ends left out: every rate stays in the fit, the error is at r = 1
+    # the curve ends left out: each knee predicted from the other rate's, r = 10
     assert len(err["end_errors_pct"]) == 2 and err["end_rms"] is not None
-    sd, dof = held_out_posterior([e / 100 for e in err["end_errors_pct"]])
+    assert err["end_ratios"] == pytest.approx([10.0, 10.0], rel=0.02)
+
+    def back(errors_pct, ratios):
+        return [e / 100 / (1 + EXTRAPOLATION_GROWTH * math.log(r))
+                for e, r in zip(errors_pct, ratios)]
+
+    sd, dof = held_out_posterior(back(err["end_errors_pct"], err["end_ratios"]))
     assert err["relative_sd"] == pytest.approx(sd) and err["dof"] == dof == 4
     assert err["pooled"] == 2 and err["relative_sd"] < raw
 
     three = held_out_error([curve(4.1, "1C"), curve(12.3, "3C"), curve(41.0, "10C")],
                            model="shepherd", cells_series=HACKER.cells_series)
     assert len(three["errors_pct"]) == 3 and three["pooled"] == 6
-    normalised = [e / 100 / (1 + EXTRAPOLATION_GROWTH * math.log(r))
-                  for e, r in zip(three["errors_pct"], three["extrapolation_ratios"])]
-    sd, dof = held_out_posterior(normalised + [e / 100 for e in three["end_errors_pct"]])
+    assert three["end_ratios"] == pytest.approx([3.0, 1.0, 3.33], rel=0.02)
+    sd, dof = held_out_posterior(back(three["errors_pct"], three["extrapolation_ratios"])
+                                 + back(three["end_errors_pct"], three["end_ratios"]))
     assert three["relative_sd"] == pytest.approx(sd) and three["dof"] == dof == 8
+
+
+def test_the_model_error_is_never_below_the_fitted_curves_own_error():
+    """The rate-capacity check's error at the fitted currents (the fitted curves' own
+    times to one voltage) is a lower bound of the model error inside them."""
+    from dischargelab.fit import Curve, fit_battery
+
+    def curve(current, name):
+        sim = simulate_current(HACKER, current, cutoff_cell_V=2.8)
+        t = sim.time_s * (1.0 - 0.06 * (current > 10))   # 6 % short at the high rate
+        return Curve(t, sim.voltage_V, sim.current_A, name=name,
+                     rest_voltage_V=float(sim.voltage_V[0]) + 0.05)
+
+    res = fit_battery([curve(4.1, "1C"), curve(41.0, "10C")], model="shepherd",
+                      cells_series=HACKER.cells_series)
+    err = res.model_error
+    fitted = np.array(err["rate_capacity"]["fitted_pct"]) / 100
+    assert err["fitted_floor"] == pytest.approx(float(np.sqrt(np.mean(fitted ** 2))))
+    pooled, _ = held_out_posterior(
+        [e / 100 / (1 + EXTRAPOLATION_GROWTH * math.log(r))
+         for e, r in zip(err["end_errors_pct"], err["end_ratios"])]
+        + [e / 100 for e in err["rate_capacity"]["between_pct"]])
+    assert pooled < err["fitted_floor"]          # the held-out errors alone say less
+    assert err["relative_sd"] == pytest.approx(err["fitted_floor"])
 
 
 def test_peak_temperature_interval():

@@ -245,7 +245,8 @@ def run(family, params: dict, steps, *, cutoff_pack_V: float, cells_series: int 
         strings_parallel: int = 1, ambient_C: float = DEFAULT_AMBIENT_C,
         initial_charge_Ah=0.0, initial_temperature_C=None, reserve_charge_Ah=None,
         record: bool = False, steps_per_discharge: int = STEPS_PER_DISCHARGE,
-        max_engine_steps: int = MAX_ENGINE_STEPS, initial_state=None) -> EngineResult:
+        max_engine_steps: int = MAX_ENGINE_STEPS, initial_state=None,
+        max_dt_s: float = MAX_DT_S) -> EngineResult:
     """Fly ``steps`` for every parameter draw until each stops.
 
     Parameters
@@ -276,6 +277,11 @@ def run(family, params: dict, steps, *, cutoff_pack_V: float, cells_series: int 
         Cell states per draw to start from (e.g. ``final_state`` of an earlier
         run, to continue a flight); replaces ``initial_charge_Ah`` and
         ``initial_temperature_C``.
+    max_dt_s : float
+        Longest engine time step [s] (:data:`MAX_DT_S`; a larger one, up to infinity,
+        where only the time to the cutoff counts: charge and filtered currents are
+        advanced exactly, the cutoff located by bisection, and the heat of a step is
+        its predictor-corrector mean).
 
     Returns
     -------
@@ -307,7 +313,8 @@ def run(family, params: dict, steps, *, cutoff_pack_V: float, cells_series: int 
         e_start = energy.copy()
         if active.any():
             state = _run_step(pack, st, k, state, active, ended, t_now, energy, vmin, peak_t,
-                              cutoff_pack_V, reserve, steps_per_discharge, rec, budget)
+                              cutoff_pack_V, reserve, steps_per_discharge, rec, budget,
+                              max_dt_s)
         summaries.append(StepSummary(
             start_s=start, end_s=t_now.copy(), charge_end_Ah=state["charge_Ah"] * pack.par,
             min_voltage_V=vmin, peak_temperature_C=peak_t.copy(), energy_Wh=energy - e_start))
@@ -386,7 +393,7 @@ def _put(state, mask, sub):
         state[k][mask] = sub[k]
 
 
-def _dt_for(pack, st, state, steps_per_discharge):
+def _dt_for(pack, st, state, steps_per_discharge, max_dt_s=MAX_DT_S):
     """Engine step [s] per draw (each draw's own, so batching does not change results)."""
     m = state["charge_Ah"].size
     end = st.end_s
@@ -408,15 +415,15 @@ def _dt_for(pack, st, state, steps_per_discharge):
     horizon = left * 3600.0 / i
     if end is not None:
         horizon = np.minimum(horizon, end)
-    return np.clip(horizon / steps_per_discharge, 1e-3, MAX_DT_S)
+    return np.clip(horizon / steps_per_discharge, 1e-3, max_dt_s)
 
 
 def _run_step(pack, st, k, state, active, ended, t_now, energy, vmin, peak_t, cutoff, reserve,
-              steps_per_discharge, rec, budget):
+              steps_per_discharge, rec, budget, max_dt_s=MAX_DT_S):
     """Advance the active draws through one step, in place; returns the new state."""
     end = st.end_s
     t_in = np.zeros(t_now.size)
-    dt = _dt_for(pack, st, state, steps_per_discharge)
+    dt = _dt_for(pack, st, state, steps_per_discharge, max_dt_s)
     running = active.copy()
     if end is not None and end <= 0:
         return state

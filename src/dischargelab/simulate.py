@@ -157,7 +157,8 @@ def _cutoff_pack(battery: Battery, cutoff_cell_V, cutoff_pack_V) -> float:
 def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
              cutoff_pack_V: float | None = None, initial_charge_Ah: float = 0.0,
              points_per_step: int = POINTS_PER_STEP, ambient_C: float | None = None,
-             reserve_charge_Ah: float | None = None) -> SimulationResult:
+             reserve_charge_Ah: float | None = None,
+             max_step_s: float = engine.MAX_DT_S) -> SimulationResult:
     """Run load steps one after another until the profile ends or the cutoff is reached.
 
     Parameters
@@ -176,6 +177,8 @@ def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
         Ambient temperature [degC] for thermal families (default: the fitted data's).
     reserve_charge_Ah : float, optional
         Stop when this pack charge has been removed [Ah].
+    max_step_s : float
+        Longest engine time step [s] (see :func:`dischargelab.engine.run`).
 
     Returns
     -------
@@ -211,7 +214,8 @@ def simulate(battery, steps, *, cutoff_cell_V: float | None = None,
                      cells_series=battery.cells_series,
                      strings_parallel=battery.strings_parallel, ambient_C=ambient,
                      initial_charge_Ah=initial_charge_Ah, reserve_charge_Ah=reserve_charge_Ah,
-                     record=True, steps_per_discharge=max(int(points_per_step), 50))
+                     record=True, steps_per_discharge=max(int(points_per_step), 50),
+                     max_dt_s=max_step_s)
     ser = res.series
     t, i, v = ser["time_s"], ser["current_A"], ser["voltage_V"]
     power = i * v
@@ -251,13 +255,14 @@ def _cumulative_energy(t, p):
 def simulate_current(battery, current_A: float, *, cutoff_cell_V: float | None = None,
                      cutoff_pack_V: float | None = None, initial_charge_Ah: float = 0.0,
                      points: int = POINTS_PER_STEP,
-                     ambient_C: float | None = None) -> SimulationResult:
+                     ambient_C: float | None = None,
+                     max_step_s: float = engine.MAX_DT_S) -> SimulationResult:
     """Constant-current discharge [A, pack] until the cutoff (paper Figs 5, 7, 10)."""
     if not current_A > 0:
         raise SimulationError(f"discharge current must be > 0 A, got {current_A}")
     return simulate(battery, [Step("current", float(current_A))], cutoff_cell_V=cutoff_cell_V,
                     cutoff_pack_V=cutoff_pack_V, initial_charge_Ah=initial_charge_Ah,
-                    points_per_step=points, ambient_C=ambient_C)
+                    points_per_step=points, ambient_C=ambient_C, max_step_s=max_step_s)
 
 
 def simulate_power(battery, power_W: float, *, cutoff_cell_V: float | None = None,

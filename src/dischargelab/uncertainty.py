@@ -341,13 +341,14 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
 
     * ``s0 = max(s_held_out, 0.005)``, ``g = 0.8`` when the battery file holds
       ``model_error = {"relative_sd": s_held_out, "source": "held-out"}`` (stored by
-      the fit when >= 2 rates were fitted: the errors of curve ends left out, of the
-      rate-capacity check between the fitted currents and, from three curves, of
-      whole curves left out brought back to the fitted currents, pooled with the
-      prior; :func:`dischargelab.fit.heldout.held_out_error`);
+      the fit when >= 2 rates were fitted: the errors of curve ends left out and, from
+      three curves, of whole curves left out, each brought back to the fitted currents
+      by ``1 + 0.8 ln r_k``, and of the rate-capacity check between the fitted currents,
+      pooled with the prior, and at least the fitted curves' own error of the time to
+      cutoff; :func:`dischargelab.fit.heldout.held_out_error`);
     * ``s0 = 0.015`` otherwise (prior: the paper's endurance errors on unseen rates
-      were 1-6 %), ``g`` the family's ``one_rate_growth`` (2; ecm 3: one rate cannot
-      show how capacity and overpotentials change with rate) times
+      were 1-6 %), ``g`` the family's ``one_rate_growth`` (2: one rate cannot show how
+      capacity and overpotentials change with rate) times
       ``SLOPED_PLATEAU_RATIO / plateau ratio`` for a flat curve (at most x4), and at
       least 4 for an isothermal family fitted to data that logged 5 K or more of
       self-heating (heat the model ignores grows as I^2 R).

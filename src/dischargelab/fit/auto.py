@@ -9,8 +9,8 @@ import numpy as np
 
 from ..errors import FitError
 from ..models import get_family
-from .family import fit_family
-from .heldout import held_out_error, several_rates
+from .family import fit_family, several_rates
+from .heldout import held_out_error
 from .result import FitResult
 
 AUTO = "auto"

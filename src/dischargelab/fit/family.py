@@ -68,6 +68,53 @@ def _starts(model: _Model, bounds: dict, guess: dict | None):
     return np.clip(mesh, lo + 1e-9 * span, hi - 1e-9 * span), lo, hi
 
 
+def several_rates(curves) -> bool:
+    """Two or more curves whose mean currents differ by 20 % or more."""
+    currents = [c.mean_current_A for c in curves]
+    return len(curves) >= 2 and max(currents) >= 1.2 * min(currents)
+
+
+#: A load current is steady when its coefficient of variation (over the samples above
+#: half the median current) is below this [-].
+STEADY_CURRENT_CV = 0.25
+
+
+def steady_current(current_A) -> bool:
+    """True when a load current is a near-constant drain (:data:`STEADY_CURRENT_CV`)."""
+    i = np.asarray(current_A, dtype=float)
+    load = i[i > 0.5 * np.median(i)] if i.size else i
+    return bool(load.size > 1 and np.std(load) < STEADY_CURRENT_CV * np.mean(load))
+
+
+def one_steady_rate(curves) -> bool:
+    """True when the curves are near-constant drains at one rate (not :func:`several_rates`):
+    data that cannot show a cell's dynamics (``Family.steady_fixed``)."""
+    curves = [curves] if isinstance(curves, Curve) else list(curves)
+    return bool(curves) and not several_rates(curves) and \
+        all(steady_current(c.current_A) for c in curves)
+
+
+def steady_dynamics(curves, model, fixed: dict | None, bounds: dict | None):
+    """``(fixed, note)``: the family's ``steady_fixed`` parameters added to ``fixed`` when
+    the curves are :func:`one_steady_rate` (those the caller fixes or bounds excepted),
+    with the note that says so; ``(fixed, None)`` otherwise."""
+    family = get_family(model)
+    held = {n: v for n, v in family.steady_fixed.items()
+            if n not in (fixed or {}) and n not in (bounds or {})}
+    if not held or not one_steady_rate(curves):
+        return fixed, None
+    note = (f"{', '.join(held)} held at {', '.join(f'{v:g}' for v in held.values())} (effect "
+            f"absent): one constant current cannot show the cell's dynamics (time under load "
+            f"and charge drawn are proportional, so the OCV takes them up); fit two or more "
+            f"rates or a varying current to fit them")
+    return dict(held, **(fixed or {})), note
+
+
+#: Relative decrease of the cost below which a warm-started fit stops (the solver's
+#: default: converged to round-off).
+WARM_FTOL = 1e-12
+
+
 def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 fixed: dict | None = None, bounds: dict | None = None,
                 guess: dict | None = None, paper_mode: bool = False, use_rest: bool = True,
@@ -75,29 +122,43 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
                 seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
                 max_samples: int = MAX_SAMPLES_PER_CURVE,
                 bootstrap_method: str = "linearised", cooling: str | None = "still-air",
-                chemistry: str | None = None) -> FitResult:
+                chemistry: str | None = None, warm_ftol: float = WARM_FTOL) -> FitResult:
     """Fit one model family (``model`` a family name, not ``"auto"``) without its
     held-out model error (:func:`dischargelab.fit.heldout.held_out_error`); see
     :func:`dischargelab.fit.fit_battery` for the parameters.
 
     ``start`` (values of the nonlinear parameters, e.g. a fit to more of the same
-    data) skips the multi-start search and refines from there: a warm start.
+    data) skips the multi-start search and refines from there: a warm start, which
+    stops when a step lowers the cost by less than ``warm_ftol`` of it.
     ``max_samples`` thins each curve to at most that many samples. A thermal family
     fitted without a logged temperature gets the thermal prior of ``cooling`` and
     ``chemistry`` (:func:`fit_self_heating`; ``cooling``
-    None holds the cell at the ambient instead)."""
+    None holds the cell at the ambient instead). A family's ``steady_fixed`` parameters
+    are held absent on :func:`one_steady_rate` data (:func:`steady_dynamics`)."""
+    fixed, steady_note = steady_dynamics(curves, model, fixed, bounds)
+    if steady_note is not None:
+        res = fit_family(curves, cells_series=cells_series, strings_parallel=strings_parallel,
+                         fixed=fixed, bounds=bounds, guess=guess, paper_mode=paper_mode,
+                         use_rest=use_rest, weighting=weighting, n_best=n_best,
+                         bootstrap=bootstrap, seed=seed, model=model, progress=progress,
+                         start=start, max_samples=max_samples,
+                         bootstrap_method=bootstrap_method, cooling=cooling,
+                         chemistry=chemistry, warm_ftol=warm_ftol)
+        res.notes.insert(0, steady_note)
+        return res
     if needs_prior(curves, model, cooling):
         return fit_self_heating(
             curves, cooling=cooling, chemistry=chemistry, cells_series=cells_series,
             strings_parallel=strings_parallel, fixed=fixed, bounds=bounds, guess=guess,
             paper_mode=paper_mode, use_rest=use_rest, weighting=weighting, n_best=n_best,
             bootstrap=bootstrap, seed=seed, model=model, progress=progress, start=start,
-            max_samples=max_samples, bootstrap_method=bootstrap_method)
+            max_samples=max_samples, bootstrap_method=bootstrap_method, warm_ftol=warm_ftol)
     return fit_once(curves, cells_series=cells_series, strings_parallel=strings_parallel,
                     fixed=fixed, bounds=bounds, guess=guess, paper_mode=paper_mode,
                     use_rest=use_rest, weighting=weighting, n_best=n_best, bootstrap=bootstrap,
                     seed=seed, model=model, progress=progress, start=start,
-                    max_samples=max_samples, bootstrap_method=bootstrap_method)
+                    max_samples=max_samples, bootstrap_method=bootstrap_method,
+                    warm_ftol=warm_ftol)
 
 
 def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
@@ -106,7 +167,8 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
              weighting: str = "equal", n_best: int | None = None, bootstrap: int = 0,
              seed: int = 0, model="shepherd", progress=None, start: dict | None = None,
              max_samples: int = MAX_SAMPLES_PER_CURVE, bootstrap_method: str = "linearised",
-             virtual_temperature=None, thermal_prior: dict | None = None) -> FitResult:
+             virtual_temperature=None, thermal_prior: dict | None = None,
+             warm_ftol: float = WARM_FTOL) -> FitResult:
     """One fit of one family (see :func:`fit_family`); ``virtual_temperature`` (per
     curve, a simulated cell temperature [degC]) stands in for the unlogged temperature,
     and ``thermal_prior`` (``Cth_J_per_K``, ``Rth_K_per_W``, ``note``) gives a thermal
@@ -151,7 +213,7 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             if not np.all(np.isfinite(mdl.varpro_residual(warm))):
                 warm = None  # the start is undefined on these data: search instead
     if warm is not None:
-        sol = _varpro_solve(mdl, warm, lo, hi)
+        sol = _varpro_solve(mdl, warm, lo, hi, ftol=warm_ftol)
         nfev += sol.nfev
         theta = sol.x
     elif mdl.nonlinear:

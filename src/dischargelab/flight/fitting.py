@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError, FitError
-from ..models.ecm import TAU_D_BOUNDS_S
+from ..fit.family import one_steady_rate, steady_current  # noqa: F401  (steady_current: API)
 from ..ocv import (
     OCV_SOURCE,
     check_chemistry,
@@ -385,22 +385,6 @@ def _coulomb_checks(fc: FlightCurves) -> list[str]:
     return notes
 
 
-#: A flight's load current is steady when its coefficient of variation (over the
-#: samples above half the median current) is below this [-].
-STEADY_CURRENT_CV = 0.25
-
-
-#: ``ecm`` parameters held at "effect absent" for steady drains (``fit_flights``).
-STEADY_DRAIN_FIXED = {"R1_ohm": 0.0, "R2_ohm": 0.0, "tau_d_s": TAU_D_BOUNDS_S[0]}
-
-
-def steady_current(current_A) -> bool:
-    """True when a load current is a near-constant drain (:data:`STEADY_CURRENT_CV`)."""
-    i = np.asarray(current_A, dtype=float)
-    load = i[i > 0.5 * np.median(i)] if i.size else i
-    return bool(load.size > 1 and np.std(load) < STEADY_CURRENT_CV * np.mean(load))
-
-
 def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: int = 1,
                 cells: int | None = None, fixed: dict | None = None,
                 bounds: dict | None = None, bootstrap: int = 0, seed: int = 0,
@@ -417,10 +401,11 @@ def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: 
     flights : FlightCurves
     model : str
         Model family; ``"auto"`` means ``"ecm"``: with its RC pairs and diffusion
-        state driven by the logged current when it varies, else (every flight a
-        near-constant drain, :func:`steady_current`) with those held absent (OCV
-        and series resistance only: one constant current cannot show the cell's
-        dynamics, and RC pairs fitted to it extrapolate to other currents badly).
+        state driven by the logged current when it varies, else (near-constant drains
+        at one rate, :func:`~dischargelab.fit.family.one_steady_rate`) with those held
+        absent (OCV and series resistance only: one constant current cannot show the
+        cell's dynamics, and RC pairs fitted to it extrapolate to other currents badly;
+        the fit does this for any ``ecm`` fit of such data).
     strings_parallel : int
         Strings in parallel of the pack.
     cells : int, optional
@@ -446,9 +431,7 @@ def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: 
         raise FitError("strings_parallel must be at least 1")
     name = "ecm" if model == AUTO else model
     family = get_family(name)
-    steady = model == AUTO and all(steady_current(c.current_A) for c in flights.curves)
-    if steady:
-        fixed = dict(STEADY_DRAIN_FIXED, **(fixed or {}))
+    steady = model == AUTO and one_steady_rate(flights.curves)
     all_bounds = dict(flights.capacity_bounds(strings_parallel))
     all_bounds.update(bounds or {})
     c_bounds = all_bounds.get("C_Ah")
@@ -464,8 +447,9 @@ def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: 
     notes = list(flights.notes)
     if steady:
         notes.insert(0, "model ecm chosen for flights, with its RC pairs and diffusion state "
-                        "held absent (OCV and series resistance only): every flight is a "
-                        "near-constant drain, which cannot show the cell's dynamics")
+                        "held absent (OCV and series resistance only): the flights are "
+                        "near-constant drains at one rate, which cannot show the cell's "
+                        "dynamics")
     elif model == AUTO:
         notes.insert(0, "model ecm chosen for flights (RC pairs driven by the logged current)")
     prior = [n for n in all_fixed if n.startswith("ocv_d") and n not in (fixed or {})]

@@ -250,6 +250,11 @@ class Family:
     #: (:func:`dischargelab.uncertainty.extrapolation_growth`; calibrated by
     #: ``benchmarks/accuracy.py``).
     one_rate_growth: float = 2.0
+    #: Parameters that one constant current cannot show, held at the value that makes
+    #: their effect absent when the fit has one steady rate
+    #: (:func:`dischargelab.fit.family.one_steady_rate`), unless the caller fixes or
+    #: bounds them.
+    steady_fixed: dict = {}
 
     # ---- parameters -------------------------------------------------------------
     @property
