@@ -32,52 +32,24 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-from scipy.optimize import least_squares
-
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import dischargelab as dl  # noqa: E402
+from _baseline import plain_least_squares  # noqa: E402
 from _machine import machine_line  # noqa: E402
-from dischargelab.fit import _resolve_e0_r, _spec, _stack  # noqa: E402
-from dischargelab.models import get_family  # noqa: E402
 
 BUNDLED = HERE.parent / "src" / "dischargelab" / "data" / "samsung30q"
 FILES = [BUNDLED / f"Q30_S001_{r}.csv" for r in ("C10", "1C", "4C")]
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 GOAL_RATIO, STRETCH_RATIO = 20.0, 10.0
-#: Residual [V] where eq. 6 is undefined (q >= C): least_squares needs finite residuals.
-UNDEFINED_RESIDUAL_V = 10.0
 
 
 def baseline_fit(curves):
-    """Plain bounded least_squares of eq. 6 on every sample; returns (RMSE [V], nfev)."""
-    family = get_family("shepherd")
-    stack = _stack(curves, 1, 1, True, "equal", max_samples=10**9)
-    fixed, bounds = _spec(family, None, None, stack, False)
-    _resolve_e0_r(family, stack, fixed, [], [])
-    free = [n for n in family.names if n not in fixed]
-    lo = np.array([bounds[n][0] for n in free])
-    hi = np.array([bounds[n][1] for n in free])
-    guess = family.guess(stack)
-    span = hi - lo
-    x0 = np.clip([guess[n] for n in free], lo + 1e-9 * span, hi - 1e-9 * span)
-    base = {n: fixed.get(n, guess.get(n)) for n in family.names}
-    w = stack.weight
-
-    def resid(x):
-        p = dict(base)
-        p.update(zip(free, x))
-        with np.errstate(invalid="ignore", over="ignore"):
-            r = (family.fit_voltage(p, stack) - stack.voltage) * w
-        return np.where(np.isfinite(r), r, UNDEFINED_RESIDUAL_V)
-
-    sol = least_squares(resid, x0, jac="2-point", bounds=(lo, hi), method="trf",
-                        x_scale="jac")
-    load = ~stack.is_rest
-    r = resid(sol.x) / w
-    return float(np.sqrt(np.mean(r[load] ** 2))), int(sol.nfev), int(stack.voltage.size)
+    """Plain bounded least_squares of eq. 6 on every sample; returns (RMSE [V], nfev,
+    stacked samples)."""
+    rmse, nfev, _, n = plain_least_squares(curves, "shepherd", max_samples=10**9)
+    return rmse, nfev, n
 
 
 def cli_fit(out: Path, bootstrap: int | None):

@@ -44,14 +44,14 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 
+from _baseline import plain_least_squares  # noqa: E402
 from _machine import machine_line  # noqa: E402
-from dischargelab.fit import Curve, _resolve_e0_r, _spec, _stack, fit_battery  # noqa: E402
+from dischargelab.fit import Curve, fit_battery  # noqa: E402
 from dischargelab.fit.family import steady_dynamics  # noqa: E402
 from dischargelab.io import read_discharge  # noqa: E402
 from dischargelab.model import cell_voltage  # noqa: E402
@@ -68,45 +68,15 @@ GOAL_FIT_OTHER_MS = 200.0
 #: Goal for the 1C -> 4C prediction with temperature [ms].
 GOAL_PREDICT_MS = 50.0
 
-#: Residual [V] used by the baseline where the model is undefined (q >= C): least_squares
-#: needs finite residuals; the fitter never evaluates there.
-UNDEFINED_RESIDUAL_V = 10.0
 
 
 def baseline_fit(curve: Curve, family_name: str):
-    """Plain bounded least_squares with a 2-point numeric Jacobian.
-
-    Same stacked samples, free parameters (a family's ``steady_fixed`` held as the fit
-    holds them on one constant current), bounds and start (the family's ``guess``) as
-    :func:`dischargelab.fit.fit_battery`. Returns (RMSE [V] over the
-    load samples, function evaluations, number of free parameters).
-    """
-    family = get_family(family_name)
-    stack = _stack([curve], 1, 1, True, "equal")
+    """The plain numeric-Jacobian fit (``_baseline.plain_least_squares``) with a family's
+    ``steady_fixed`` held as the fit holds them on one constant current. Returns (RMSE [V]
+    over the load samples, function evaluations, number of free parameters)."""
     held, _ = steady_dynamics([curve], family_name, None, None)  # as the fit holds them
-    fixed, bounds = _spec(family, held, None, stack, False)
-    _resolve_e0_r(family, stack, fixed, [], [])
-    free = [n for n in family.names if n not in fixed]
-    lo = np.array([bounds[n][0] for n in free])
-    hi = np.array([bounds[n][1] for n in free])
-    guess = family.guess(stack)
-    span = hi - lo
-    x0 = np.clip([guess[n] for n in free], lo + 1e-9 * span, hi - 1e-9 * span)
-    base = {n: fixed.get(n, guess.get(n)) for n in family.names}
-    w = stack.weight
-
-    def resid(x):
-        p = dict(base)
-        p.update(zip(free, x))
-        with np.errstate(invalid="ignore", over="ignore"):
-            r = (family.fit_voltage(p, stack) - stack.voltage) * w
-        return np.where(np.isfinite(r), r, UNDEFINED_RESIDUAL_V)
-
-    sol = least_squares(resid, x0, jac="2-point", bounds=(lo, hi), method="trf",
-                        x_scale="jac")
-    load = ~stack.is_rest
-    r = resid(sol.x) / w
-    return float(np.sqrt(np.mean(r[load] ** 2))), int(sol.nfev), len(free)
+    rmse, nfev, n_free, _ = plain_least_squares([curve], family_name, held=held)
+    return rmse, nfev, n_free
 
 
 def median_ms(func, repeats):
