@@ -91,12 +91,9 @@ class PackPages:
         if self._own and lb is not None and hasattr(lb, "close"):
             lb.close()
 
-    def _pack_names(self) -> list[str]:
-        return [row["name"] for row in self.logbook().packs().to_dict()["rows"]]
-
     def _known(self, name: str) -> str:
         name = check_pack_name(name)
-        if name not in self._pack_names():
+        if name not in self.logbook().pack_names():
             raise RequestRefused(404, f"no pack named {name!r} in the logbook")
         return name
 
