@@ -36,20 +36,11 @@ Modules: :mod:`.samples` (flights as samples, rest voltages), :mod:`.fitting`
 
 References
 ----------
-.. [1] G. L. Plett, "Battery Management Systems, Vol. 1: Battery Modeling",
-   Artech House (2015), ch. 2 (open-circuit voltage from a slow discharge
-   corrected for the ohmic drop; state of charge from a rested voltage).
-.. [2] Y. Ai, et al., "Electrochemical thermal-mechanical modelling of stress
-   inhomogeneity in lithium-ion pouch cells", J. Electrochem. Soc. 167 (2020)
-   013512 (the Enertech LCO pouch-cell C/10 discharge, ``../shared/data/enertech_lco``).
-.. [3] ARTS-Laboratory, "dataset-electrothermal-deformation-characterization-for-
-   samsung-30Q-cell" (Samsung INR18650-30Q C/10 discharge, ``../shared/data/samsung30q_S001``)
-   and "Dataset-battery-electro-thermal-characterization" (K2 LFP26650 1C discharge,
-   ``../shared/data/k2_lfp26650``); CC BY-SA 4.0.
-.. [4] PX4 parameter reference: BAT1_V_EMPTY, BAT1_V_CHARGED [V per cell],
+.. [1] The open-circuit voltage curves and their sources: :mod:`dischargelab.ocv`.
+.. [2] PX4 parameter reference: BAT1_V_EMPTY, BAT1_V_CHARGED [V per cell],
    BAT1_R_INTERNAL [ohm per cell]; uORB ``battery_status.time_remaining_s``
    ("time remaining until the battery is empty under the previous averaged load").
-.. [5] ArduPilot parameter reference: BATT_CAPACITY [mAh]; DataFlash ``CURR.CurrTot`` /
+.. [3] ArduPilot parameter reference: BATT_CAPACITY [mAh]; DataFlash ``CURR.CurrTot`` /
    ``BAT.CurrTot`` [mAh consumed].
 """
 
