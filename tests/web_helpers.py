@@ -89,29 +89,37 @@ class ServerProcess:
     def request(self, method: str, path: str, body: bytes | None = None,
                 headers: dict | None = None, timeout_s: float = 30) -> tuple[int, dict | str]:
         """Send ``path`` exactly as given (no client-side normalisation of ``..``)."""
-        conn = http.client.HTTPConnection(self.host, self.port, timeout=timeout_s)
-        try:
-            conn.putrequest(method, path, skip_accept_encoding=True,
-                            skip_host="Host" in (headers or {}))
-            hdrs = {"Content-Length": str(len(body or b"")), **(headers or {})}
-            for key, value in hdrs.items():
-                conn.putheader(key, value)
-            conn.endheaders()
-            if body:
-                conn.send(body)
-            resp = conn.getresponse()
-            raw = resp.read()
-        finally:
-            conn.close()
-        try:
-            return resp.status, json.loads(raw)
-        except ValueError:
-            return resp.status, raw.decode("utf-8", "replace")
+        status, data, _ = raw_request(self.host, self.port, method, path, body, headers,
+                                      timeout_s)
+        return status, data
 
     def get_json(self, path: str):
         status, data = self.request("GET", path)
         assert status == 200, (status, data)
         return data
+
+
+def raw_request(host, port, method, path, body=None, headers=None, timeout_s=30.0):
+    """Send ``path`` exactly as given (no client-side normalisation of ``..``); returns
+    (status, JSON or text, the set-cookie header)."""
+    conn = http.client.HTTPConnection(host, port, timeout=timeout_s)
+    try:
+        conn.putrequest(method, path, skip_accept_encoding=True,
+                        skip_host="Host" in (headers or {}))
+        for key, value in {"Content-Length": str(len(body or b"")), **(headers or {})}.items():
+            conn.putheader(key, value)
+        conn.endheaders()
+        if body:
+            conn.send(body)
+        resp = conn.getresponse()
+        raw = resp.read()
+        cookie = resp.getheader("set-cookie")
+    finally:
+        conn.close()
+    try:
+        return resp.status, json.loads(raw), cookie
+    except ValueError:
+        return resp.status, raw.decode("utf-8", "replace"), cookie
 
 
 def multipart(fields: dict, files: dict, boundary: str = "dlboundary7f3a") -> tuple[bytes, str]:
@@ -193,28 +201,7 @@ class ThreadServer:
         self.host, self.port = "127.0.0.1", self.server.listening.port
 
     def request(self, method, path, body=None, headers=None):
-        import http.client
-        import json
-
-        conn = http.client.HTTPConnection(self.host, self.port, timeout=20)
-        try:
-            conn.putrequest(method, path, skip_accept_encoding=True,
-                            skip_host="Host" in (headers or {}))
-            for key, value in {"Content-Length": str(len(body or b"")), **(headers or {})}.items():
-                conn.putheader(key, value)
-            conn.endheaders()
-            if body:
-                conn.send(body)
-            resp = conn.getresponse()
-            raw = resp.read()
-            cookie = resp.getheader("set-cookie")
-        finally:
-            conn.close()
-        try:
-            data = json.loads(raw)
-        except ValueError:
-            data = raw.decode("utf-8", "replace")
-        return resp.status, data, cookie
+        return raw_request(self.host, self.port, method, path, body, headers, 20)
 
     def alive(self) -> bool:
         status, data, _ = self.request("GET", "/api/live")
