@@ -19,7 +19,8 @@ voltages, current; no temperature):
 * **27 A flight**: 200 s around 27 A (+-8 A, bursts to 60 A) from full, in flight, 10 Hz.
 
 The slow drain is fitted (``dischargelab.fit``) four ways: as a flight log (``auto``:
-ecm with its dynamics held absent, the thermal prior for airflow), the same with ecm's RC
+ecm with its RC pairs held absent and its diffusion lead at the steady prior, the thermal
+prior for airflow), the same with ecm's RC
 pairs and diffusion state fitted anyway (their bounds given), as a bench discharge
 (``auto``: shepherd-thermal with the thermal prior for still air), and as a bench
 discharge with the cell held at the ambient (``cooling=None``: the behaviour without a
@@ -30,7 +31,8 @@ and on the 27 A flight (voltage RMS in % of the mean pack voltage).
 **Slow drains of measured and virtual cells** (no model writes them; the truth at every
 faster rate is measured): the slowest run of each cell with a rate series, its temperature
 column dropped, is fitted three of the ways above (``ecm`` on one steady rate holds its
-dynamics absent, with the airflow prior, as the flight-log path does; ``ecm`` with them
+RC pairs absent and its diffusion lead at the prior, with the airflow prior, as the
+flight-log path does; ``ecm`` with them
 fitted anyway; ``auto`` as a bench discharge) and predicts every faster run's time to its
 cutoff (``Battery.predict`` at its mean current and ambient): Samsung 30Q C/10, Enertech LCO
 0.1C, the PyBaMM NMC, LCO and LFP cells at 0.1C (``benchmarks/accuracy.py`` loads them).
@@ -267,7 +269,7 @@ def main(argv=None):
               f"({100 * LEAD_PER_TAU * TAU_D_S / 3600:.0f} % of "
               f"the capacity per C).\n")
         fits = [
-            ("flight log, auto (ecm, dynamics absent, thermal prior: airflow)",
+            ("flight log, auto (ecm: RC pairs absent, lead prior; thermal prior: airflow)",
              lambda: dl.fit(flight_curves(folder / "slow.csv"), bootstrap=0)),
             ("flight log, ecm with its dynamics fitted anyway (bounds given)",
              lambda: dl.fit(flight_curves(folder / "slow.csv"), model="ecm",

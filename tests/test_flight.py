@@ -329,7 +329,7 @@ def test_a_full_drain_gives_the_capacity_when_no_label_is_known(tmp_path):
 
 
 def test_a_slow_drain_predicts_a_fast_spiky_drain_of_the_same_pack(tmp_path):
-    """One slow full drain (0.3C) fits ecm with its dynamics held absent (one constant
+    """One slow full drain (0.3C) fits ecm with its RC pairs held absent (one constant
     current cannot show them); it predicts a 3.5C drain with 5.5C peaks of the same pack
     (generic LiPo OCV, 8 mOhm per cell) within 5 % to 3.3 V/cell, and its voltage."""
     from dischargelab.flight import ocv_from_soc

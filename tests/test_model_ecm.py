@@ -13,6 +13,7 @@ from dischargelab.models import Samples, get_family
 from dischargelab.models.ecm import (
     OCV_DROP_NAMES,
     OCV_NODES,
+    STEADY_TAU_D_S,
     SURFACE_LEAD_PER_TAU,
     open_circuit_voltage,
 )
@@ -412,8 +413,17 @@ def test_one_steady_rate_holds_the_dynamics_absent():
     absent = {"R1_ohm": 0.0, "R2_ohm": 0.0, "tau_d_s": 1.0}
     assert ECM.steady_fixed == absent
     res = fit_battery(slow, model="ecm", model_error=False)
-    assert {n: res.parameters[n] for n in absent} == absent
+    # the RC pairs stay absent; the diffusion lead is fitted absent, then set to its prior
+    # (1 % of the capacity per C) for predictions
+    prior = {"R1_ohm": 0.0, "R2_ohm": 0.0, "tau_d_s": STEADY_TAU_D_S}
+    assert {n: res.parameters[n] for n in absent} == prior
+    assert SURFACE_LEAD_PER_TAU * STEADY_TAU_D_S / 3600.0 == pytest.approx(0.01)
     assert set(absent) <= set(res.fixed) and "cannot show the cell's dynamics" in res.notes[0]
+    assert "prior" in res.notes[1] and res.ci95["tau_d_s"] == (STEADY_TAU_D_S, STEADY_TAU_D_S)
+    # the series resistance comes from the fit without the prior (the caller's value kept)
+    absent_fit = fit_battery(slow, model="ecm", model_error=False, fixed={"tau_d_s": 1.0})
+    assert absent_fit.parameters["tau_d_s"] == 1.0
+    assert res.parameters["R0_ohm"] == absent_fit.parameters["R0_ohm"] and "R0_ohm" in res.fixed
     # the caller's choice wins
     res = fit_battery(slow, model="ecm", model_error=False, fixed={"R1_ohm": 0.002},
                       bounds={"tau_d_s": (50.0, 500.0)})

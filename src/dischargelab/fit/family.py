@@ -103,10 +103,11 @@ def steady_dynamics(curves, model, fixed: dict | None, bounds: dict | None):
             if n not in (fixed or {}) and n not in (bounds or {})}
     if not held or not one_steady_rate(curves):
         return fixed, None
-    note = (f"{', '.join(held)} held at {', '.join(f'{v:g}' for v in held.values())} (effect "
-            f"absent): one constant current cannot show the cell's dynamics (time under load "
-            f"and charge drawn are proportional, so the OCV takes them up); fit two or more "
-            f"rates or a varying current to fit them")
+    absent = {n: v for n, v in held.items() if n not in family.steady_prior}
+    note = (f"{', '.join(absent)} held at {', '.join(f'{v:g}' for v in absent.values())} "
+            f"(effect absent): one constant current cannot show the cell's dynamics (time "
+            f"under load and charge drawn are proportional, so the OCV takes them up); fit two "
+            f"or more rates or a varying current to fit them")
     return dict(held, **(fixed or {})), note
 
 
@@ -135,16 +136,28 @@ def fit_family(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     ``chemistry`` (:func:`fit_self_heating`; ``cooling``
     None holds the cell at the ambient instead). A family's ``steady_fixed`` parameters
     are held absent on :func:`one_steady_rate` data (:func:`steady_dynamics`)."""
+    chosen = set(fixed or {}) | set(bounds or {})
     fixed, steady_note = steady_dynamics(curves, model, fixed, bounds)
     if steady_note is not None:
-        res = fit_family(curves, cells_series=cells_series, strings_parallel=strings_parallel,
-                         fixed=fixed, bounds=bounds, guess=guess, paper_mode=paper_mode,
-                         use_rest=use_rest, weighting=weighting, n_best=n_best,
-                         bootstrap=bootstrap, seed=seed, model=model, progress=progress,
-                         start=start, max_samples=max_samples,
-                         bootstrap_method=bootstrap_method, cooling=cooling,
-                         chemistry=chemistry, warm_ftol=warm_ftol)
-        res.notes.insert(0, steady_note)
+        kw = dict(cells_series=cells_series, strings_parallel=strings_parallel, bounds=bounds,
+                  guess=guess, paper_mode=paper_mode, use_rest=use_rest, weighting=weighting,
+                  n_best=n_best, seed=seed, model=model, progress=progress, start=start,
+                  max_samples=max_samples, bootstrap_method=bootstrap_method,
+                  cooling=cooling, chemistry=chemistry, warm_ftol=warm_ftol)
+        family = get_family(model)
+        prior = {n: v for n, v in family.steady_prior.items() if n not in chosen}
+        res = fit_family(curves, fixed=fixed, bootstrap=0 if prior else bootstrap, **kw)
+        notes = [steady_note]
+        if prior:
+            # the parameters the steady data do determine (the load step's series
+            # resistance) come from the fit without the prior, which could take their place
+            carried = {n: float(res.parameters[n]) for n in family.steady_prior_carries
+                       if n not in chosen}
+            res = fit_family(curves, fixed={**fixed, **prior, **carried}, bootstrap=bootstrap,
+                             **dict(kw, start=start or res.parameters.as_dict()))
+            notes.append(family.steady_prior_note + "".join(
+                f"; {n} = {v:.4g} from the fit without it" for n, v in carried.items()))
+        res.notes[:0] = notes
         return res
     if needs_prior(curves, model, cooling):
         return fit_self_heating(

@@ -446,10 +446,10 @@ def fit_flights(flights: FlightCurves, *, model: str = "ecm", strings_parallel: 
                          cooling="airflow", chemistry=flights.chemistry)
     notes = list(flights.notes)
     if steady:
-        notes.insert(0, "model ecm chosen for flights, with its RC pairs and diffusion state "
-                        "held absent (OCV and series resistance only): the flights are "
-                        "near-constant drains at one rate, which cannot show the cell's "
-                        "dynamics")
+        notes.insert(0, "model ecm chosen for flights, with its RC pairs held absent and its "
+                        "diffusion lead at a prior (OCV and series resistance fitted): the "
+                        "flights are near-constant drains at one rate, which cannot show the "
+                        "cell's dynamics")
     elif model == AUTO:
         notes.insert(0, "model ecm chosen for flights (RC pairs driven by the logged current)")
     prior = [n for n in all_fixed if n.startswith("ocv_d") and n not in (fixed or {})]

@@ -255,6 +255,13 @@ class Family:
     #: (:func:`dischargelab.fit.family.one_steady_rate`), unless the caller fixes or
     #: bounds them.
     steady_fixed: dict = {}
+    #: Of the ``steady_fixed`` parameters, those whose effect a fast run shows although a
+    #: slow steady one cannot: held at this prior instead, in a second fit that keeps the
+    #: ``steady_prior_carries`` parameters at the values of the fit without it (the fit
+    #: notes say so, with :attr:`steady_prior_note`).
+    steady_prior: dict = {}
+    steady_prior_carries: tuple = ()
+    steady_prior_note: str = ""
 
     # ---- parameters -------------------------------------------------------------
     @property
