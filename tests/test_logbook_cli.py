@@ -24,6 +24,7 @@ def test_logbook_commands_end_to_end(capsys, tmp_path, shared_data):
     code, out, _ = run(capsys, "logbook", "add", files[0], tmp_path / "missing.csv",
                        "--pack", "C", "--db", db)
     assert code == 0
+    assert "added 0 file(s), 0 event(s); 1 already in the logbook; 1 rejected" in out
     assert "DischargeCycle001.txt: already in the logbook" in out
     code, out, err = run(capsys, "logbook", "add", tmp_path / "missing.csv", "--pack", "C",
                          "--db", db)
@@ -59,6 +60,14 @@ def test_logbook_commands_end_to_end(capsys, tmp_path, shared_data):
 
 def test_unknown_pack_and_newer_database_are_one_line_errors(capsys, tmp_path):
     db = tmp_path / "lb.sqlite"
+    for command in (["logbook", "packs"], ["logbook", "health", "nope"]):
+        code, _, err = run(capsys, *command, "--db", db)
+        assert code == 2 and err.strip() == (f"error: no logbook at {db}: adding files creates "
+                                             "one (Logbook.add, `dischargelab logbook add`)")
+    assert not db.exists()  # reading a mistyped path creates nothing
+    code, out, _ = run(capsys, "logbook", "add", tmp_path / "missing.csv", "--pack", "C",
+                       "--db", db)
+    assert code == 2 and db.exists()
     code, _, err = run(capsys, "logbook", "health", "nope", "--db", db)
     assert code == 2 and err.strip().startswith("error: no pack named 'nope'")
     assert len(err.strip().splitlines()) == 1

@@ -36,10 +36,11 @@ def eol_option(func):
                         help="End of life: this share of the reference capacity.")(func)
 
 
-def open_logbook(db):
+def open_logbook(db, create: bool = False):
+    """The logbook at ``db``; only commands that add to it create a new one."""
     from ..logbook import Logbook
 
-    return Logbook(db)
+    return Logbook(db, create=create)
 
 
 def _num(value, digits: int = 3, scale: float = 1.0) -> str:
@@ -120,7 +121,7 @@ def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
     """
     options = {"columns": columns, "current_A": current_A, "units": units,
                "sign": None if sign == "auto" else sign}
-    with open_logbook(db) as lb:
+    with open_logbook(db, create=True) as lb:
         settings = {"label_capacity_Ah": label_capacity_Ah, "chemistry": chemistry,
                     "cells": cells}
         if any(v is not None for v in settings.values()):
@@ -135,7 +136,7 @@ def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
     if as_json:
         print_json(result.to_dict())
     else:
-        out.print(f"added {len(result.added)} file(s), {result.events} event(s)", markup=False)
+        out.print(result.summary(), markup=False)
         for line in result.lines():
             (err if "rejected" in line else out).print(line, markup=False)
     if result.rejected and not result.added and not result.skipped:

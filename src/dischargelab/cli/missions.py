@@ -170,7 +170,7 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
     if pack_name is not None:
         from ..logbook import Logbook
 
-        with Logbook(db) as lb:
+        with Logbook(db, create=False) as lb:
             loaded = lb.pack(pack_name).battery()
     else:
         loaded = load_battery_arg(battery)

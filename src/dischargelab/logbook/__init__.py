@@ -49,6 +49,14 @@ EXPORT_FORMATS = ("csv", "parquet")
 class Logbook:
     """A logbook database (see the module docstring).
 
+    Parameters
+    ----------
+    url : str or path-like, optional
+        Where it is (see the module docstring).
+    create : bool
+        Create a SQLite logbook that does not exist yet (the default); False raises
+        LogbookError instead, for code that only reads.
+
     Raises
     ------
     MissingExtraError
@@ -57,14 +65,14 @@ class Logbook:
         The database cannot be reached, is not a logbook, or has a newer schema.
     """
 
-    def __init__(self, url=None):
+    def __init__(self, url=None, create: bool = True):
         from ..errors import require
 
         require("sqlalchemy", "logbook")
         from . import schema
 
         self.url = schema.resolve_url(url)
-        self._engine = schema.create(self.url)
+        self._engine = schema.create(self.url, new=create)
         with schema.database_errors(self.url):
             #: Schema version found when opened (0: created now).
             self.opened_version = schema.prepare(self._engine, self.url)

@@ -84,6 +84,15 @@ class AddResult:
     rejected: list[tuple[str, str]] = field(default_factory=list)
     events: int = 0
 
+    def summary(self) -> str:
+        """One line: files added, events, files already there, files rejected."""
+        text = f"added {len(self.added)} file(s), {self.events} event(s)"
+        if self.skipped:
+            text += f"; {len(self.skipped)} already in the logbook"
+        if self.rejected:
+            text += f"; {len(self.rejected)} rejected"
+        return text
+
     def lines(self) -> list[str]:
         """One line per skipped or rejected file, for printing."""
         out = [f"{name}: already in the logbook" for name in self.skipped]

@@ -214,8 +214,11 @@ def _sqlite_begin(conn) -> None:
     conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.info.get("write") else "BEGIN")
 
 
-def create(url: str) -> Engine:
+def create(url: str, new: bool = True) -> Engine:
     """An engine for the URL (SQLite folder created; the driver must be installed).
+
+    ``new=False`` refuses a SQLite file that does not exist yet instead of creating it
+    (for reading: a mistyped path should not give an empty logbook).
 
     Raises
     ------
@@ -245,6 +248,9 @@ def create(url: str) -> Engine:
         raise LogbookError("give the logbook a file: an in-memory SQLite database is lost "
                            "when it closes")
     path = Path(database)
+    if not new and not path.is_file():
+        raise LogbookError(f"no logbook at {path}: adding files creates one "
+                           "(Logbook.add, `dischargelab logbook add`)")
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         engine = create_engine(parsed, connect_args={"timeout": BUSY_TIMEOUT_S})
