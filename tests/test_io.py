@@ -7,7 +7,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dischargelab.errors import DataError
-from dischargelab.io import describe, detect_format, parse_columns, parse_units, read_discharge
+from dischargelab.io import (
+    describe,
+    detect_format,
+    discharge_reader,
+    parse_columns,
+    parse_units,
+    read_discharge,
+)
 from dischargelab.model import charge_from_current
 
 
@@ -360,6 +367,20 @@ def test_several_flights_longest_by_default(tmp_path):
         read_discharge(path, segment="4")
     with pytest.raises(DataError, match="--segment counts from 1"):
         read_discharge(path, segment=0)
+
+
+def test_a_file_parsed_once_reads_as_read_discharge_at_every_segment(tmp_path):
+    t, v, i, soc = flights()
+    path = write(tmp_path / "flights.csv",
+                 as_csv([t, v, i, soc], header=["time_s", "voltage_V", "current_A", "soc_pct"]))
+    read = discharge_reader(path, sign="positive")
+    for segment in ("auto", 1, 3, "none", 2, "auto"):  # repeated: no call changes the parse
+        frame, meta = read(segment=segment)
+        expected, expected_meta = read_discharge(path, sign="positive", segment=segment)
+        pd.testing.assert_frame_equal(frame, expected)
+        assert meta == expected_meta
+    with pytest.raises(DataError, match="--current must be"):
+        discharge_reader(path, current_A=-1)
 
 
 def test_pack_swap_inside_load_splits(tmp_path):

@@ -20,9 +20,12 @@ start), ``voltage_V``, ``current_A`` (discharge positive) and, when present,
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from ..errors import DataError
 from .columns import (
@@ -126,6 +129,28 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
     DataError
         One line saying what is wrong and which option fixes it.
     """
+    check_segment_option(segment)
+    read = discharge_reader(path, columns=columns, current_A=current_A, sign=sign,
+                            units=units, delimiter=delimiter, header=header, fmt=fmt,
+                            rest_sample=rest_sample, flight=flight, battery=battery)
+    return read(segment=segment)
+
+
+def discharge_reader(path, *, columns=None, current_A=None, sign="auto", units=None,
+                     delimiter=None, header="auto", fmt="auto", rest_sample="auto",
+                     flight=None, battery=None) -> Callable[..., tuple[pd.DataFrame, dict]]:
+    """Parse a file once; ``read(segment="auto")`` then gives any of its discharges.
+
+    The arguments are :func:`read_discharge`'s (without ``segment``), and
+    ``read(segment=...)`` returns what ``read_discharge(path, ..., segment=...)``
+    would, without parsing the text again (the logbook reads every segment and the
+    whole file). A flight log is parsed at each call, as :func:`read_discharge` does.
+
+    Raises
+    ------
+    DataError
+        As :func:`read_discharge`, for the file and the options.
+    """
     path = Path(path)
     name = path.name
     if fmt not in FORMATS:
@@ -138,13 +163,12 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
         units = parse_units(units)
     elif units is not None:
         units = validate_units(dict(units))
-    check_segment_option(segment)
     given = check_current_option(current_A)
 
     flight_log = detect_flight_log(path) if fmt == "auto" else None
     if flight_log is not None:
-        return read_flight_discharge(path, flight=flight, battery=battery, current_A=given,
-                                     sign=sign, segment=segment, rest_sample=rest_sample)
+        return functools.partial(read_flight_discharge, path, flight=flight, battery=battery,
+                                 current_A=given, sign=sign, rest_sample=rest_sample)
     if flight is not None or battery is not None:
         raise DataError(f"{name} is not a flight log (ArduPilot, PX4 ULog, blackbox, in-flight "
                         "logger CSV): --flight and --battery apply only to those; use "
@@ -177,8 +201,9 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
     table.meta.setdefault("format", kind)
     table.meta["source"] = str(path)
     table.meta["encoding"] = encoding["encoding"] + (" with BOM" if encoding.get("bom") else "")
-    return prepare(table, name, current_A=given, sign=sign, segment=segment,
-                   rest_sample=rest_sample)
+    # prepare() copies the rows and the metadata it changes, so the table serves every call
+    return functools.partial(prepare, table, name, current_A=given, sign=sign,
+                             rest_sample=rest_sample)
 
 
 def _read_logfile(path: Path) -> tuple[CanonicalTable, float | None]:
@@ -208,5 +233,5 @@ def _read_logfile(path: Path) -> tuple[CanonicalTable, float | None]:
     return CanonicalTable(frame=frame, line_numbers=lines, meta=meta), logged_current
 
 
-__all__ = ["read_discharge", "describe", "parse_columns", "parse_units", "detect_format",
-           "FORMATS", "CANONICAL_COLUMNS", "COLUMN_KEYS", "LOG_MAGIC"]
+__all__ = ["read_discharge", "discharge_reader", "describe", "parse_columns", "parse_units",
+           "detect_format", "FORMATS", "CANONICAL_COLUMNS", "COLUMN_KEYS", "LOG_MAGIC"]

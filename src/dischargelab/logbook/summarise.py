@@ -179,12 +179,12 @@ def summarise_source(source, options: dict | None = None, keep_raw: bool = True
 
 
 def _reader(path: Path, options: dict):
-    """``read(segment=...)`` of one file; a flight log is parsed once for all its flights."""
-    from ..io import check_current_option, read_discharge
+    """``read(segment=...)`` of one file, parsed once for all its discharges or flights."""
+    from ..io import check_current_option, discharge_reader
     from ..io.flightlog import detect_flight_log, read_flight_discharge, read_flight_log
 
     if detect_flight_log(path) is None:
-        return functools.partial(read_discharge, path, **options)
+        return discharge_reader(path, **options)
     return functools.partial(read_flight_discharge, path, log=read_flight_log(path),
                              battery=options.get("battery"),
                              current_A=check_current_option(options.get("current_A")),
