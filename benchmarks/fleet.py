@@ -14,7 +14,8 @@ run's. The table gives files per second (wall clock, cluster start included),
 speed-up against one worker, the client's peak RSS, and the costs per file and per
 event that docs/fleet.md extrapolates from.
 
-Usage: python benchmarks/fleet.py [--packs N] [--workers 2,...] [--keep DIR]
+Usage: python benchmarks/fleet.py [--packs N] [--workers 2,...] [--keep DIR] [--no-formats]
+       [--repeats N]
 """
 
 from __future__ import annotations
@@ -95,6 +96,10 @@ def main() -> None:
     parser.add_argument("--packs", type=int, default=9, help="pack folders (68 files each)")
     parser.add_argument("--workers", default="2", help="worker counts to try, e.g. 2,4")
     parser.add_argument("--keep", type=Path, help="keep the files and databases here")
+    parser.add_argument("--no-formats", action="store_true",
+                        help="skip the per-format cost of one file")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="runs per file for the per-format cost (median)")
     opts = parser.parse_args()
     if not CELL_C.is_dir():
         raise SystemExit(f"needs {CELL_C}")
@@ -136,6 +141,44 @@ def main() -> None:
     print(machine_line(), f"; load average at the end {os.getloadavg()[0]:.2f}")
     if not opts.keep:
         shutil.rmtree(work)
+    if not opts.no_formats:
+        per_format_costs(opts.repeats)
+
+
+#: One shared file of each format the logbook reads (docs/fleet.md extrapolates from them).
+FORMAT_FILES = [
+    ("samsung30q_ageing_cellC/DischargeCycle100.txt", "LabVIEW text"),
+    ("flight_logs/ina3221_fpv_4s/29.csv", "in-flight INA3221 CSV"),
+    ("flight_logs/px4_ulog_rs/esc_status_log.ulg", "PX4 ULog"),
+    ("flight_logs/pyulog_sample/sample_log_small.ulg", "PX4 ULog"),
+    ("flight_logs/ardupilot_loganalyzer/mechanical_fail.log", "ArduPilot DataFlash text"),
+    ("flight_logs/betaflight_diatone/btfl_001.bbl", "Betaflight blackbox"),
+]
+
+
+def per_format_costs(repeats: int = 3) -> None:
+    """What one file costs a worker (read, split, summarise, compress), median of runs."""
+    from dischargelab.logbook.summarise import summarise_source
+
+    data = CELL_C.parent
+    print("\nOne file's task, one core (summarise_source: read, split into events, summarise, "
+          "compress), median of", repeats)
+    print("| file | format | size [MB] | events | time [ms] | per MB [ms] | kept bytes / size |")
+    print("|---|---|---:|---:|---:|---:|---:|")
+    for relative, label in FORMAT_FILES:
+        path = data / relative
+        if not path.is_file():
+            print(f"| {path.name} | {label} | missing | | | | |")
+            continue
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            summary = summarise_source(path)
+            times.append(time.perf_counter() - t0)
+        size_MB = path.stat().st_size / 1e6
+        ms = 1000 * sorted(times)[len(times) // 2]
+        print(f"| {path.name} | {label} | {size_MB:.2f} | {len(summary.events)} | {ms:.0f} | "
+              f"{ms / size_MB:.0f} | {len(summary.raw_zlib) / (1e6 * size_MB):.2f} |")
 
 
 if __name__ == "__main__":

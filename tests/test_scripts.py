@@ -22,7 +22,7 @@ BENCHMARKS = {
     "flightlog_read_speed.py": (["--mb", "2", "--blackbox-mb", "2.5", "--unfiltered-mb", "1"],
                                 "peak RSS MB"),
     "logbook.py": (["--copies", "20"], "later capacities in band"),
-    "fleet.py": (["--packs", "1"], "events identical"),
+    "fleet.py": (["--packs", "1", "--repeats", "1"], "One file's task"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }
