@@ -1,23 +1,15 @@
-"""Modified Shepherd (Tremblay) battery model: pure, vectorised numpy physics.
+"""Battery files: a cell model of any family, its pack layout, its fit and its presets.
 
-Sign convention (used everywhere in dischargelab): discharge current is
-**positive**; ``charge_Ah`` is the charge taken out of the cell since full
-charge, ``q = integral(i dt) / 3600`` [Ah].
-
-Per cell (eq. 6 of the reference paper, Tremblay & Dessaint 2009)::
-
-    V = E0 - R*i - K*C/(C - q) * (i_f + q) + A*exp(-B*q)
-
-A pack of ``s`` cells in series and ``p`` strings in parallel carries the pack
-current ``I`` and the pack charge ``Q``; each cell sees ``I/p`` and ``Q/p``, and
-``V_pack = s * V_cell``.
+:class:`Battery` holds a family's parameters (:mod:`dischargelab.models`), the pack's
+cells in series and strings in parallel, and what the fit recorded; it reads and writes
+the battery file (JSON, atomic). The paper's presets (Tables 2-4) are built here. The
+cell's equations, units and sign convention are in :mod:`dischargelab.cell` (eq. 6) and
+the family files.
 
 References
 ----------
 .. [1] "Measuring battery discharge characteristics for accurate UAV endurance
    estimation", eq. (6) and Tables 2-4 (see ``../shared/paper``).
-.. [2] O. Tremblay, L.-A. Dessaint, "Experimental validation of a battery
-   dynamic model for EV applications", World Electric Vehicle Journal 3 (2009).
 """
 
 from __future__ import annotations
