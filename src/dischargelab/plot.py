@@ -8,6 +8,7 @@ main Axes; nothing is shown: call ``ax.figure.savefig(path)`` or
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -114,7 +115,9 @@ def plot_fit(result, ax=None, x: str = "charge"):
     res_ax.set_xlabel(_xlabel(x))
     ax.tick_params(labelbottom=False)
     ax.set_ylabel(f"pack voltage [V] ({result.cells_series}S{result.strings_parallel}P)")
-    ax.set_title(f"{_fit_title(result)}   RMSE {result.rmse_V * 1000:.1f} mV/cell", fontsize=9)
+    # wrapped between parameters (ecm names many); no-break spaces hold each one together
+    title = f"{_fit_title(result)}   RMSE\u00a0{result.rmse_V * 1000:.1f}\u00a0mV/cell"
+    ax.set_title("\n".join(textwrap.wrap(title, 95)), fontsize=9)
     ax.grid(alpha=0.3)
     res_ax.grid(alpha=0.3)
     ax.legend(fontsize=8, ncol=2 if len(result.curves) > 2 else 1)
