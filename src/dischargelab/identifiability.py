@@ -232,8 +232,8 @@ def plausibility(family, params, ci95: dict, fixed: dict, data, rmse_V: float) -
                    "units")
     if "E0_V" in params and not 2.0 <= float(params["E0_V"]) <= 5.0:
         out.append(f"E0 = {float(params['E0_V']):.3g} V is not a cell voltage: the parameters fit "
-                   "the curve but mean nothing physically; try a model with more physics "
-                   "(model='shepherd-thermal' or 'ecm') or fit fewer rates at once")
+                   "the curve but mean nothing physically; try model='ecm' (a free-form "
+                   "open-circuit voltage) or fit fewer rates at once")
     for p in family.parameters:
         value = float(params[p.name])
         if p.unit == "ohm" and value < 0:
