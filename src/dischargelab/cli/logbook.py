@@ -211,6 +211,10 @@ def health_cmd(name, eol, plot_path, force, db, as_json):
     fc = health.forecast
     ref = health.reference_capacity_Ah
     out.print(f"reference capacity: {_num(ref)} Ah ({health.reference})", markup=False)
+    if ref is None:
+        out.print(f"  give its label capacity to count cycles: dischargelab logbook add FILE "
+                  f"--pack {name!r} --capacity AH (a file already there is skipped)",
+                  markup=False)
     if fc is None:
         out.print("end of life: no forecast yet (needs two capacities)", markup=False)
     else:
