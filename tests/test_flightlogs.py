@@ -369,7 +369,7 @@ def test_truncated_blackbox_and_binary_dataflash(logs, tmp_path, capfd):
     assert out == "" and err == ""
 
 
-@pytest.mark.parametrize("magic", [b"ULog\x01\x12\x35\x01", b"\xa3\x95",
+@pytest.mark.parametrize("magic", [b"ULog\x01\x12\x35\x01", b"\xa3\x95", b"\xa3\x95\x80\x80",
                                    b"H Product:Blackbox flight data recorder by Nicholas "
                                    b"Sherlock\n", b"FMT, 128, 89, FMT, BBnNZ, Type\n"])
 def test_random_bytes_behind_a_magic(tmp_path, capfd, magic):

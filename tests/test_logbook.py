@@ -239,6 +239,49 @@ def test_not_a_database_file(tmp_path):
         Logbook(path)
 
 
+def test_export_never_replaces_the_logbook_or_a_file_it_keeps_by_path(tmp_path, shared_data):
+    from dischargelab.atomic import OutputIsInputError
+
+    db = tmp_path / "lb.sqlite"
+    kept = tmp_path / "DischargeCycle001.txt"
+    kept.write_bytes(cell_c_files(shared_data, [1])[0].read_bytes())
+    with Logbook(db) as lb:
+        lb.add(kept, pack="C", keep_raw=False)
+        for target in (db, kept):
+            before = target.read_bytes()
+            with pytest.raises(OutputIsInputError):
+                lb.export(target, force=True)
+            assert target.read_bytes() == before
+        assert lb.export(tmp_path / "out.csv").stat().st_size > 0
+
+
+def test_cycle_numbers_come_from_the_name_but_not_from_a_date(tmp_path, shared_data):
+    from dischargelab.logbook.summarise import safe_file_name, summarise_source
+
+    data = cell_c_files(shared_data, [1])[0].read_bytes()
+    for name, cycle in (("DischargeCycle042.txt", 42), ("cycle_20240501.txt", None),
+                        ("Cycle-7.txt", 7)):
+        assert summarise_source((name, data), keep_raw=False).events[0]["cycle"] == cycle
+    assert safe_file_name("..") == safe_file_name("") == "upload"
+    assert safe_file_name("C:\\logs\\run 1.bbl") == "run 1.bbl"
+    assert safe_file_name("a\x00b.csv") == "a_b.csv"
+    long = safe_file_name("\u00e9" * 200 + ".ulg")
+    assert long.endswith(".ulg") and len(long.encode()) <= 120
+
+
+def test_another_programs_sqlite_file_is_left_untouched(tmp_path):
+    import sqlite3
+
+    path = tmp_path / "shop.sqlite"
+    with sqlite3.connect(path) as db:
+        db.execute("CREATE TABLE customers (name TEXT)")
+    before = path.read_bytes()
+    for create in (True, False):
+        with pytest.raises(LogbookError, match="another program's SQLite database"):
+            Logbook(path, create=create)
+    assert path.read_bytes() == before and not (tmp_path / "shop.sqlite-wal").exists()
+
+
 # --------------------------------------------------------------------------- concurrency
 
 ADD_SCRIPT = textwrap.dedent("""

@@ -94,9 +94,34 @@ def test_listening_beyond_loopback_needs_a_token():
         check_bind("0.0.0.0", None)
     with pytest.raises(DischargelabError, match="give it a token"):
         build_server(host="0.0.0.0", port=0)
-    check_bind("0.0.0.0", "secret")
+    check_bind("0.0.0.0", "a-long-secret.token")
     check_bind("127.0.0.1", None)
     check_bind("::1", None)
+    for bad in ("short", "has;semicolon-in-it", "has space in it", "euro-\u20ac-token-x"):
+        with pytest.raises(DischargelabError, match="the token must be 12-200 letters"):
+            check_bind("0.0.0.0", bad)
+
+
+@pytest.mark.parametrize("file_name", ["..", ".", "a\x01b.csv", "\u00e9" * 200 + ".csv",
+                                       "C:\\logs\\..\\run.csv"])
+def test_upload_names_no_file_system_takes_are_made_safe(server, file_name):
+    body, ctype = multipart({"pack": "p1"}, {"file": (file_name, b"not a log at all\n")})
+    status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+    assert status == 422 and "has a header but no data rows" in data["error"], (status, data)
+    assert server.alive()
+
+
+def test_demo_start_settings_refuse_infinities_and_server_files(tmp_path):
+    from dischargelab.errors import DataError
+    from dischargelab.web.bench import DemoBench, parse_demo_settings
+
+    for settings in ({"cells": 1e400}, {"debounce": float("inf")}, {"c_rate": float("nan")}):
+        with pytest.raises(DataError, match="must be a"):
+            parse_demo_settings(settings)
+    bench = DemoBench(tmp_path / "runs")
+    with pytest.raises(DataError, match="battery must be one of the presets"):
+        bench.start({"battery": str(tmp_path / "battery.json")})
+    assert not bench.running
 
 
 def test_a_token_is_needed_on_every_request_when_given(tmp_path):

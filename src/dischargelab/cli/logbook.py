@@ -345,10 +345,11 @@ def report_cmd(fleet, output, within, eol, force, workers, scheduler, db, as_jso
       dischargelab logbook report --fleet -o fleet.html
       dischargelab logbook report --fleet --workers 4 --within 100 --json
     """
-    guard_outputs([output], [], force)
     bar, progress = progress_bar("packs")
-    with open_logbook(db) as lb, open_executor(workers, scheduler) as executor, bar:
-        report = lb.fleet(eol=eol, executor=executor, progress=progress)
+    with open_logbook(db) as lb:
+        guard_outputs([output], lb.own_files(), force)   # never the logbook, even with --force
+        with open_executor(workers, scheduler) as executor, bar:
+            report = lb.fleet(eol=eol, executor=executor, progress=progress)
     path = report.save(output, force=force, within_efc=within)
     due = report.retire_soon(within)
     if as_json:

@@ -166,7 +166,11 @@ def read_dataflash(path, *, topic: str | None = None, fields: dict | None = None
                 _close(reader)
     except DataError as exc:
         raise DataError(f"{path.name}: {exc}") from None
-    except _DATAFLASH_ERRORS as exc:
+    except Exception as exc:
+        # pymavlink reports a corrupt format table with a bare Exception ("Unsupported format
+        # char"); any other kind that is not in the list is a bug and goes on
+        if not isinstance(exc, _DATAFLASH_ERRORS) and type(exc) is not Exception:
+            raise
         raise DataError(f"{path.name}: the DataFlash log is corrupt or truncated and cannot be "
                         f"read ({type(exc).__name__}); copy the log from the vehicle again or "
                         "check that it is an ArduPilot log") from None

@@ -365,6 +365,15 @@ class Logbook:
         return model
 
     # ------------------------------------------------------------------ export
+    def own_files(self) -> list[Path]:
+        """Files no output may replace, even with ``force``: the SQLite logbook itself and
+        the files it keeps only by path (added with ``keep_raw=False``)."""
+        from . import schema, store
+
+        with self._errors(), self._read() as conn:
+            kept_by_path = store.path_only_sources(conn)
+        return schema.sqlite_files(self.url) + kept_by_path
+
     def export(self, path, format: str = "csv", force: bool = False) -> Path:
         """Write every pack's events with their health figures (CSV or Parquet).
 
@@ -386,7 +395,7 @@ class Logbook:
                                f"got {format!r}")
         if format == "parquet":
             require("pyarrow", "parquet")
-        out = check_outputs([path], force=force)[0]
+        out = check_outputs([path], inputs=self.own_files(), force=force)[0]
         with self._errors(), self._read() as conn:
             names = store.pack_names(conn)
         frames = []

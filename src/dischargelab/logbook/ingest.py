@@ -35,6 +35,7 @@ from . import schema
 from .summarise import (
     SourceSummary,
     check_reader_options,
+    safe_file_name,
     sha256_bytes,
     sha256_file,
     summarise_source,
@@ -273,8 +274,9 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
             if len(batch) >= BATCH_SOURCES:
                 write_summaries(engine, batch, result)
                 batch = []
-    except KeyboardInterrupt:
-        # keep what is summarised (one transaction): a rerun only does what is missing
+    except BaseException:
+        # Ctrl-C, a file gone, a lost cluster: keep what is summarised (one transaction), so
+        # a rerun only does what is missing
         write_summaries(engine, batch, result)
         raise
     write_summaries(engine, batch, result)
@@ -301,7 +303,7 @@ def add_upload(engine, file_name: str, data: bytes, pack: str,
     """Add one file given as bytes (an upload; see :meth:`dischargelab.Logbook.add_bytes`)."""
     if not str(pack or "").strip():
         raise LogbookError("the pack name is empty")
-    name = Path(str(file_name)).name
+    name = safe_file_name(file_name)
     result = AddResult()
     sha = sha256_bytes(data)
     with schema.reading(engine) as conn:

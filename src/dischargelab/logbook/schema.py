@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import os
 import sys
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -251,6 +251,8 @@ def create(url: str, new: bool = True) -> Engine:
     if not new and not path.is_file():
         raise LogbookError(f"no logbook at {path}: adding files creates one "
                            "(Logbook.add, `dischargelab logbook add`)")
+    if path.is_file() and path.stat().st_size > 0:
+        _check_sqlite_is_a_logbook(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         engine = create_engine(parsed, connect_args={"timeout": BUSY_TIMEOUT_S})
@@ -259,6 +261,33 @@ def create(url: str, new: bool = True) -> Engine:
     event.listen(engine, "connect", _sqlite_pragmas)
     event.listen(engine, "begin", _sqlite_begin)
     return engine
+
+
+def sqlite_files(url: str) -> list[Path]:
+    """The files of a SQLite logbook (the database, its WAL and shared-memory files);
+    none for a server database."""
+    parsed = make_url(url)
+    if parsed.get_backend_name() != "sqlite" or not parsed.database:
+        return []
+    path = Path(parsed.database)
+    return [path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")]
+
+
+def _check_sqlite_is_a_logbook(path: Path) -> None:
+    """Refuse, before anything writes to it, a file that is not SQLite or is another
+    program's database (its tables, but none of a logbook's)."""
+    import sqlite3
+
+    try:
+        with closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)) as db:
+            names = {row[0] for row in db.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table'")}
+    except sqlite3.DatabaseError:
+        raise LogbookError(f"{path} is not a logbook database that can be opened (not an "
+                           "SQLite file, or no permission)") from None
+    if names and "logbook_meta" not in names:
+        raise LogbookError(f"{path} is another program's SQLite database (tables "
+                           f"{', '.join(sorted(names)[:5])}); give the logbook a file of its own")
 
 
 @contextmanager

@@ -98,6 +98,15 @@ def raw_file(conn, sha256: str) -> bytes:
     return data
 
 
+def path_only_sources(conn) -> list[Path]:
+    """Files added without keeping their bytes: the logbook's only copy is where they are."""
+    s, b = schema.sources, schema.blobs
+    kept = select(b.c.sha256)
+    rows = conn.execute(select(s.c.path).where(s.c.path.is_not(None))
+                        .where(s.c.sha256.not_in(kept))).scalars()
+    return [Path(p) for p in rows]
+
+
 def source_of_event(conn, event_id: int) -> dict:
     """File name, SHA-256, reader options and segment number (from 1) of an event's source."""
     e, s = schema.events, schema.sources
@@ -110,4 +119,4 @@ def source_of_event(conn, event_id: int) -> dict:
 
 
 __all__ = ["pack_row", "pack_names", "pack_events", "set_pack", "counts", "latest_model",
-           "save_model", "raw_file", "source_of_event"]
+           "save_model", "raw_file", "source_of_event", "path_only_sources"]

@@ -72,7 +72,9 @@ FLIGHT_FORMATS = ("ardupilot-bin", "ardupilot-text", "ulog", "blackbox", "inflig
 READER_OPTIONS = ("columns", "current_A", "sign", "units", "delimiter", "header", "fmt",
                   "battery")
 
-_CYCLE = re.compile(r"cycle[\s_\-]*0*(\d+)", re.IGNORECASE)
+#: A cycle number in a file name (``DischargeCycle042``); at most five digits, so a date
+#: (``cycle_20240501``) is not read as one.
+_CYCLE = re.compile(r"cycle[\s_\-]*0*(\d{1,5})(?!\d)", re.IGNORECASE)
 
 
 @dataclass
@@ -166,7 +168,7 @@ def summarise_source(source, options: dict | None = None, keep_raw: bool = True
     options = check_reader_options(options)
     if isinstance(source, tuple):
         name, data = source
-        name = Path(str(name)).name
+        name = safe_file_name(name)
         with tempfile.TemporaryDirectory(prefix="dischargelab-") as folder:
             path = Path(folder) / name
             path.write_bytes(data)
@@ -176,6 +178,26 @@ def summarise_source(source, options: dict | None = None, keep_raw: bool = True
         raise DataError(f"{path}: no such file")
     data = path.read_bytes()
     return _summarise_path(path, path.name, data, options, keep_raw)
+
+
+#: Longest file name kept for a file given as bytes [UTF-8 bytes] (file systems allow 255).
+MAX_NAME_BYTES = 120
+
+
+def safe_file_name(name) -> str:
+    """A file name given with a file's bytes, safe to write in a folder of our own: the
+    last path part, control characters replaced, at most :data:`MAX_NAME_BYTES` (the
+    suffix kept, as the readers look at it), and ``upload`` for none, ``.`` or ``..``."""
+    text = str(name).replace("\\", "/").rsplit("/", 1)[-1]
+    text = re.sub(r"[\x00-\x1f\x7f]", "_", text).strip()
+    if text in ("", ".", ".."):
+        return "upload"
+    stem, dot, suffix = text.rpartition(".")
+    if not dot or len(suffix.encode()) > 16:
+        stem, suffix = text, ""
+    room = MAX_NAME_BYTES - len(suffix.encode()) - (1 if suffix else 0)
+    stem = stem.encode()[:room].decode("utf-8", "ignore") or "upload"
+    return f"{stem}.{suffix}" if suffix else stem
 
 
 def _reader(path: Path, options: dict):

@@ -13,6 +13,7 @@ Two ways to feed the live page:
 
 from __future__ import annotations
 
+import math
 import threading
 from datetime import datetime
 from pathlib import Path
@@ -124,7 +125,9 @@ def parse_demo_settings(raw: dict) -> dict:
                     raise ValueError
             else:
                 parsed = float(value)
-        except (TypeError, ValueError):
+                if not math.isfinite(parsed):
+                    raise ValueError
+        except (TypeError, ValueError, OverflowError):   # int(inf) overflows
             raise DataError(f"{name} must be {'a whole number' if kind is int else 'a number'}"
                             f", got {value!r}") from None
         if low is not None and not low <= parsed <= high:
@@ -160,16 +163,16 @@ class DemoBench(LiveBench):
         from ..acquire.safety import SafetyLimits
         from ..acquire.sensors import CURRENT_SENSORS, Thermistor
         from ..acquire.virtual_device import VirtualDevice
-        from ..model import load_battery
+        from ..model import PRESETS, load_battery
 
         opts = parse_demo_settings(settings)
         with self._lock:
             if self.running:
                 raise BenchError("a test is already running; stop it first")
-            try:
-                bat = load_battery(opts["battery"])
-            except DischargelabError as exc:
-                raise DataError(str(exc)) from None
+            if opts["battery"] not in PRESETS:   # a preset, never a file on the server
+                raise DataError(f"battery must be one of the presets: {', '.join(PRESETS)}; "
+                                f"got {opts['battery']!r}")
+            bat = load_battery(opts["battery"])
             cells = int(opts.get("cells") or bat.cells_series)
             SafetyLimits.for_chemistry(opts["chemistry"], cells,    # checks them as acquire does
                                        cutoff_cell_V=opts.get("cutoff_cell_V"),
@@ -215,6 +218,10 @@ class DemoBench(LiveBench):
     def _run(self, acq, device) -> None:
         try:
             result = acq.run(view="none")
+        except Exception as exc:  # the thread's end: the page learns it and can Start again
+            self.acquisition = None
+            self.hub.finish("error", f"the test stopped on an error: {exc}")
+            raise
         finally:
             device.stop()
         self.finished(result)

@@ -34,9 +34,9 @@ NO_MODEL = "no model fitted yet — Refit"
 
 def check_pack_name(name: str) -> str:
     name = (name or "").strip()
-    if not _PACK_NAME.match(name):
+    if not _PACK_NAME.match(name) or name in (".", ".."):
         raise RequestRefused(400, "pack name must be 1-100 characters without '/', '\\' or "
-                                  "control characters")
+                                  "control characters, and not '.' or '..'")
     return name
 
 

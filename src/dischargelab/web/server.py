@@ -8,6 +8,7 @@ The socket is bound here, before uvicorn starts, so a busy port is a clear one-l
 from __future__ import annotations
 
 import ipaddress
+import re
 import secrets
 import socket
 import threading
@@ -37,8 +38,17 @@ def new_token() -> str:
     return secrets.token_urlsafe(24)
 
 
+#: What a token given by the user may hold: URL- and cookie-safe characters, long enough.
+TOKEN_PATTERN = re.compile(r"[A-Za-z0-9._~-]{12,200}")
+
+
 def check_bind(host: str, token: str | None) -> None:
-    """Refuse to listen beyond loopback without a token (one-line DischargelabError)."""
+    """Refuse to listen beyond loopback without a token, or with one that a URL or a
+    cookie cannot carry (one-line DischargelabError)."""
+    if token and not TOKEN_PATTERN.fullmatch(token):
+        raise DischargelabError("the token must be 12-200 letters, digits or '.', '_', '~', "
+                                "'-' (it travels in a URL and a cookie); leave it out for a "
+                                "random one")
     if not is_loopback(host) and not token:
         raise DischargelabError(
             f"listening on {host} lets other machines reach the server: give it a token too, "

@@ -7,13 +7,12 @@ stores it.
 
 from __future__ import annotations
 
+from ..logbook.summarise import safe_file_name
 from .guard import RequestRefused
 
 #: The form's fields.
 FILE_FIELD = "file"
 PACK_FIELD = "pack"
-#: Longest file name kept from an upload (the rest is cut).
-MAX_FILE_NAME = 200
 
 _USAGE = (f"send multipart/form-data with a '{FILE_FIELD}' (the log file) and a "
           f"'{PACK_FIELD}' (the pack's name) field")
@@ -79,7 +78,7 @@ def parse_upload(content_type: str, body: bytes) -> tuple[str, bytes, str]:
         name = options.get(b"name", b"").decode("utf-8", "replace")
         if name == FILE_FIELD:
             raw_name = options.get(b"filename", b"upload").decode("utf-8", "replace")
-            file_name = raw_name.replace("\\", "/").rsplit("/", 1)[-1][:MAX_FILE_NAME] or "upload"
+            file_name = safe_file_name(raw_name)
             data = bytes(part["data"])
         elif name == PACK_FIELD:
             pack = bytes(part["data"]).decode("utf-8", "replace").strip()
