@@ -84,6 +84,31 @@ def test_local_cluster_stores_the_same_events_and_refits_and_reports_alike(
             local[name].parameters.as_dict(), rel=1e-9)
 
 
+def test_refits_build_each_packs_job_only_as_the_executor_asks(packs, tmp_path, monkeypatch):
+    url = str(tmp_path / "lb.sqlite")
+    with Logbook(url) as lb:
+        lb.add(packs, pack_from="parent", recursive=True)
+        lb.set_pack("no-full", label_capacity_Ah=3.0)   # a pack with nothing to fit
+        built, seen, calls = [], [], []
+        job = lb._job
+        monkeypatch.setattr(lb, "_job", lambda name, *a: (built.append(name), job(name, *a))[1])
+
+        class Watching(InProcessExecutor):
+            def map_unordered(self, func, items, per_task=1):
+                for item, outcome in super().map_unordered(func, items, per_task):
+                    seen.append(len(built))     # jobs built when this one comes back
+                    yield item, outcome
+
+        fitted = lb.fit_all(executor=Watching(), bootstrap=0,
+                            progress=lambda done, total, name: calls.append((done, total)))
+    # "no-full" (tried first, nothing to fit), then one job per result: never every
+    # pack's file bytes at once (building them all first would read [4, 4, 4])
+    assert seen == [2, 3, 4]
+    assert sorted(fitted) == ["no-full", "pack-a", "pack-b", "pack-c"]
+    assert "no full discharge" in fitted["no-full"]
+    assert calls[-1] == (4, 4) and [d for d, _ in calls] == [1, 2, 3, 4]
+
+
 def run_cli(*args):
     """The CLI in process, capturing its output (pytest's capsys is function-scoped)."""
     import contextlib

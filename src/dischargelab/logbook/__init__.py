@@ -300,25 +300,34 @@ class Logbook:
         from .refit import fit_job
 
         out: dict = {}
-        jobs = []
-        for name in self.pack_names():
-            try:
-                jobs.append(self._job(name, self.health(name), fit_options))
-            except LogbookError as exc:
-                out[name] = str(exc)
-        executor = executor or InProcessExecutor()
-        done = len(out)
-        total = len(out) + len(jobs)
-        for job, outcome in executor.map_unordered(fit_job, jobs):
+        names = self.pack_names()
+        done = 0
+
+        def report(name: str) -> None:
+            nonlocal done
             done += 1
+            if progress is not None:
+                progress(done, len(names), name)
+
+        def jobs():
+            # built as the executor asks for the next one: only the jobs in flight hold
+            # their file's bytes, however many packs there are
+            for name in names:
+                try:
+                    yield self._job(name, self.health(name), fit_options)
+                except LogbookError as exc:
+                    out[name] = str(exc)
+                    report(name)
+
+        executor = executor or InProcessExecutor()
+        for job, outcome in executor.map_unordered(fit_job, jobs()):
             if isinstance(outcome, DischargelabError):
                 out[job["pack"]] = f"cannot fit it: {str(outcome).splitlines()[0]}"
             elif isinstance(outcome, BaseException):
                 raise outcome
             else:
                 out[job["pack"]] = self._store_model(outcome)
-            if progress is not None:
-                progress(done, total, job["pack"])
+            report(job["pack"])
         return dict(sorted(out.items()))
 
     def pack_names(self) -> list[str]:

@@ -41,8 +41,10 @@ from .summarise import (
     summarise_source,
 )
 
-#: Summaries written per transaction.
+#: Summaries written per transaction, and the compressed bytes they may hold at most before
+#: they are written anyway (a batch of large flight logs stays small in memory).
 BATCH_SOURCES = 25
+BATCH_BYTES = 64_000_000
 
 #: Files per task on a cluster: up to this many bytes (at least one file, at most
 #: :data:`TASK_FILES`), so a task lasts long enough to pay for its few milliseconds of
@@ -249,6 +251,7 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
     task = functools.partial(summarise_source, options=options, keep_raw=keep_raw)
     executor = executor or InProcessExecutor()
     batch: list = []
+    batch_bytes = 0
     failure: BaseException | None = None
     try:
         sizes = [path.stat().st_size for path, _, _ in by_path.values()]
@@ -269,11 +272,12 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
                                                    "added; add it again"))
             else:
                 batch.append((outcome, pack_name, str(path.resolve())))
+                batch_bytes += len(outcome.raw_zlib)
             if progress is not None:
                 progress(done, total, path.name)
-            if len(batch) >= BATCH_SOURCES:
+            if len(batch) >= BATCH_SOURCES or batch_bytes >= BATCH_BYTES:
                 write_summaries(engine, batch, result)
-                batch = []
+                batch, batch_bytes = [], 0
     except BaseException:
         # Ctrl-C, a file gone, a lost cluster: keep what is summarised (one transaction), so
         # a rerun only does what is missing
