@@ -1,6 +1,7 @@
 """The web server's safety rules and the live hub's no-silent-drop promise (no browser)."""
 
 import asyncio
+import socket
 import subprocess
 import sys
 import time
@@ -10,7 +11,7 @@ import pytest
 from dischargelab.acquire.pipeline import Sample
 from dischargelab.errors import DischargelabError
 from dischargelab.web.guard import path_problem
-from dischargelab.web.live import LiveHub
+from dischargelab.web.live import RING_EVENTS, LiveHub
 from dischargelab.web.server import Server, build_server, check_bind
 from web_helpers import ThreadServer, multipart
 
@@ -74,6 +75,44 @@ def test_bad_uploads_get_a_clear_4xx(server):
     body, ctype = multipart({"pack": "a/b"}, {"file": ("run.csv", b"1,2\n")})
     status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
     assert status == 400 and "pack name" in data["error"]
+    assert server.alive()
+
+
+def test_uploads_beyond_two_at_once_are_told_to_try_again(server):
+    from dischargelab.web.packs import MAX_CONCURRENT_UPLOADS
+
+    csv = b"time_s,current_A,voltage_V\n" + b"".join(
+        b"%d,1.0,%.3f\n" % (k, 4.1 - 0.001 * k) for k in range(600))
+    body, ctype = multipart({"pack": "p1"}, {"file": ("run.csv", csv)})
+    held = []
+    for _ in range(MAX_CONCURRENT_UPLOADS):     # uploads that send half their body and wait
+        sock = socket.create_connection((server.host, server.port), timeout=20)
+        sock.sendall(b"POST /api/upload HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                     b"Content-Type: " + ctype.encode() + b"\r\n"
+                     b"Content-Length: %d\r\n\r\n" % len(body) + body[: len(body) // 2])
+        held.append(sock)
+    try:
+        deadline = time.monotonic() + 10
+        while True:                             # the server has started reading both
+            status, data, _ = server.request("POST", "/api/upload", body,
+                                             {"Content-Type": ctype})
+            if status == 503 or time.monotonic() > deadline:
+                break
+            time.sleep(0.1)
+        assert status == 503 and "try again" in data["error"], (status, data)
+        held[0].sendall(body[len(body) // 2:])  # one finishes: its answer is a stored file
+        reply = held[0].recv(65536)
+        assert reply.startswith(b"HTTP/1.1 200"), reply[:200]
+    finally:
+        for sock in held:
+            sock.close()
+    deadline = time.monotonic() + 10
+    while True:                                 # the abandoned upload frees its place
+        status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+        if status != 503 or time.monotonic() > deadline:
+            break
+        time.sleep(0.1)
+    assert status == 200 and data["skipped"], (status, data)   # the first one stored it
     assert server.alive()
 
 
@@ -187,6 +226,22 @@ def test_hub_never_waits_for_a_subscriber_and_resyncs_one_that_fell_behind():
         assert elapsed < 1.0                 # 340 samples without any reader
         hub.unsubscribe(sub)
         assert hub.subscribers == 0
+
+    asyncio.run(scenario())
+
+
+def test_hub_resyncs_a_subscriber_whose_events_pile_up():
+    async def scenario():
+        hub = LiveHub(ring_samples=1000, subscriber_samples=50)
+        hub.begin({})
+        sub = hub.subscribe(asyncio.get_running_loop())
+        hub.take(sub)
+        for k in range(RING_EVENTS + 5):     # a noisy link, a page that reads nothing
+            hub.event("gap", frames=k)
+        assert len(sub.events) <= RING_EVENTS
+        kind, got = hub.take(sub)
+        assert kind == "snapshot" and len(got["events"]) == RING_EVENTS
+        assert got["events"][-1]["frames"] == RING_EVENTS + 4
 
     asyncio.run(scenario())
 

@@ -3,10 +3,10 @@
 :class:`LiveHub` is a pipeline :class:`~dischargelab.acquire.pipeline.Consumer`. For every
 sample it appends one record to a bounded ring (the history a page gets when it connects or
 reloads) and to each subscriber's bounded queue, then wakes the subscriber's event loop; it
-never waits for a subscriber. A subscriber whose queue is full is marked *behind*: its queue
-is dropped and its next read is a resync (the whole ring again), so a slow page can miss
-nothing silently. Every record carries ``n``, its index in the run (0, 1, 2 ... with no
-gaps), so a page (and a test) can prove that it has every sample.
+never waits for a subscriber. A subscriber whose queue (or its queue of events) is full is
+marked *behind*: its queues are dropped and its next read is a resync (the whole ring again),
+so a slow page can miss nothing silently. Every record carries ``n``, its index in the run
+(0, 1, 2 ... with no gaps), so a page (and a test) can prove that it has every sample.
 
 The numbers in a record (per-cell voltage, power, charge and energy) come from
 :class:`~dischargelab.acquire.live.LiveDisplay`, the same object as the terminal view's.
@@ -175,7 +175,13 @@ class LiveHub:
             self.events.append(record)
             subs = list(self._subscribers)
             for sub in subs:
-                if not sub.behind:
+                if sub.behind:
+                    continue
+                if len(sub.events) >= RING_EVENTS:
+                    sub.behind = True          # resync from the ring at its next read
+                    sub.queue.clear()
+                    sub.events.clear()
+                else:
                     sub.events.append(record)
         for sub in subs:
             sub.notify()

@@ -64,6 +64,10 @@ def _clean(value):
     return str(value)
 
 
+#: Uploads read and stored at the same time; more get 503 (each is held in memory).
+MAX_CONCURRENT_UPLOADS = 2
+
+
 class PackPages:
     """Routes of the logbook API; the logbook is opened at the first request needing it."""
 
@@ -73,6 +77,7 @@ class PackPages:
         self._own = logbook is None
         self.max_upload_bytes = max_upload_bytes
         self._lock = threading.Lock()
+        self._uploads = asyncio.Semaphore(MAX_CONCURRENT_UPLOADS)
 
     # ------------------------------------------------------------------ logbook
     def logbook(self):
@@ -205,10 +210,18 @@ class PackPages:
         return await read_json(request)
 
     async def upload(self, request: Request) -> Response:
-        body = await read_body(request, self.max_upload_bytes, "upload")
-        file_name, data, pack = parse_upload(request.headers.get("content-type", ""), body)
-        pack = check_pack_name(pack)
-        result = await self._call(lambda: self.logbook().add_bytes(file_name, data, pack))
+        # An upload is held in memory a few times over while it is parsed and stored, so
+        # only a few run at once; the rest are told to try again (503) instead of waiting.
+        if self._uploads.locked():
+            raise RequestRefused(503, f"{MAX_CONCURRENT_UPLOADS} uploads are being stored; "
+                                      "try again when one has finished")
+        async with self._uploads:
+            body = await read_body(request, self.max_upload_bytes, "upload")
+            file_name, data, pack = parse_upload(request.headers.get("content-type", ""),
+                                                 body)
+            del body
+            pack = check_pack_name(pack)
+            result = await self._call(lambda: self.logbook().add_bytes(file_name, data, pack))
         if result.rejected:
             return error(422, f"{file_name}: {result.rejected[0][1]}")
         return JSONResponse(_clean(result.to_dict()))
