@@ -54,6 +54,12 @@ class Subscriber:
         self._wake_pending = False
         self.resyncs = 0
 
+    def fall_behind(self) -> None:
+        """Drop what is queued; the next read is a resync from the ring (hub lock held)."""
+        self.behind = True
+        self.queue.clear()
+        self.events.clear()
+
     def _set(self) -> None:
         self._wake_pending = False
         self.wake.set()
@@ -158,9 +164,7 @@ class LiveHub:
                 if sub.behind:
                     continue
                 if len(sub.queue) >= sub.limit:
-                    sub.behind = True          # resync from the ring at its next read
-                    sub.queue.clear()
-                    sub.events.clear()
+                    sub.fall_behind()
                 else:
                     sub.queue.append(record)
             subs = list(subs)
@@ -178,9 +182,7 @@ class LiveHub:
                 if sub.behind:
                     continue
                 if len(sub.events) >= RING_EVENTS:
-                    sub.behind = True          # resync from the ring at its next read
-                    sub.queue.clear()
-                    sub.events.clear()
+                    sub.fall_behind()
                 else:
                     sub.events.append(record)
         for sub in subs:
