@@ -135,7 +135,7 @@ def test_writer_to_a_serial_port():
         for s in samples_cc(5):
             w.handle(s)
         received = b""
-        deadline = time.monotonic() + 3
+        deadline = time.monotonic() + 10
         while received.count(b"\r\n") < 5 and time.monotonic() < deadline:
             if select.select([master], [], [], 0.2)[0]:
                 received += os.read(master, 4096)
@@ -159,7 +159,7 @@ def test_whole_run_virtual_load_to_logview(tmp_path):
         writer = LogViewWriter(out)
         pipe = Pipeline(source, [writer])
         ended = pipe.run(timeout_s=30)
-        deadline = time.monotonic() + 3          # the load handles bytes asynchronously
+        deadline = time.monotonic() + 10         # the load handles bytes asynchronously
         while 0x06 not in [c[0] for c in load.commands] and time.monotonic() < deadline:
             time.sleep(0.01)
     assert ended == "cutoff" and source.ended_by == "load cutoff"

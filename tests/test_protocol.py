@@ -289,7 +289,7 @@ def firmware_harness(tmp_path_factory):
     return exe
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(st.lists(sample_frames(), min_size=1, max_size=40),
        st.lists(st.integers(proto.MIN_PERIOD_US - 10, proto.MAX_PERIOD_US + 10), max_size=20),
        st.lists(st.tuples(st.sampled_from(sorted(proto.COMMAND_TYPES)), st.integers(0, 255),

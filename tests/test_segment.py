@@ -138,7 +138,7 @@ def test_voltage_step_rest():
     assert voltage_step_rest([4.1, 4.0])[0] is False
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(st.lists(st.tuples(st.sampled_from(["idle", "load", "charge"]),
                           st.integers(min_value=3, max_value=15)), min_size=1, max_size=8))
 def test_segments_are_the_load_blocks(blocks):
