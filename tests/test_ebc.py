@@ -247,7 +247,8 @@ def test_host_safety_cutoff_stops_the_load():
 
 def test_stop_load_resends_until_confirmed():
     with VirtualEbcLoad("zippy-1100-2s", ignore_stops=1, frame_period_s=0.01) as load:
-        src = open_source(load, current_A=1.0, cutoff_V=6.0, command_timeout_s=0.3)
+        # the confirmation comes 0.01 s after the second stop; 1 s leaves room for a busy host
+        src = open_source(load, current_A=1.0, cutoff_V=6.0, command_timeout_s=1.0)
         src.read(0.1)
         src.stop_load()
         assert not src.running and src.ended_by == "host stop"

@@ -223,7 +223,7 @@ def test_hub_never_waits_for_a_subscriber_and_resyncs_one_that_fell_behind():
         hub.handle(_samples(1, 340)[0])
         kind, got = hub.take(sub)
         assert kind == "samples" and got["samples"][0][0] == 340
-        assert elapsed < 1.0                 # 340 samples without any reader
+        assert elapsed < 10.0                # a hang, not a timing: 340 samples, no reader
         hub.unsubscribe(sub)
         assert hub.subscribers == 0
 
