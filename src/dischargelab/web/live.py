@@ -54,11 +54,28 @@ class Subscriber:
         self._wake_pending = False
         self.resyncs = 0
 
-    def fall_behind(self) -> None:
-        """Drop what is queued; the next read is a resync from the ring (hub lock held)."""
-        self.behind = True
-        self.queue.clear()
-        self.events.clear()
+    def add_sample(self, record: tuple) -> None:
+        """Queue a sample record (hub lock held); see :meth:`_add`."""
+        self._add(self.queue, self.limit, record)
+
+    def add_event(self, record: dict) -> None:
+        """Queue an event record (hub lock held); see :meth:`_add`."""
+        self._add(self.events, RING_EVENTS, record)
+
+    def _add(self, queue: deque, limit: int, record) -> None:
+        """Append ``record``, or fall behind when ``queue`` already holds ``limit`` records.
+
+        Falling behind drops everything queued; the next read is a resync from the ring.
+        A subscriber already behind queues nothing.
+        """
+        if self.behind:
+            return
+        if len(queue) >= limit:
+            self.behind = True
+            self.queue.clear()
+            self.events.clear()
+        else:
+            queue.append(record)
 
     def _set(self) -> None:
         self._wake_pending = False
@@ -159,15 +176,9 @@ class LiveHub:
         with self._lock:
             self.count += 1
             self.ring.append(record)
-            subs = self._subscribers
+            subs = list(self._subscribers)
             for sub in subs:
-                if sub.behind:
-                    continue
-                if len(sub.queue) >= sub.limit:
-                    sub.fall_behind()
-                else:
-                    sub.queue.append(record)
-            subs = list(subs)
+                sub.add_sample(record)
         for sub in subs:
             sub.notify()
 
@@ -179,12 +190,7 @@ class LiveHub:
             self.events.append(record)
             subs = list(self._subscribers)
             for sub in subs:
-                if sub.behind:
-                    continue
-                if len(sub.events) >= RING_EVENTS:
-                    sub.fall_behind()
-                else:
-                    sub.events.append(record)
+                sub.add_event(record)
         for sub in subs:
             sub.notify()
 
