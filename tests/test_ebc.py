@@ -185,16 +185,6 @@ def open_source(load, **kw):
     return EbcSource(load.port, **kw)
 
 
-def wait_for_command(load, code, timeout_s=3.0):
-    """The load thread handles bytes asynchronously: wait until it has seen ``code``."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if any(c[0] == code for c in load.commands):
-            return True
-        time.sleep(0.01)
-    return False
-
-
 def drain(src, limit_s=30.0):
     samples = []
     t_end = time.monotonic() + limit_s
@@ -211,7 +201,7 @@ def test_discharge_to_the_loads_own_cutoff():
         samples = drain(src)
         assert src.ended_by == "load cutoff" and not src.running
         src.close()
-        assert wait_for_command(load, Command.DISCONNECT)
+        assert load.wait_for_command(Command.DISCONNECT, timeout_s=3.0)
     active = [s for s in samples if s.current_A and s.current_A > 0]
     assert len(active) > 20
     assert all(isinstance(s, Sample) for s in samples)

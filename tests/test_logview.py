@@ -159,9 +159,7 @@ def test_whole_run_virtual_load_to_logview(tmp_path):
         writer = LogViewWriter(out)
         pipe = Pipeline(source, [writer])
         ended = pipe.run(timeout_s=30)
-        deadline = time.monotonic() + 10         # the load handles bytes asynchronously
-        while 0x06 not in [c[0] for c in load.commands] and time.monotonic() < deadline:
-            time.sleep(0.01)
+        load.wait_for_command(0x06, timeout_s=10)   # Disconnect, sent as the source closes
     assert ended == "cutoff" and source.ended_by == "load cutoff"
     lines = read_openformat(out)
     assert len(lines) > 20

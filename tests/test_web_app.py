@@ -78,6 +78,17 @@ def test_bad_uploads_get_a_clear_4xx(server):
     assert server.alive()
 
 
+def _upload_until(server, body, ctype, done, timeout_s=10):
+    """POST ``body`` to /api/upload every 0.1 s until ``done(status)`` or ``timeout_s`` [s]
+    has passed; returns the last status and JSON answer."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
+        if done(status) or time.monotonic() > deadline:
+            return status, data
+        time.sleep(0.1)
+
+
 def test_uploads_beyond_two_at_once_are_told_to_try_again(server):
     from dischargelab.web.packs import MAX_CONCURRENT_UPLOADS
 
@@ -92,13 +103,8 @@ def test_uploads_beyond_two_at_once_are_told_to_try_again(server):
                      b"Content-Length: %d\r\n\r\n" % len(body) + body[: len(body) // 2])
         held.append(sock)
     try:
-        deadline = time.monotonic() + 10
-        while True:                             # the server has started reading both
-            status, data, _ = server.request("POST", "/api/upload", body,
-                                             {"Content-Type": ctype})
-            if status == 503 or time.monotonic() > deadline:
-                break
-            time.sleep(0.1)
+        # a third is refused once the server has started reading both
+        status, data = _upload_until(server, body, ctype, lambda status: status == 503)
         assert status == 503 and "try again" in data["error"], (status, data)
         held[0].sendall(body[len(body) // 2:])  # one finishes: its answer is a stored file
         reply = held[0].recv(65536)
@@ -106,12 +112,8 @@ def test_uploads_beyond_two_at_once_are_told_to_try_again(server):
     finally:
         for sock in held:
             sock.close()
-    deadline = time.monotonic() + 10
-    while True:                                 # the abandoned upload frees its place
-        status, data, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype})
-        if status != 503 or time.monotonic() > deadline:
-            break
-        time.sleep(0.1)
+    # the abandoned upload frees its place: the next one is read
+    status, data = _upload_until(server, body, ctype, lambda status: status != 503)
     assert status == 200 and data["skipped"], (status, data)   # the first one stored it
     assert server.alive()
 

@@ -153,6 +153,19 @@ class VirtualEbcLoad:
         self.current_A = 0.0
 
     # ------------------------------------------------------------------ commands
+    def wait_for_command(self, code: int, timeout_s: float) -> bool:
+        """Whether the load has received command ``code`` within ``timeout_s`` [s].
+
+        The load's thread handles bytes asynchronously: a command the host has sent may not
+        be in :attr:`commands` yet.
+        """
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if any(c[0] == code for c in self.commands):
+                return True
+            time.sleep(0.01)
+        return False
+
     def _handle(self, frame: bytes) -> None:
         try:
             code, a, b, c = decode_command(frame)
