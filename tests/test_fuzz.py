@@ -40,7 +40,7 @@ currentCurrent=17900, remainPowerPercent=96, smartBattery=true, temperature=18.1
 currentCurrent=18100, remainPowerPercent=95, smartBattery=true, temperature=18.2}.
 """
 COLUMNS = "time_s=0,current_A=1,voltage_V=2"
-SETTINGS = dict(deadline=None, derandomize=True, database=None,
+SETTINGS = dict(derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 BAD_VALUES = ["nan", "NaN", "inf", "-inf", "1e308", "-1e308", "1e31", "", "x", "-", "0",

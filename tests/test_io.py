@@ -674,7 +674,7 @@ def mutate(lines, pos, kind):
         lines[pos] = lines[pos].replace(",", "\t")
 
 
-@settings(max_examples=150, deadline=None,
+@settings(max_examples=150,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.lists(st.tuples(st.integers(0, 50), st.sampled_from(MUTATIONS)), max_size=6),
        st.sampled_from([{}, {"current_A": 2.0}, {"segment": "none"}, {"sign": "negative"},
@@ -699,7 +699,7 @@ def test_damaged_files_load_cleanly_or_fail_with_one_line(tmp_path, mutations, o
     assert "\n" not in meta["summary"]
 
 
-@settings(max_examples=150, deadline=None,
+@settings(max_examples=150,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.text(alphabet=st.sampled_from(list("0123456789.,;\t -+eE\n#abcXV:_")), max_size=300))
 def test_random_text_never_raises_anything_but_data_error(tmp_path, text):
