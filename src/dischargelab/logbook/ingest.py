@@ -183,7 +183,8 @@ def event_row(event: dict) -> dict:
                idx=int(event["index"]), kind=event["kind"], start_time=event.get("start_time"),
                cycle=event.get("cycle"), reaches_knee=bool(event.get("reaches_knee")),
                cells=event.get("cells"), samples=int(event.get("samples") or 0),
-               curve_json=json.dumps(event.get("curve") or {}))
+               curve_json=json.dumps(event.get("curve") or {}),
+               details_json=json.dumps(event["details"]) if event.get("details") else None)
     return {k: (float(v) if k in schema.EVENT_FLOATS and v is not None else v)
             for k, v in row.items()}
 

@@ -16,7 +16,7 @@ Tables (all values SI, discharge positive; ``*_json`` columns hold JSON text)::
                   end_voltage_V, end_current_A, resistance_ohm, resistance_low_ohm,
                   resistance_high_ohm, reaches_knee, cells, samples,
                   temperature_start_C, temperature_max_C, ambient_C, cell_spread_V,
-                  curve_json                      -- unique (source_id, idx)
+                  curve_json, details_json        -- unique (source_id, idx)
     models        id, pack_id, fitted_at, reference_event_id, capacity_Ah,
                   resistance_ohm, battery_json    -- the pack's fitted battery models
 
@@ -26,6 +26,8 @@ opened, a newer one is refused):
 * 1: packs, blobs, sources, events without ``cycle`` and ``cell_spread_V``.
 * 2: ``events.cycle`` (cycle number from the file name, for the equivalent full
   cycles between logged ones), ``events.cell_spread_V``, and the ``models`` table.
+* 3: ``events.details_json``: the event's further figures (rests and their relaxation,
+  charges, per-cell figures, how well the sampling resolves the current), JSON.
 """
 
 from __future__ import annotations
@@ -61,7 +63,7 @@ from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 from ..errors import LogbookError
 
 #: Version of the tables this code writes.
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 #: File name of the default SQLite logbook in the user's data folder.
 DEFAULT_FILE_NAME = "logbook.sqlite"
@@ -133,6 +135,7 @@ events = Table(
     Column("cells", Integer),
     Column("samples", Integer, nullable=False),
     Column("curve_json", Text, nullable=False),
+    Column("details_json", Text),
     UniqueConstraint("source_id", "idx", name="uq_events_source_idx"),
 )
 
@@ -340,8 +343,12 @@ def _migrate_1_to_2(conn) -> None:
     models.create(conn, checkfirst=True)
 
 
+def _migrate_2_to_3(conn) -> None:
+    _add_column(conn, "events", "details_json", "TEXT")
+
+
 #: Forward migrations: version -> function taking it to version + 1.
-MIGRATIONS = {1: _migrate_1_to_2}
+MIGRATIONS = {1: _migrate_1_to_2, 2: _migrate_2_to_3}
 
 
 def schema_version(conn) -> int | None:

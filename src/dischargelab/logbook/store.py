@@ -38,6 +38,8 @@ def pack_events(conn, pack_id: int) -> list[dict]:
     for row in conn.execute(query).mappings():
         item = dict(row)
         item["curve"] = json.loads(item.pop("curve_json"))
+        details = item.pop("details_json", None)
+        item["details"] = json.loads(details) if details else {}
         out.append(item)
     return out
 
