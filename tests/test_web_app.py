@@ -11,6 +11,7 @@ import pytest
 from dischargelab.acquire.pipeline import Sample
 from dischargelab.errors import DischargelabError
 from dischargelab.web.guard import path_problem
+from dischargelab.web.limits import Limits
 from dischargelab.web.live import RING_EVENTS, LiveHub
 from dischargelab.web.server import Server, build_server, check_bind
 from web_helpers import ThreadServer, multipart
@@ -18,7 +19,7 @@ from web_helpers import ThreadServer, multipart
 
 @pytest.fixture
 def server(tmp_path):
-    srv = ThreadServer(db=str(tmp_path / "logbook.sqlite"), max_upload_bytes=50_000)
+    srv = ThreadServer(db=str(tmp_path / "logbook.sqlite"), limits=Limits(max_upload_bytes=50_000))
     yield srv
     srv.server.stop()
 
@@ -90,8 +91,7 @@ def _upload_until(server, body, ctype, done, timeout_s=10):
 
 
 def test_uploads_beyond_two_at_once_are_told_to_try_again(server):
-    from dischargelab.web.packs import MAX_CONCURRENT_UPLOADS
-
+    MAX_CONCURRENT_UPLOADS = Limits().max_uploads
     csv = b"time_s,current_A,voltage_V\n" + b"".join(
         b"%d,1.0,%.3f\n" % (k, 4.1 - 0.001 * k) for k in range(600))
     body, ctype = multipart({"pack": "p1"}, {"file": ("run.csv", csv)})
