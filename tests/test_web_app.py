@@ -130,6 +130,23 @@ def test_other_sites_and_other_host_names_are_refused(server):
     assert server.alive()
 
 
+def test_behind_a_proxy_the_public_name_is_answered(tmp_path):
+    srv = ThreadServer(db=str(tmp_path / "lb.sqlite"), public_hosts=["dl.example.org"])
+    try:
+        status, data, _ = srv.request("GET", "/api/live", headers={"Host": "dl.example.org"})
+        assert status == 200 and "active" in data
+        status, data, _ = srv.request("POST", "/api/live/stop", b"{}", {
+            "Host": "dl.example.org", "Origin": "https://dl.example.org"})
+        assert status == 409 and "no test is running" in data["error"]   # past the guard
+        status, data, _ = srv.request("POST", "/api/live/stop", b"{}", {
+            "Host": "dl.example.org", "Origin": "https://evil.example"})
+        assert status == 403
+        status, data, _ = srv.request("GET", "/api/live", headers={"Host": "evil.example"})
+        assert status == 421
+    finally:
+        srv.server.stop()
+
+
 def test_listening_beyond_loopback_needs_a_token():
     with pytest.raises(DischargelabError, match="give it a token"):
         check_bind("0.0.0.0", None)

@@ -203,6 +203,14 @@ def test_pack_page_reads_without_writing_then_refits_and_flies(server, browser, 
     result = browser.wait_for("window.__endurance", 60, "the endurance result")
     assert result["flight_time_s"] == pytest.approx(expected["flight_time_s"], rel=1e-9)
     assert any("scaled to its health today" in n for n in result["notes"])
+    assert result["source"] == MISSION                  # a name, not a path on the server
+    # the paper's 50 A take-off on 4S1P of these 3 Ah cells: the page says it cannot fly
+    cannot = expected["cannot_deliver"]
+    assert result["cannot_deliver"] == cannot and cannot["phase"] == "takeoff"
+    assert cannot["message"].startswith("the pack cannot deliver the 50 A of 'takeoff'")
+    row = browser.js("const r = document.querySelector('#endurance-result tr.cannot');"
+                     "return r && [r.cells[0].textContent, r.cells[1].textContent];")
+    assert row == ["Cannot fly", cannot["message"]]
 
 
 @pytest.mark.slow
@@ -234,6 +242,30 @@ def test_uploads_through_the_form_and_the_api_appear_in_the_list(server, browser
         expected = lb.packs().to_dict()["rows"]
     assert [r["name"] for r in expected] == ["cell C", "zippy 2S", "zippy spare"]
     assert rows == [list_row(r) for r in expected]
+
+
+def strings(value):
+    """Every string in a JSON answer (keys and values)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield k
+            yield from strings(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from strings(v)
+    elif isinstance(value, str):
+        yield value
+
+
+def test_answers_carry_what_the_page_shows_and_no_server_path(server, db):
+    detail = server.get_json("/api/packs/cell%20C")
+    assert set(detail) == {"name", "summary", "health", "model", "model_note"}
+    assert [e["source"] for e in detail["health"]["events"]] == [
+        f"DischargeCycle{c:03d}.txt" for c in CYCLES]
+    for answer in (detail, server.get_json("/api/packs"), server.get_json("/api/missions"),
+                   server.get_json("/api/live")):
+        for text in strings(answer):
+            assert str(db.parent) not in text and not text.startswith("/"), text
 
 
 def test_bad_requests_get_a_clear_4xx_and_the_server_stays_up(server, db, tmp_path):

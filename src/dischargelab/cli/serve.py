@@ -34,13 +34,16 @@ from .common import CONTEXT, err, out
               show_default=True, metavar="S",
               help="Time a request body may take, plus 1 s per 500 bytes received; slower "
                    "bodies are cut off (408).")
+@click.option("--public-host", "public_hosts", multiple=True, metavar="NAME",
+              help="Host name the server also answers to, as a reverse proxy in front passes "
+                   "it on (e.g. dl.example.org); repeat for more.")
 @click.option("--max-connections", type=click.IntRange(1), default=1000, show_default=True,
               metavar="N", help="Open connections at most; more are answered 503.")
 @click.option("--max-per-client", type=click.IntRange(0), default=0, show_default=True,
               metavar="N", help="Open connections from one address at most (429 beyond); 0 "
                                 "= no cap. Keep 0 behind a reverse proxy.")
 def serve_cmd(db, port, host, token, demo, runs_dir, max_upload_MB, header_timeout_s,
-              body_timeout_s, max_connections, max_per_client):
+              body_timeout_s, public_hosts, max_connections, max_per_client):
     """Serve the logbook's pages and the live test bench in a browser.
 
     Pages: / (packs: health, EFC, forecast end of life), /packs/NAME (capacity
@@ -56,7 +59,8 @@ def serve_cmd(db, port, host, token, demo, runs_dir, max_upload_MB, header_timeo
       dischargelab serve --demo                      # live page with a virtual logger
       dischargelab serve --db runs.sqlite --port 8080
       dischargelab serve --host 0.0.0.0 --token      # reachable on the network, token required
-      dischargelab serve --token --max-per-client 32 # straight on a network, no proxy
+      dischargelab serve --token --public-host dl.example.org   # behind nginx or Caddy
+      dischargelab serve --host 0.0.0.0 --token --max-per-client 32   # no proxy
       dischargelab acquire --port /dev/ttyACM0 --out run.csv --ke 4.38 --serve
     """
     from ..errors import DischargelabError
@@ -71,7 +75,7 @@ def serve_cmd(db, port, host, token, demo, runs_dir, max_upload_MB, header_timeo
                     max_connections=max_connections,
                     max_connections_per_client=max_per_client)
     server = build_server(db=db, host=host, port=port, token=token, demo=demo, runs=runs_dir,
-                          limits=limits)
+                          limits=limits, public_hosts=public_hosts)
     listening = server.listening
     out.print(f"dischargelab serve: listening on {listening.url}", markup=False)
     if demo:

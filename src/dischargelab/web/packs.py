@@ -54,17 +54,32 @@ def _thin(values, points: int = CURVE_POINTS) -> list:
     return [None if not math.isfinite(float(values[i])) else float(values[i]) for i in idx]
 
 
+_PLAIN = (str, int, bool, type(None))
+
+
 def _clean(value):
-    """JSON-safe copy: NaN and infinities become None, tuples lists, numpy scalars floats."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
+    """JSON-safe copy: NaN and infinities become None, tuples lists, numpy scalars floats.
+
+    The common types are recognised by identity first: a pack page holds thousands of
+    floats, and this walk is on every answer."""
+    kind = type(value)
+    if kind is float:
+        return value if math.isfinite(value) else None
+    if kind is dict:
+        return {k if type(k) is str else str(k): _clean(v) for k, v in value.items()}
+    if kind is list or kind is tuple:
         return [_clean(v) for v in value]
+    if kind in _PLAIN:
+        return value
+    if isinstance(value, dict):
+        return _clean(dict(value))
+    if isinstance(value, (list, tuple)):
+        return _clean(list(value))
     if hasattr(value, "item") and not isinstance(value, (str, bytes)):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if value is None or isinstance(value, (str, int, float, bool)):
+        return _clean(value.item())             # numpy scalars
+    if isinstance(value, float):
+        return _clean(float(value))
+    if isinstance(value, _PLAIN):
         return value
     return str(value)
 
@@ -147,7 +162,9 @@ class PackPages:
 
     def _pack_detail(self, name: str) -> dict:
         """What is stored about a pack, read only: a GET never fits or writes (a pack
-        without a stored model says so; the refit is ``POST /api/packs/NAME/fit``)."""
+        without a stored model says so; the refit is ``POST /api/packs/NAME/fit``).
+        Only what the page shows: the summary, the health with its per-event figures,
+        the model's curves."""
         name = self._known(name)
         lb = self.logbook()
         pack = lb.pack(name)
@@ -156,7 +173,7 @@ class PackPages:
         summary["capacity_fraction"] = cap / ref if cap is not None and ref else None
         health = pack.health if pack.health is not None else lb.health(name)
         out = {"name": name, "summary": summary, "health": health.to_dict(),
-               "events": lb.events(name).to_dict(), "model": None, "model_note": None}
+               "model": None, "model_note": None}
         if not pack.fitted:
             out["model_note"] = NO_MODEL
             return out

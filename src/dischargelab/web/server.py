@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass
 
 from ..errors import DischargelabError, require
+from .guard import LOOPBACK_HOSTS
 
 #: Default port of ``dischargelab serve``.
 DEFAULT_PORT = 8050
@@ -189,7 +190,7 @@ class Server:
 
 def build_server(*, db=None, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  token: str | None = None, demo: bool = False, runs=None, live=None,
-                 limits=None) -> Server:
+                 limits=None, public_hosts=()) -> Server:
     """The server ``dischargelab serve`` runs (not started yet; see :meth:`Server.run`).
 
     Parameters
@@ -206,6 +207,9 @@ def build_server(*, db=None, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
     limits : Limits, optional
         Time-outs, connection caps, threads, upload size (default
         :class:`~dischargelab.web.limits.Limits`).
+    public_hosts : sequence of str
+        Host names the server also answers to on loopback: the name a reverse proxy in
+        front of it passes on in the Host header (``dl.example.org``).
     """
     import tempfile
 
@@ -220,5 +224,6 @@ def build_server(*, db=None, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
         live = DemoBench(runs or tempfile.mkdtemp(prefix="dischargelab-runs-"), hub=None)
     limits = limits or Limits()
     app = create_app(db, live=live, token=token, limits=limits,
-                     allowed_hosts=None if is_loopback(host) else ["*"])
+                     allowed_hosts=[*LOOPBACK_HOSTS, *public_hosts] if is_loopback(host)
+                     else ["*"])
     return Server(app, host, port, token, limits)
