@@ -30,7 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _machine import machine_line
+from _machine import machine_line, table
 from dischargelab.logbook import Logbook
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -63,15 +63,6 @@ def cut_file(path: Path, out: Path, share: float) -> None:
                                                 * np.diff(cols[:, 0])))) / 3600.0
     stop = int(np.searchsorted(charge, share * charge[-1])) + 1
     out.write_text("".join(header + data[:stop]), encoding="utf-8")
-
-
-def table(title: str, head: list[str], rows: list[list]) -> None:
-    print(f"\n{title}")
-    widths = [max(len(str(x)) for x in [h] + [r[k] for r in rows]) for k, h in enumerate(head)]
-    print("  ".join(str(h).ljust(w) for h, w in zip(head, widths)))
-    print("  ".join("-" * w for w in widths))
-    for r in rows:
-        print("  ".join(str(x).ljust(w) for x, w in zip(r, widths)))
 
 
 def cycle_of(path: Path) -> int:

@@ -21,7 +21,7 @@ closed connection), latency p50/p99 per request kind and over all, each upload's
 how many times its file is stored, how long the server let an idle connection live, and the
 server's resident memory (RSS) growth over the run (sampled every 0.2 s from
 /proc/PID/status, against the RSS after one warm-up request of each kind and one upload
-of a small file to "K2 LFP"). To tell the
+of a small file to "K2 LFP", once the server is idle). To tell the
 server from the logbook, the same reads are also timed in this process on one thread
 (``compute alone``): what each request costs before any waiting.
 
@@ -50,7 +50,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from _machine import machine_line  # noqa: E402
+from _machine import machine_line, table  # noqa: E402
 from web_helpers import ServerProcess, multipart  # noqa: E402
 
 SHARED = Path(os.environ.get("DISCHARGELAB_SHARED_DATA") or next(
@@ -126,6 +126,26 @@ def compute_alone(db: Path, packs: list[str]) -> dict:
         pages.close()
         pages.workers.close()
     return {"list": t_list, "pack_mean": statistics.mean(per_pack), "pack_max": max(per_pack)}
+
+
+def cpu_s(pid: int) -> float:
+    """CPU time a process has used so far [s] (user + system)."""
+    with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+        fields = fh.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def wait_idle(pid: int, bound_s: float = 300.0) -> None:
+    """Until the process uses under 2 % of a core for a second (work it started in the
+    background, such as recomputing figures after an upload, has ended)."""
+    deadline = time.monotonic() + bound_s
+    last = cpu_s(pid)
+    while time.monotonic() < deadline:
+        time.sleep(1.0)
+        now = cpu_s(pid)
+        if now - last < 0.02:
+            return
+        last = now
 
 
 def rss_MB(pid: int) -> float:
@@ -288,15 +308,6 @@ def pct(values, q: float) -> float:
     return ordered[min(len(ordered) - 1, int(round(q / 100.0 * (len(ordered) - 1))))]
 
 
-def table(title: str, head: list[str], rows: list[list]) -> None:
-    print(f"\n{title}")
-    widths = [max(len(str(x)) for x in [h] + [r[k] for r in rows]) for k, h in enumerate(head)]
-    print("  ".join(str(h).ljust(w) for h, w in zip(head, widths)))
-    print("  ".join("-" * w for w in widths))
-    for r in rows:
-        print("  ".join(str(x).ljust(w) for x, w in zip(r, widths)))
-
-
 def stored_times(db: Path, names: list[str]) -> dict:
     """How many times each file name is stored in the logbook (its sources)."""
     import sqlite3
@@ -355,6 +366,7 @@ def main() -> None:
         status, _ = server.request("POST", "/api/upload", body, {"Content-Type": ctype},
                                    timeout_s=DRAIN_S)
         assert status == 200, status
+        wait_idle(pid)
         base_rss = rss_MB(pid)
 
         clock = Clock(args.seconds)
