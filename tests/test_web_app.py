@@ -283,3 +283,31 @@ def test_importing_dischargelab_does_not_import_the_web_stack():
             "('starlette', 'uvicorn', 'python_multipart', 'multipart', 'anyio', "
             "'dischargelab.web')]; print(bad); assert not bad")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
+
+
+def test_limits_refuse_nonsense_in_one_line():
+    from dischargelab.errors import DataError
+
+    assert Limits().header_timeout_s == 10.0 and Limits().max_uploads == 2
+    for bad, words in (({"header_timeout_s": 0}, "header_timeout_s must be a positive"),
+                       ({"body_min_rate_Bps": float("nan")}, "bytes/s"),
+                       ({"max_connections": 0}, "max_connections must be a whole number >= 1"),
+                       ({"read_threads": 2.5}, "read_threads must be a whole number"),
+                       ({"max_uploads": True}, "max_uploads must be a whole number")):
+        with pytest.raises(DataError, match=words):
+            Limits(**bad)
+
+
+def test_the_open_file_limit_is_raised_to_fit_the_connections_or_said():
+    code = ("import resource; from dischargelab.web.server import open_files_for\n"
+            "from dischargelab.errors import DischargelabError\n"
+            "resource.setrlimit(resource.RLIMIT_NOFILE, (200, 400))\n"
+            "open_files_for(300)\n"
+            "assert resource.getrlimit(resource.RLIMIT_NOFILE)[0] == 364\n"
+            "try:\n    open_files_for(1000)\nexcept DischargelabError as exc:\n"
+            "    print(exc)\nelse:\n    raise SystemExit('not refused')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "1000 connections need 1064 open files, and this system allows 400" in done.stdout
+    assert "lower max_connections to 336" in done.stdout and "ulimit -n" in done.stdout

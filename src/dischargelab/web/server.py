@@ -117,8 +117,8 @@ def open_files_for(connections: int) -> None:
     if soft != resource.RLIM_INFINITY and soft < need:
         raise DischargelabError(
             f"{connections} connections need {need} open files, and this system allows "
-            f"{soft}: lower max_connections (--max-connections) to {soft - SPARE_FILES} or "
-            "raise the limit (ulimit -n)")
+            f"{soft}: lower max_connections to {soft - SPARE_FILES} or raise the limit "
+            "(ulimit -n)")
 
 
 class Server:
