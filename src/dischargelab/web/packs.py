@@ -255,15 +255,21 @@ class PackPages:
             raise RequestRefused(503, f"{limits.max_uploads} uploads are being stored; "
                                       "try again when one has finished")
         self.uploads += 1
-        folder = tempfile.mkdtemp(prefix="dischargelab-upload-")
+        folder = None
         try:
+            try:
+                folder = tempfile.mkdtemp(prefix="dischargelab-upload-")
+            except OSError as exc:
+                raise RequestRefused(507, "no room on the server to receive the upload "
+                                          f"({exc.strerror or exc}); try again later") from None
             received = await self._receive_upload(request, folder)
             pack = check_pack_name(received.pack)
             result = await self._call(self.workers.work, request,
-                                      self.logbook().add_upload, received.path, pack)
+                                      lambda: self.logbook().add_upload(received.path, pack))
         finally:
             self.uploads -= 1
-            shutil.rmtree(folder, ignore_errors=True)
+            if folder is not None:
+                shutil.rmtree(folder, ignore_errors=True)
         if result.rejected:
             return error(422, f"{received.path.name}: {result.rejected[0][1]}")
         return JSONResponse(_clean(result.to_dict()))
