@@ -29,9 +29,18 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy src/dischargelab/__init__.py $(wildcard src/dischargelab/api.py)
 
-# API reference from the docstrings (numpydoc) into docs/api/.
-docs: $(STAMP)
-	$(BIN)/pdoc --docformat numpy -o docs/api dischargelab dischargelab.models dischargelab.engine
+# The documentation site (Sphinx: docs/*.md, the API reference from the numpydoc docstrings,
+# the gallery made by running examples/) into docs/_build/html, offline, warnings as errors.
+DOCS_STAMP := $(VENV)/.docs-installed
+
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	rm -rf docs/_build docs/generated docs/gallery
+	$(BIN)/python -m sphinx -W --keep-going -q -b html -j 1 docs docs/_build/html
+	@echo "documentation: docs/_build/html/index.html"
 
 # A separate venv (.venv/min-versions) with the lower bounds from pyproject.toml.
 min-versions:
@@ -71,4 +80,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/fleet.py
 
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache
+	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache docs/_build docs/generated docs/gallery

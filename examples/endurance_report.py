@@ -1,32 +1,40 @@
 """Pilot's report: fit a battery, validate it on other rates, fly a mission, write one HTML page.
+==============================================================================================
 
 Uses the Samsung 30Q discharges bundled with the package (1C and 4C to fit, C/10 to
-validate) and, when the shared data folder is beside the checkout, the 2C and 3C runs
-too. The mission is the bundled fixed-wing survey mission on a 4S2P pack.
+validate) and, when the shared data folder is beside the checkout (or given with
+``--more``), the 2C and 3C runs too. The mission is the bundled fixed-wing survey mission
+on a 4S2P pack.
 
-Usage: python examples/endurance_report.py [--out DIR]
+Usage: python examples/endurance_report.py [--out DIR] [--more DIR]
 """
 
 import argparse
 from pathlib import Path
 
+from dischargelab.demo import demo_data_dir
 from dischargelab.fit import Curve, fit_battery
 from dischargelab.io import read_discharge
 from dischargelab.mission import load_mission, run_mission
 from dischargelab.report import write_report
 from dischargelab.validate import compare_files
 
-HERE = Path(__file__).resolve().parent
-BUNDLED = HERE.parent / "src" / "dischargelab" / "data" / "samsung30q"
-SHARED = HERE.parent.parent / "shared" / "data" / "samsung30q_S001"
+BUNDLED = demo_data_dir()
+#: The other Samsung 30Q runs, relative to where the script runs (the checkout)
+SHARED = Path("..") / "shared" / "data" / "samsung30q_S001"
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 CUTOFF_CELL_V = 3.0
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="report-out", help="folder for the battery and report")
-    out = Path(parser.parse_args().out)
+    parser.add_argument("--more", default=str(SHARED),
+                        help="folder with Q30_S001_2C.csv and Q30_S001_3C.csv to validate on "
+                             "too, if it exists (default: %(default)s)")
+    args = parser.parse_args()
+    out, more = Path(args.out), Path(args.more)
     out.mkdir(parents=True, exist_ok=True)
 
     curves = [Curve.from_frame(*read_discharge(BUNDLED / f"Q30_S001_{rate}.csv",
@@ -36,8 +44,8 @@ def main() -> None:
     print(fit.report())
 
     unseen = [BUNDLED / "Q30_S001_C10.csv"]
-    unseen += [SHARED / f"Q30_S001_{rate}.csv" for rate in ("2C", "3C")
-               if (SHARED / f"Q30_S001_{rate}.csv").exists()]
+    unseen += [more / f"Q30_S001_{rate}.csv" for rate in ("2C", "3C")
+               if (more / f"Q30_S001_{rate}.csv").exists()]
     cases = compare_files(battery_file, unseen, cutoff_cell_V=CUTOFF_CELL_V, columns=COLUMNS)
     for case in cases:
         s = case.summary

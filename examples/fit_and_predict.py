@@ -1,4 +1,5 @@
 """Fit a cell from one measured discharge and predict other currents and a power.
+==============================================================================
 
 Uses the Samsung 30Q 1C discharge bundled with dischargelab; change DATA and the
 column mapping for your own file.
@@ -20,7 +21,8 @@ CUTOFF_CELL_V = 2.5
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="fit-out", help="folder for the plots and battery file")
     out = Path(parser.parse_args().out)
 

@@ -1,4 +1,5 @@
 """Mission endurance: the paper's Table 5 flight, a fixed-wing survey and a multirotor hover.
+==========================================================================================
 
 Flies the three bundled example missions on the Hacker 4S LiFePO4
 preset (paper Table 4), then flies the fixed-wing survey on a 4S2P pack of Samsung 30Q
@@ -10,13 +11,13 @@ Usage: python examples/mission_endurance.py [--out DIR]
 import argparse
 from pathlib import Path
 
+from dischargelab.demo import demo_data_dir
 from dischargelab.fit import Curve, fit_battery
 from dischargelab.io import read_discharge
 from dischargelab.mission import load_mission, run_mission
 from dischargelab.plot import save
 
-HERE = Path(__file__).resolve().parent
-BUNDLED = HERE.parent / "src" / "dischargelab" / "data" / "samsung30q"
+BUNDLED = demo_data_dir()
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 
@@ -25,7 +26,8 @@ def minutes(seconds: float) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="mission-out", help="folder for the plots")
     out = Path(parser.parse_args().out)
     out.mkdir(parents=True, exist_ok=True)
