@@ -38,7 +38,7 @@ $(DOCS_STAMP): $(STAMP)
 	touch $(DOCS_STAMP)
 
 docs: $(DOCS_STAMP)
-	rm -rf docs/_build docs/generated docs/gallery
+	rm -rf docs/_build docs/generated docs/gallery docs/sg_execution_times.rst
 	$(BIN)/python -m sphinx -W --keep-going -q -b html -j 1 docs docs/_build/html
 	@echo "documentation: docs/_build/html/index.html"
 
