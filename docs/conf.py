@@ -8,6 +8,7 @@ are errors (``-W`` in the Makefile).
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import sys
@@ -21,7 +22,7 @@ import dischargelab  # noqa: E402
 
 project = "dischargelab"
 author = "dischargelab developers"
-copyright = "dischargelab developers"  # noqa: A001 (Sphinx's name)
+copyright = "dischargelab developers"
 release = dischargelab.__version__
 version = release
 
@@ -55,8 +56,19 @@ add_module_names = False
 
 # ---- gallery: examples/ run at build time, their figures captured ---------------------------
 GALLERY_OUT = HERE / "_build" / "gallery-out"
-#: The measured runs beside the checkout, when they are there (as in CI).
-SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+def _shared_data() -> Path:
+    """The measured runs beside the checkout (as in CI), or $DISCHARGELAB_SHARED_DATA."""
+    if os.environ.get("DISCHARGELAB_SHARED_DATA"):
+        return Path(os.environ["DISCHARGELAB_SHARED_DATA"])
+    for parent in ROOT.parents:
+        if (parent / "shared" / "data" / "samsung30q_S001").is_dir():
+            return parent / "shared" / "data"
+    return ROOT.parent / "shared" / "data"
+
+
+SHARED_DATA = _shared_data()
 
 
 def _example_argv(gallery_conf, script_vars):
@@ -105,7 +117,7 @@ sphinx_gallery_conf = {
     "remove_config_comments": True,
     "within_subsection_order": "FileNameSortKey",
     "show_signature": False,
-    "min_reported_time": 3600,
+    "write_computation_times": False,     # its page loads tables from a CDN
 }
 
 # ---- HTML -----------------------------------------------------------------------------------
@@ -169,6 +181,25 @@ def add_new_pages(app, docname, source):
                       + "\n".join(extra) + "\n```\n")
 
 
+#: A script, stylesheet, font or image the reader's browser would fetch from elsewhere.
+REMOTE_ASSET = re.compile(
+    r"<(?:script|link|img|source|iframe)\b[^>]*\b(?:src|href)=[\"'](?:https?:)?//", re.I)
+
+
+def no_remote_assets(app, exception):
+    """The site must read offline: refuse a page that loads anything from elsewhere."""
+    if exception is not None or app.builder.format != "html":
+        return
+    bad = [str(page.relative_to(app.outdir)) for page in Path(app.outdir).rglob("*.html")
+           if REMOTE_ASSET.search(page.read_text(encoding="utf-8", errors="replace"))]
+    if bad:
+        from sphinx.errors import ExtensionError
+
+        raise ExtensionError(f"pages load remote assets (no CDN: the site reads offline): "
+                             f"{', '.join(sorted(bad)[:10])}")
+
+
 def setup(app):
+    app.connect("build-finished", no_remote_assets)
     app.connect("source-read", repository_links)
     app.connect("source-read", add_new_pages)

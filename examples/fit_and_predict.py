@@ -1,5 +1,8 @@
-"""Fit a cell from one measured discharge and predict other currents and a power.
-==============================================================================
+"""Fit and predict
+===============
+
+Fit a cell from one measured discharge and predict other currents and a constant power,
+with the building blocks under ``dl.fit`` (readers, the fit, simulations, plots).
 
 Uses the Samsung 30Q 1C discharge bundled with dischargelab; change DATA and the
 column mapping for your own file.

@@ -1,5 +1,7 @@
-"""The demo's fit, prediction and missions in a short script with the public API.
-==============================================================================
+"""Use it from Python
+===================
+
+The demo's fit, predictions and missions in a short script with the public API.
 
 Reads the bundled Samsung 30Q discharges (C/10, 1C, 4C), fits a model picked by
 evidence, predicts 2C and 4C, and flies the paper's Table 5 and a survey on a
