@@ -135,6 +135,7 @@ html_theme_options = {
     "secondary_sidebar_items": ["page-toc"],
     "header_links_before_dropdown": 6,
 }
+html_context = {"default_mode": "auto"}     # light or dark, as the reader's system says
 html_sidebars = {"index": [], "method": [], "benchmarks": []}
 
 
