@@ -31,7 +31,9 @@ def main() -> None:
 
     data, meta = read_discharge(DATA, columns=DEMO_COLUMNS)
     print(meta["summary"])
-    result = fit_battery(Curve.from_frame(data, meta, name="1C"), bootstrap=50)
+    # one rate with its logged temperature: the thermal family (what dl.fit picks here)
+    result = fit_battery(Curve.from_frame(data, meta, name="1C"), model="shepherd-thermal",
+                         bootstrap=50)
     print(result.report())
     battery = result.battery
     battery.save(out / "battery.json")

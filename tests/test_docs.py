@@ -111,3 +111,18 @@ def test_physical_parameters_state_their_units():
     for param in ("current", "power", "cutoff, cutoff_pack", "ambient", "soc"):
         block = re.search(rf"^{re.escape(param)} :.*\n((?:    .*\n)+)", doc + "\n", re.M)
         assert block and "[" in block.group(1), param
+
+
+def test_readme_is_a_landing_page_whose_links_resolve():
+    """At most 220 lines, exactly the two set-up commands, and every relative link (pages,
+    the picture) points at a file of the repository, so it works on the forge unbuilt."""
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 220
+    setup = re.search(r"## Set up and run.*?```\n(.*?)```", text, re.S)
+    assert setup, "no set-up block"
+    commands = [line.split("#")[0].strip() for line in setup.group(1).splitlines()]
+    assert commands == ["make demo", "make test"]
+    links = re.findall(r"\]\((?!https?:)([^)#]+)", text)
+    assert any(link.endswith(".png") for link in links)
+    for link in links:
+        assert (REPO / link).exists(), link

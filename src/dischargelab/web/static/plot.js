@@ -31,10 +31,27 @@
     return acc;
   }
 
-  function increasing(x) {
-    for (let i = 1; i < x.length; i++) if (!(x[i] > x[i - 1])) return false;
-    return x.length > 0 && finite(x[0]) && finite(x[x.length - 1]);
+  // What is known of an x array: strictly increasing? its extent. The live page only
+  // appends to its arrays, so a draw scans the new samples alone.
+  const SCANNED = new WeakMap();
+
+  function scan(x) {
+    let known = SCANNED.get(x);
+    if (!known || known.n > x.length) known = {n: 0, increasing: true, range: [Infinity, -Infinity]};
+    const range = known.range;
+    for (let i = known.n; i < x.length; i++) {
+      const v = x[i];
+      if (!(i === 0 ? finite(v) : v > x[i - 1])) known.increasing = false;
+      if (!finite(v)) continue;
+      if (v < range[0]) range[0] = v;
+      if (v > range[1]) range[1] = v;
+    }
+    known.n = x.length;
+    SCANNED.set(x, known);
+    return known;
   }
+
+  function increasing(x) { return x.length > 0 && scan(x).increasing && finite(x[x.length - 1]); }
 
   function num(v, span) {
     if (!finite(v)) return "–";
@@ -100,7 +117,7 @@
       const plotted = [], overlay = [];
       for (const s of series) (increasing(s.x) ? plotted : overlay).push(s);
       const xr = [Infinity, -Infinity];
-      for (const s of series) extent(s.x, xr);
+      for (const s of series) extent(scan(s.x).range, xr);
       for (const b of spec.bands || []) extent(b.x, xr);
       for (const l of spec.vlines || []) if (finite(l.x)) extent([l.x], xr);
       if (spec.xMin !== undefined && isFinite(xr[0])) xr[0] = Math.min(xr[0], spec.xMin);
@@ -356,7 +373,13 @@
       const data = prep.data || [[prep.extent[0], prep.extent[1]]];
       const key = this._structure(prep);
       if (this.u && key === this.key) {
-        this.u.setData(data, !this.zoomed);
+        if (this.zoomed) {                   // keep the reader's stretch; redraw what is in it
+          const {min, max} = this.u.scales.x;
+          this.u.setData(data, false);
+          this.u.setScale("x", {min, max});
+        } else {
+          this.u.setData(data);
+        }
       } else {
         this.destroy();
         this.zoomed = false;
