@@ -39,7 +39,8 @@ const done = arguments[arguments.length - 1];
 (async () => {
 const t = new Array(n), v = new Array(n);
 for (let i = 0; i < n; i++) { t[i] = i / 10; v[i] = 8.4 - 2.2 * Math.pow(i / n, 3) - 0.3 * i / n; }
-const plot = new LinePlot(document.getElementById("plot"), {xTime: true, yLabel: "pack voltage [V]"});
+const plot = new LinePlot(document.getElementById("plot"),
+                          {xTime: true, yLabel: "pack voltage [V]"});
 const spec = () => ({series: [{x: t, y: v, color: "#2563eb", label: "pack voltage"}],
                      hlines: [{y: 6.0, color: "#dc2626", label: "cutoff 6.00 V"}]});
 let t0 = performance.now();

@@ -23,6 +23,8 @@ BENCHMARKS = {
                                 "peak RSS MB"),
     "logbook.py": (["--copies", "20"], "later capacities in band"),
     "fleet.py": (["--packs", "1", "--repeats", "1"], "One file's task"),
+    # needs Debian's chromium and chromium-driver (make browser), as the web page tests do
+    "web_plot_speed.py": (["--points", "2000", "--repeats", "3"], "next draws, median"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }
