@@ -351,8 +351,10 @@
       }
       for (const l of spec.vlines || []) {
         if (!finite(l.x) || !l.label) continue;
-        ctx.fillStyle = l.color || "#6b7280"; ctx.textAlign = "left"; ctx.textBaseline = "top";
-        ctx.fillText(l.label, X(l.x) + 4 * r, b.top + 2 * r);
+        const x = X(l.x), room = b.left + b.width - x > ctx.measureText(l.label).width + 8 * r;
+        ctx.fillStyle = l.color || "#6b7280"; ctx.textBaseline = "top";
+        ctx.textAlign = room ? "left" : "right";     // beside the line, inside the plot
+        ctx.fillText(l.label, room ? x + 4 * r : x - 4 * r, b.top + 2 * r);
       }
       ctx.restore();
     }
