@@ -64,6 +64,8 @@ def built_site(tmp_path_factory) -> Path:
                                                   "sg_execution_times.rst"))
     for name in ("src", "examples"):
         (root / name).symlink_to(REPO / name)
+    # a page just added, that no toctree names yet, joins the user guide
+    (root / "docs" / "new-page.md").write_text("# A new page\n\nJust added.\n")
     done = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b",
                            "html", "-D", "plot_gallery=0", str(root / "docs"),
                            str(root / "html")], capture_output=True, text=True, timeout=600)
@@ -94,6 +96,7 @@ def test_every_public_name_in_python_md_resolves_in_the_api_reference(built_site
     for page in (REPO / "docs").glob("*.md"):
         assert (built_site / f"{page.stem}.html").exists(), page.name
     assert (built_site / "generated" / "dischargelab.fit.html").exists()
+    assert 'href="new-page.html"' in (built_site / "guide.html").read_text(encoding="utf-8")
 
 
 @pytest.mark.parametrize("name", PUBLIC_FUNCTIONS)
