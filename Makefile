@@ -1,8 +1,9 @@
 # Two entry points on a fresh machine (only Python >= 3.11 needed):
 #   make demo   -> builds .venv, installs dischargelab, runs the demo into ./demo-out/
 #   make test   -> same .venv, runs the whole test suite
-# Checks CI runs too: make lint (ruff), make typecheck (mypy on the public API),
-# make min-versions (the suite with every dependency at its declared lower bound).
+# Checks CI runs too: make docs (the documentation site), make lint (ruff), make typecheck
+# (mypy on the public API), make min-versions (the suite with every dependency at its
+# declared lower bound).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
