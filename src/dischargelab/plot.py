@@ -171,20 +171,21 @@ def plot_family(results, ax=None, x: str = "charge", labels=None):
 
 
 
-def plot_ocv(battery, ax=None, points: int = 201):
-    """Open-circuit voltage per cell against the state of charge, with the chemistry's
-    generic curve (:func:`dischargelab.ocv.ocv_from_soc`) for comparison.
+def plot_ocv(battery, ax=None, reference=None, points: int = 201):
+    """Open-circuit voltage per cell against the state of charge.
 
     Parameters
     ----------
     battery : Battery
         Its family's ``open_circuit_voltage`` at rest, from full to the model capacity.
     ax : matplotlib Axes, optional
+    reference : tuple (label, soc, voltage_V), optional
+        Another curve to compare with, e.g. the chemistry's generic one
+        (:func:`dischargelab.ocv.ocv_from_soc`): state of charge [0-1] and voltage per cell
+        [V], drawn dashed.
     points : int
         Points along the state of charge.
     """
-    from .ocv import OCV_SOURCE, check_chemistry, ocv_from_soc
-
     ax = _axes(ax, figsize=(6.4, 4.0))
     fam = battery.family
     soc = np.linspace(1.0, 0.0, points)
@@ -193,10 +194,9 @@ def plot_ocv(battery, ax=None, points: int = 201):
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         ocv = np.asarray(fam.open_circuit_voltage(p, state), dtype=float)
     ax.plot(100 * soc, ocv, color="C0", lw=2, label=f"fitted ({fam.name})")
-    chemistry = check_chemistry(battery.chemistry)
-    ax.plot(100 * soc, ocv_from_soc(soc, chemistry), color="0.45", ls="--", lw=1,
-            label=OCV_SOURCE[chemistry].split(" from ")[0]
-            + ("" if battery.chemistry else " (chemistry not given)"))
+    if reference is not None:
+        label, ref_soc, ref_V = reference
+        ax.plot(100 * np.asarray(ref_soc), ref_V, color="0.45", ls="--", lw=1, label=label)
     ax.set_xlim(100, 0)
     ax.set_xlabel("state of charge [%]")
     ax.set_ylabel("open-circuit voltage per cell [V]")

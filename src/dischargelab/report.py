@@ -218,9 +218,15 @@ def _battery_facts(battery: Battery) -> list[tuple[str, str]]:
 
 def _ocv_figure(battery: Battery) -> str:
     """The open-circuit voltage curve the fit found, beside the chemistry's generic one."""
+    from .ocv import OCV_SOURCE, check_chemistry, ocv_from_soc
     from .plot import plot_ocv
 
-    return _figure(plot_ocv(battery), "Open-circuit voltage per cell against the state of "
+    chemistry = check_chemistry(battery.chemistry)
+    soc = np.linspace(1.0, 0.0, 101)
+    label = OCV_SOURCE[chemistry].split(" from ")[0] + (
+        "" if battery.chemistry else " (chemistry not given)")
+    ax = plot_ocv(battery, reference=(label, soc, ocv_from_soc(soc, chemistry)))
+    return _figure(ax, "Open-circuit voltage per cell against the state of "
                    "charge: the fitted curve and the chemistry's generic curve.",
                    "open-circuit voltage curve", "half")
 
