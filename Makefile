@@ -1,8 +1,9 @@
 # Two entry points on a fresh machine (only Python >= 3.11 needed):
 #   make demo   -> builds .venv, installs dischargelab, runs the demo into ./demo-out/
 #   make test   -> same .venv, runs the whole test suite
-# Checks CI runs too: make lint (ruff), make typecheck (mypy on the public API),
-# make min-versions (the suite with every dependency at its declared lower bound).
+# Checks CI runs too: make docs (the documentation site), make lint (ruff), make typecheck
+# (mypy on the public API), make min-versions (the suite with every dependency at its
+# declared lower bound).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -29,9 +30,18 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy src/dischargelab/__init__.py $(wildcard src/dischargelab/api.py)
 
-# API reference from the docstrings (numpydoc) into docs/api/.
-docs: $(STAMP)
-	$(BIN)/pdoc --docformat numpy -o docs/api dischargelab dischargelab.models dischargelab.engine
+# The documentation site (Sphinx: docs/*.md, the API reference from the numpydoc docstrings,
+# the gallery made by running examples/) into docs/_build/html, offline, warnings as errors.
+DOCS_STAMP := $(VENV)/.docs-installed
+
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	rm -rf docs/_build docs/generated docs/gallery docs/sg_execution_times.rst
+	$(BIN)/python -m sphinx -W --keep-going -q -b html -j 1 docs docs/_build/html
+	@echo "documentation: docs/_build/html/index.html"
 
 # A separate venv (.venv/min-versions) with the lower bounds from pyproject.toml.
 min-versions:
@@ -71,4 +81,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/fleet.py
 
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache
+	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache docs/_build docs/generated docs/gallery

@@ -171,6 +171,42 @@ def plot_family(results, ax=None, x: str = "charge", labels=None):
 
 
 
+def plot_ocv(battery, ax=None, reference=None, points: int = 201):
+    """Open-circuit voltage per cell against the state of charge.
+
+    Parameters
+    ----------
+    battery : Battery
+        Its family's ``open_circuit_voltage`` at rest, from full to the model capacity.
+    ax : matplotlib Axes, optional
+    reference : tuple (label, soc, voltage_V), optional
+        Another curve to compare with, e.g. the chemistry's generic one
+        (:func:`dischargelab.ocv.ocv_from_soc`): state of charge [0-1] and voltage per cell
+        [V], drawn dashed.
+    points : int
+        Points along the state of charge.
+    """
+    ax = _axes(ax, figsize=(6.4, 4.0))
+    fam = battery.family
+    soc = np.linspace(1.0, 0.0, points)
+    p = {n: float(battery.parameters[n]) for n in fam.names}
+    state = fam.initial_state(p, charge_Ah=(1.0 - soc) * p["C_Ah"] * (1 - 1e-9))
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        ocv = np.asarray(fam.open_circuit_voltage(p, state), dtype=float)
+    ax.plot(100 * soc, ocv, color="C0", lw=2, label=f"fitted ({fam.name})")
+    if reference is not None:
+        label, ref_soc, ref_V = reference
+        ax.plot(100 * np.asarray(ref_soc), ref_V, color="0.45", ls="--", lw=1, label=label)
+    ax.set_xlim(100, 0)
+    ax.set_xlabel("state of charge [%]")
+    ax.set_ylabel("open-circuit voltage per cell [V]")
+    ax.set_title(f"{battery.name + ': ' if battery.name else ''}open-circuit voltage per cell",
+                 fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return ax
+
+
 def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool = True):
     """Pack voltage through a flight with the phases shaded (like the paper's Fig. 11).
 
