@@ -50,7 +50,8 @@ def flight_fit_wanted(paths, flights, battery_index, capacity) -> bool:
         raise DischargelabError("give either flight logs or discharge files to fit, not both")
     if not all(logs) and (flights or battery_index is not None or capacity is not None):
         raise DischargelabError("--flight, --battery and --capacity apply to flight logs "
-                                "(ArduPilot, PX4 ULog, blackbox, in-flight logger CSV)")
+                                "(ArduPilot, PX4 ULog, blackbox, telemetry .tlog, in-flight "
+                                "logger CSV)")
     return all(logs)
 
 
@@ -162,8 +163,9 @@ def autopilot_params_cmd(battery, firmware, cells, parallel, load_current, reser
 def convert_cmd(log, output, flight, battery, topic, fields, force, as_json):
     """Convert a flight log's battery data to a canonical CSV.
 
-    Reads ArduPilot .bin/.log, PX4 .ulg, Betaflight/INAV blackbox and in-flight
-    logger CSV (found from the content) and writes time_s, voltage_V,
+    Reads ArduPilot .bin/.log, PX4 .ulg, Betaflight/INAV blackbox, MAVLink
+    telemetry logs (.tlog, as Mission Planner and QGroundControl save them) and
+    in-flight logger CSV (found from the content) and writes time_s, voltage_V,
     current_A (discharge positive), measured temperature and cell voltages,
     the log's own counters and a flight column. The summary names the flights,
     the charge drawn, the current-sensor offset and every dropped record.
@@ -173,6 +175,7 @@ def convert_cmd(log, output, flight, battery, topic, fields, force, as_json):
       dischargelab convert flight.bin -o flight.csv
       dischargelab convert log.ulg --battery 1 --flight 2 -o pack2.csv
       dischargelab convert btfl_001.bbl --json
+      dischargelab convert 2021-12-02_13-26-14.tlog -o flight.csv
     """
     from ..io.flightlog import convert_flight_log
 

@@ -102,7 +102,7 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
     rest_sample : {"auto", "none"}
         Keep the rest sample before the load step in ``meta["rest_sample"]``.
     flight : int, optional
-        Flight logs (ArduPilot, PX4 ULog, blackbox, in-flight logger CSV; found
+        Flight logs (ArduPilot, PX4 ULog, blackbox, MAVLink .tlog, in-flight CSV; found
         from the content): the flight to keep, counting from 1 (``--flight``);
         default the longest (:mod:`.flightlog`).
     battery : int, optional
@@ -170,9 +170,9 @@ def discharge_reader(path, *, columns=None, current_A=None, sign="auto", units=N
         return functools.partial(read_flight_discharge, path, flight=flight, battery=battery,
                                  current_A=given, sign=sign, rest_sample=rest_sample)
     if flight is not None or battery is not None:
-        raise DataError(f"{name} is not a flight log (ArduPilot, PX4 ULog, blackbox, in-flight "
-                        "logger CSV): --flight and --battery apply only to those; use "
-                        "--segment N to choose a discharge")
+        raise DataError(f"{name} is not a flight log (ArduPilot, PX4 ULog, blackbox, telemetry "
+                        ".tlog, in-flight logger CSV): --flight and --battery apply only to "
+                        "those; use --segment N to choose a discharge")
     text, encoding = load_text(path)
     kind = detect_format(text) if fmt == "auto" else fmt
     if kind == "dischargelab-log":

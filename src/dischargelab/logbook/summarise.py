@@ -66,7 +66,7 @@ KNEE_SPAN = 0.03
 
 #: Reader formats that are flights.
 FLIGHT_FORMATS = ("ardupilot-bin", "ardupilot-text", "ulog", "blackbox", "inflight-csv",
-                  "flightlog-csv", "dji-raw", "dji-derived-csv")
+                  "flightlog-csv", "mavlink-tlog", "dji-raw", "dji-derived-csv")
 
 #: Reader options a summary may be given (the rest are the logbook's own).
 READER_OPTIONS = ("columns", "current_A", "sign", "units", "delimiter", "header", "fmt",
