@@ -169,6 +169,14 @@ def _same_file(a, b) -> bool:
         return False
 
 
+def _same_step(fitted: dict, meta: dict) -> bool:
+    """The same step of a tester's file (True for files without steps)."""
+    a, b = fitted.get("step"), meta.get("step")
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.get("number") == b.get("number")
+    return True
+
+
 def _run_ambient_C(battery: Battery, data) -> float:
     """Ambient of a run [degC]: its first logged temperature, else the battery's."""
     if "temperature_C" in data:
@@ -414,7 +422,7 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
     if isinstance(sources, list) and meta.get("source"):
         summary["in_fit"] = any(isinstance(s, dict) and _same_file(s.get("source"),
                                                                      meta["source"])
-                                for s in sources)
+                                and _same_step(s, meta) for s in sources)
         if summary["in_fit"]:
             warnings.append("this file was used in the fit: not an independent validation")
     if any(battery.fit_currents_A):

@@ -235,7 +235,7 @@ def _summarise_path(path: Path, name: str, data: bytes, options: dict,
         event = summarise_event(frame, meta, whole, whole_meta)
         event["index"] = index
         event["kind"] = "flight" if fmt in FLIGHT_FORMATS else "discharge"
-        event["cycle"] = cycle
+        event["cycle"] = meta.get("cycle", cycle)  # a tester's step knows its cycle
         events.append(event)
     notes = list(dict.fromkeys(n for _, meta in reads for n in meta.get("notes", [])))
     return SourceSummary(sha256=sha256_bytes(data), file_name=name, size_bytes=len(data),

@@ -203,10 +203,12 @@ def read_step(tester: TesterFile, segment="auto", *, current_A=None, rest_sample
             raise DataError(f"{name} has {len(tester.steps)} steps; step (segment) {number} "
                             f"does not exist; its discharge steps are {_numbers(numbers)}")
         step = tester.step(number)
-        if step["kind"] != "discharge":
-            raise DataError(f"{name}: {describe_step(step)} is not a discharge; its discharge "
-                            f"steps are {_numbers(numbers)} (segment='none' gives every step "
-                            "with its cycle_index and step_index)")
+        if step["number"] not in numbers:
+            what = "is not a discharge" if step["kind"] != "discharge" else \
+                f"has {step['rows']} record(s), too few for a discharge"
+            raise DataError(f"{name}: {describe_step(step)} {what}; its discharge steps are "
+                            f"{_numbers(numbers)} (segment='none' gives every step with its "
+                            "cycle_index and step_index)")
         a, b = tester.bounds[number - 1]
     columns = [c for c in ("time_s", "voltage_V", "current_A", "temperature_C")
                if c in tester.frame] + list(STEP_COLUMNS)
@@ -223,7 +225,7 @@ def read_step(tester: TesterFile, segment="auto", *, current_A=None, rest_sample
     meta["sign_source"] = tester.meta["sign_source"]
     meta["sign_convention"] = tester.meta["sign_convention"]
     meta["steps"] = tester.steps
-    meta["segments"] = [_segment(s) for s in tester.steps if s["kind"] == "discharge"]
+    meta["segments"] = [_segment(tester.step(n)) for n in numbers]
     meta["segment"] = None if step is None else step["number"]
     meta["step"] = step
     if step is not None:
@@ -261,8 +263,9 @@ def default_step(steps: list[dict]) -> int:
     full = full_discharges(steps)
     if full:
         return full[0]["number"]
-    discharges = [s for s in steps if s["kind"] == "discharge"]
-    return max(discharges, key=lambda s: s["duration_s"])["number"]
+    numbers = discharge_numbers(steps)
+    return max((s for s in steps if s["number"] in numbers),
+               key=lambda s: s["duration_s"])["number"]
 
 
 def _numbers(numbers: list[int]) -> str:

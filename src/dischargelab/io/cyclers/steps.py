@@ -309,23 +309,30 @@ def _tester_Ah(frame: pd.DataFrame, a: int, b: int, kind: str) -> float | None:
 
 
 def _discharge_flags(steps: list[dict]) -> None:
-    discharges = [s for s in steps if s["kind"] == "discharge"]
+    discharges = [s for s in steps if s["kind"] == "discharge" and s["rows"] >= MIN_STEP_ROWS]
     if not discharges:
         return
     floor = float(np.median([s["end_voltage_V"] for s in discharges]))
     previous = None
     for s in steps:
         if s["kind"] == "discharge":
-            s["after_charge"] = previous is not None and previous["kind"] == "charge"
+            s["after_charge"] = previous is not None and previous["kind"] == "charge" \
+                and s["rows"] >= MIN_STEP_ROWS
             low = s["min_voltage_V"] + LIMIT_SHARE * abs(s["min_voltage_V"])
             s["to_limit"] = bool(s["end_voltage_V"] <= min(low, floor + LIMIT_SHARE * abs(floor)))
         if s["kind"] != "rest" and s["rows"] > 1:
             previous = s
 
 
+#: A discharge step needs this many records to be read as a discharge (a tester's
+#: one-record transition steps are not).
+MIN_STEP_ROWS = 3
+
+
 def discharge_numbers(steps: list[dict]) -> list[int]:
-    """Numbers of the discharge steps."""
-    return [s["number"] for s in steps if s["kind"] == "discharge"]
+    """Numbers of the discharge steps (of at least :data:`MIN_STEP_ROWS` records)."""
+    return [s["number"] for s in steps if s["kind"] == "discharge"
+            and s["rows"] >= MIN_STEP_ROWS]
 
 
 def full_discharges(steps: list[dict]) -> list[dict]:
@@ -367,7 +374,7 @@ def fit_steps(steps: list[dict]) -> tuple[list[int], str]:
     if limited:
         return [s["number"] for s in limited], ("the discharges that reach the lower voltage "
                                                 "limit (none starts after a charge)")
-    discharges = [s for s in steps if s["kind"] == "discharge"]
+    discharges = [s for s in steps if s["number"] in discharge_numbers(steps)]
     if not discharges:
         return [], "no discharge step"
     longest = max(discharges, key=lambda s: s["duration_s"])
