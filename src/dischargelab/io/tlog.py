@@ -77,6 +77,9 @@ MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID = 6, 8
 EARLIEST_S, LATEST_S = 946684800.0, 4102444800.0
 #: No message for longer than this [s]: the recording stopped, a new session starts.
 SESSION_GAP_S = 120.0
+#: Arrival times of messages from two links may step back by this much [s] (a reordered
+#: message, not a new recording; its record is dropped as out of time order).
+JITTER_S = 0.5
 #: Sessions that do not follow each other in time, or pause longer than
 #: :data:`KEEP_CLOCK_GAP_S` [s], are laid this far apart [s].
 SESSION_SPACER_S = 60.0
@@ -193,23 +196,26 @@ def _looks_truncated(data: bytes, pos: int) -> bool:
 # --------------------------------------------------------------------------- sessions
 
 def _spikes(times: np.ndarray) -> np.ndarray:
-    """Records whose arrival time is out of step with both neighbours while the neighbours
-    agree with each other (in order, less than :data:`SESSION_GAP_S` apart): corrupt."""
+    """Records whose arrival time lies more than :data:`JITTER_S` outside the span of both
+    neighbours while the neighbours agree (less than :data:`SESSION_GAP_S` apart): corrupt."""
     bad = np.zeros(times.size, dtype=bool)
     if times.size < 3:
         return bad
     before, here, after = times[:-2], times[1:-1], times[2:]
-    neighbours_agree = (after >= before) & (after - before <= SESSION_GAP_S)
-    bad[1:-1] = neighbours_agree & ~((before <= here) & (here <= after))
+    agree = np.abs(after - before) <= SESSION_GAP_S
+    low, high = np.minimum(before, after) - JITTER_S, np.maximum(before, after) + JITTER_S
+    bad[1:-1] = agree & ((here < low) | (here > high))
     return bad
 
 
 def _session_of_records(times: np.ndarray) -> np.ndarray:
-    """Session number (1, 2, ...) of every record from its arrival time alone."""
+    """Session number (1, 2, ...) of every record from its arrival time alone: a new one
+    where the time goes back by more than :data:`JITTER_S` or pauses over
+    :data:`SESSION_GAP_S`."""
     if times.size == 0:
         return np.zeros(0, dtype=int)
     step = np.diff(times)
-    new = (step < 0) | (step > SESSION_GAP_S)
+    new = (step < -JITTER_S) | (step > SESSION_GAP_S)
     return np.concatenate(([1], 1 + np.cumsum(new)))
 
 

@@ -14,6 +14,7 @@ NewareNDA, https://github.com/d-cogswell/NewareNDA
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -39,18 +40,28 @@ def read_neware(path) -> TesterRecords:
 
     path = Path(path)
     version = _version("NewareNDA")
+    said = _Said()
+    logger = logging.getLogger("newarenda")
+    logger.addHandler(said)
     try:
-        with quiet("newarenda", "NewareNDA"):
+        with quiet() as printed:
             table = NewareNDA.read(str(path), software_cycle_number=False)
+        said.messages.append(printed.getvalue())
     except (*_ERRORS, struct.error, zipfile.BadZipFile) as exc:
         text = str(exc).strip().splitlines()
         raise DataError(f"{path.name}: NewareNDA {version} cannot read this file "
                         f"({text[0] if text else type(exc).__name__}); a newer NewareNDA may "
                         "(pip install -U NewareNDA), or export the test from BTSDA as CSV"
                         ) from None
+    finally:
+        logger.removeHandler(said)
     if len(table) == 0:
         raise DataError(f"{path.name}: NewareNDA {version} found no records in the file")
     notes = []
+    if "interpolat" in " ".join(said.messages).lower():
+        notes.append(f"the file lacks some records' time and capacity: NewareNDA {version} "
+                     "filled them in by interpolation (time, capacity and energy of those "
+                     "records are not measured)")
     frame = table[[]].copy()
     frame["time_s"] = _test_time(table, notes)
     frame["voltage_V"] = table["Voltage"].to_numpy(dtype=float)
@@ -78,6 +89,17 @@ def read_neware(path) -> TesterRecords:
             meta["start_time"] = start.tz_localize(None).isoformat(timespec="seconds") \
                 if start.tzinfo is not None else start.isoformat(timespec="seconds")
     return TesterRecords(frame=frame, records=np.arange(1, len(frame) + 1), meta=meta)
+
+
+class _Said(logging.Handler):
+    """Keeps what NewareNDA logs while it reads (it says when it interpolates)."""
+
+    def __init__(self):
+        super().__init__(level=logging.DEBUG)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
 
 
 def _test_time(table: pd.DataFrame, notes: list[str]) -> np.ndarray:
