@@ -22,6 +22,7 @@ galvani, https://github.com/echemdata/galvani; EC-Lab Software User's Manual
 from __future__ import annotations
 
 import struct
+import warnings
 from datetime import datetime
 from pathlib import Path
 
@@ -47,14 +48,20 @@ def read_biologic(path) -> TesterRecords:
     path = Path(path)
     version = _version("galvani")
     try:
-        mpr = BioLogic.MPRfile(str(path))
+        with warnings.catch_warnings():   # galvani's own warnings are not the user's
+            warnings.simplefilter("ignore", DeprecationWarning)
+            warnings.simplefilter("ignore", FutureWarning)
+            mpr = BioLogic.MPRfile(str(path))
         data = pd.DataFrame(mpr.data)
     except _ERRORS as exc:
         text = str(exc).strip().splitlines()
-        raise DataError(f"{path.name}: galvani {version} cannot read this file "
-                        f"({text[0] if text else type(exc).__name__}); newer EC-Lab versions "
-                        "write columns galvani does not know yet: export the data from EC-Lab "
-                        "as text (.mpt) or try a newer galvani") from None
+        reason = text[0] if text else type(exc).__name__
+        hint = ("newer EC-Lab versions write columns galvani does not know yet: export the "
+                "data from EC-Lab as text (.mpt) or try a newer galvani"
+                if "column" in reason.lower() or isinstance(exc, NotImplementedError) else
+                "the file is damaged or cut short; copy it from the EC-Lab computer again")
+        raise DataError(f"{path.name}: galvani {version} cannot read this file ({reason}); "
+                        f"{hint}") from None
     for needed in ("time/s", "Ewe/V"):
         if needed not in data:
             raise DataError(f"{path.name}: no {needed} column in the file (galvani {version} "

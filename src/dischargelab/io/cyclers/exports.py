@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import io
 import re
+import warnings
 import zipfile
 from pathlib import Path
 
@@ -201,7 +202,9 @@ def read_xlsx_export(path) -> TesterRecords:
     require("openpyxl", "cyclers")
     path = Path(path)
     try:
-        sheets = pd.read_excel(path, sheet_name=None, header=None, engine="openpyxl")
+        with warnings.catch_warnings():   # openpyxl's style warnings are not the user's
+            warnings.simplefilter("ignore", UserWarning)
+            sheets = pd.read_excel(path, sheet_name=None, header=None, engine="openpyxl")
     except (ValueError, KeyError, OSError, zipfile.BadZipFile) as exc:
         raise DataError(f"{path.name}: the workbook cannot be read by openpyxl "
                         f"({str(exc).splitlines()[0]})") from None

@@ -15,6 +15,7 @@ NewareNDA, https://github.com/d-cogswell/NewareNDA
 from __future__ import annotations
 
 import logging
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +45,10 @@ def read_neware(path) -> TesterRecords:
     logger = logging.getLogger("newarenda")
     logger.addHandler(said)
     try:
-        with quiet() as printed:
+        with quiet() as printed, warnings.catch_warnings():
+            # NewareNDA's own deprecation warnings from newer pandas are not the user's
+            warnings.simplefilter("ignore", DeprecationWarning)
+            warnings.simplefilter("ignore", FutureWarning)
             table = NewareNDA.read(str(path), software_cycle_number=False)
         said.messages.append(printed.getvalue())
     except (*_ERRORS, struct.error, zipfile.BadZipFile) as exc:
