@@ -138,13 +138,37 @@ def is_tester_table(names: list[str]) -> bool:
 
 # --------------------------------------------------------------------------- text
 
+#: Records of a tester's table per (cycle, step) run, at least, among its first rows: a
+#: tester writes many records per step (a column that changes every row is not a step).
+MIN_RECORDS_PER_STEP = 3
+
+
 def text_header(lines: list[str]) -> tuple[int, str] | None:
-    """(line index, delimiter) of a tester table's header among the first lines, or None."""
+    """(line index, delimiter) of a tester table's header among the first lines, or None.
+
+    The rows below the header must hold steps: runs of one (cycle, step) pair of
+    :data:`MIN_RECORDS_PER_STEP` records or more on average.
+    """
     for k, line in enumerate(lines[:60]):
         for delimiter in ("\t", ",", ";"):
-            if line.count(delimiter) >= 3 and is_tester_table(line.rstrip("\r\n").split(delimiter)):
-                return k, delimiter
+            names = line.rstrip("\r\n").split(delimiter)
+            if line.count(delimiter) >= 3 and is_tester_table(names):
+                return (k, delimiter) if _holds_steps(lines[k:k + 201], delimiter) else None
     return None
+
+
+def _holds_steps(lines: list[str], delimiter: str) -> bool:
+    try:
+        table = pd.read_csv(io.StringIO("\n".join(lines)), sep=delimiter, header=0)
+    except (ValueError, pd.errors.ParserError):
+        return False
+    roles = find_roles([str(c) for c in table.columns])
+    keys = [table.iloc[:, roles[r][0]] for r in ("cycle_index", "step_index") if r in roles]
+    if not keys or len(table) < MIN_RECORDS_PER_STEP:
+        return bool(keys)
+    values = pd.concat(keys, axis=1).astype(str).agg("|".join, axis=1).to_numpy()
+    runs = 1 + int(np.sum(values[1:] != values[:-1]))
+    return len(values) / runs >= MIN_RECORDS_PER_STEP
 
 
 def read_text_export(path, text: str | None = None) -> TesterRecords:
