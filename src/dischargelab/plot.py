@@ -51,6 +51,14 @@ def _axes(ax, figsize=(8, 5)):
     return ax
 
 
+def _stacked_axes(axes, figsize, ratios):
+    """The given axes, or a new figure of panels stacked on one time axis (heights ``ratios``)."""
+    if axes is None:
+        _, axes = pyplot().subplots(len(ratios), 1, figsize=figsize, sharex=True,
+                                    layout="constrained", gridspec_kw={"height_ratios": ratios})
+    return np.asarray(axes)
+
+
 #: File suffixes :func:`save` can write (matplotlib's static formats).
 FIGURE_SUFFIXES = (".png", ".svg", ".svgz", ".pdf", ".jpg", ".jpeg", ".eps", ".ps", ".tif",
                    ".tiff", ".webp")
@@ -356,13 +364,7 @@ def plot_flight_report(report: FlightReport, axes=None):
     -------
     numpy.ndarray of Axes
     """
-    from .plot import pyplot
-
-    plt = pyplot()
-    if axes is None:
-        fig, axes = plt.subplots(3, 1, figsize=(9, 8.5), sharex=True, layout="constrained",
-                                 gridspec_kw={"height_ratios": [3, 2, 3]})
-    axes = np.asarray(axes)
+    axes = _stacked_axes(axes, (9, 8.5), [3, 2, 3])
     av, ai, ar = axes
     seen = set()
 
@@ -531,6 +533,8 @@ def plot_health(health, axes=None):
 
 #: Shade of each kind of tester step in :func:`plot_tester_steps`.
 STEP_COLORS = {"charge": "C0", "discharge": "C3", "rest": "0.85"}
+#: Up to this many steps, the discharge steps are numbered on the plot.
+MAX_NUMBERED_STEPS = 60
 
 
 def plot_tester_steps(frame, steps: list[dict], meta: dict, axes=None):
@@ -550,11 +554,7 @@ def plot_tester_steps(frame, steps: list[dict], meta: dict, axes=None):
     -------
     numpy.ndarray of Axes
     """
-    plt = pyplot()
-    if axes is None:
-        fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True, layout="constrained",
-                                 gridspec_kw={"height_ratios": [3, 2]})
-    axes = np.asarray(axes)
+    axes = _stacked_axes(axes, (10, 6), [3, 2])
     av, ai = axes
     t = frame["time_s"].to_numpy(dtype=float)
     span = float(t[-1] - t[0]) if t.size > 1 else 0.0
@@ -575,7 +575,7 @@ def plot_tester_steps(frame, steps: list[dict], meta: dict, axes=None):
             ax.axvspan(a, b, color=STEP_COLORS.get(s["kind"], "0.9"), alpha=0.18, lw=0,
                        label=label if ax is av else None)
         full = s["kind"] == "discharge" and s.get("after_charge") and s.get("to_limit")
-        if len(steps) <= 60 and s["kind"] == "discharge":
+        if len(steps) <= MAX_NUMBERED_STEPS and s["kind"] == "discharge":
             av.annotate(f"{s['number']}" + ("*" if full else ""), ((a + b) / 2, 1.0),
                         xycoords=("data", "axes fraction"), ha="center", va="bottom",
                         fontsize=7, color="C3")
@@ -586,6 +586,8 @@ def plot_tester_steps(frame, steps: list[dict], meta: dict, axes=None):
     for ax in axes:
         ax.grid(alpha=0.3)
     name = Path(str(meta.get("source", ""))).name
-    av.set_title(f"{name} ({meta.get('format')}): {len(steps)} steps; discharge steps "
-                 "numbered, * = full (from a charge to the lower limit)", fontsize=9, pad=14)
+    numbered = ("; discharge steps numbered, * = full (from a charge to the lower limit)"
+                if len(steps) <= MAX_NUMBERED_STEPS else "")
+    av.set_title(f"{name} ({meta.get('format')}): {len(steps)} steps{numbered}", fontsize=9,
+                 pad=14)
     return axes
