@@ -33,7 +33,9 @@ def read(path: str | Path, **options: Any) -> Discharge:
     Parameters
     ----------
     path : str or path-like
-        CSV/TSV/LabVIEW/DJI/dischargelab log, or a flight log where supported.
+        CSV/TSV/LabVIEW/DJI/dischargelab log, a flight log (ArduPilot, PX4 ULog,
+        blackbox, MAVLink .tlog, in-flight CSV) or a battery tester's file (Neware,
+        BioLogic, Arbin, Maccor: one discharge step, ``segment=N`` picks step N).
     **options
         Reader options of :func:`dischargelab.io.read_discharge` (``columns``,
         ``current_A`` [A] for files without a current, ``sign``, ``units``,
