@@ -182,13 +182,15 @@ def read_discharges(path, *, steps=None, choose: str = "fit", segment="auto", **
     if choose not in CHOICES:
         raise DataError(f"choose must be one of {', '.join(CHOICES)}; got {choose!r}")
     segment = check_segment_option(segment)
+    if _tester_kind(path, options.get("fmt", "auto"), options.get("columns")) is None:
+        if steps is not None:
+            raise DataError(f"{Path(path).name} is not a battery tester file: steps apply to "
+                            "Neware, BioLogic, Arbin and Maccor files; choose a discharge with "
+                            "segment=N (--segment N)")
+        return [read_discharge(path, segment=segment, **options)]
     read = discharge_reader(path, **options)
-    tester = getattr(read, "tester", None)
-    if steps is not None and tester is None:
-        raise DataError(f"{Path(path).name} is not a battery tester file: steps apply to "
-                        "Neware, BioLogic, Arbin and Maccor files; choose a discharge with "
-                        "segment=N (--segment N)")
-    if tester is None or (steps is None and segment != "auto"):
+    tester = read.tester
+    if steps is None and segment != "auto":
         return [read(segment=segment)]
     if steps is not None:
         numbers = [check_segment_option(n) for n in steps]
@@ -248,7 +250,7 @@ def discharge_reader(path, *, columns=None, current_A=None, sign="auto", units=N
     if flight_log is not None:
         return functools.partial(read_flight_discharge, path, flight=flight, battery=battery,
                                  current_A=given, sign=sign, rest_sample=rest_sample)
-    tester = detect_tester(path) if fmt == "auto" and columns is None else None
+    tester = _tester_kind(path, fmt, columns)
     if tester is not None:
         if flight is not None or battery is not None:
             raise DataError(f"{name} is a battery tester file: --flight and --battery apply to "
@@ -293,6 +295,14 @@ def discharge_reader(path, *, columns=None, current_A=None, sign="auto", units=N
     # prepare() copies the rows and the metadata it changes, so the table serves every call
     return functools.partial(prepare, table, name, current_A=given, sign=sign,
                              rest_sample=rest_sample)
+
+
+def _tester_kind(path, fmt: str, columns) -> str | None:
+    """What :func:`dischargelab.io.cyclers.detect_tester` says, unless the format or the
+    columns are given (a table read as the user maps it) or the path is a flight log."""
+    if fmt != "auto" or columns is not None or detect_flight_log(path) is not None:
+        return None
+    return detect_tester(path)
 
 
 def _read_logfile(path: Path) -> tuple[CanonicalTable, float | None]:
