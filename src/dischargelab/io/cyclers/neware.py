@@ -1,7 +1,8 @@
 """Neware BTS files, ``.nda`` and ``.ndax``, read with NewareNDA.
 
-NewareNDA returns one row per record: ``Cycle`` (the file's cycle number with
-``software_cycle_number=False``), ``Step`` (the running step number Neware
+NewareNDA returns one row per record: ``Cycle`` (the cycle as Neware's software
+counts it: a new cycle at a charge that follows a discharge; the raw numbers in the
+file differ between NewareNDA versions), ``Step`` (the running step number Neware
 records), ``Status`` (``CC_Chg``, ``CC_DChg``, ``CCCV_Chg``, ``Rest``...),
 ``Time`` [s, test time], ``Voltage`` [V], ``Current(mA)`` (discharge negative),
 ``Charge_Capacity(mAh)`` and ``Discharge_Capacity(mAh)`` (restarting every
@@ -49,7 +50,7 @@ def read_neware(path) -> TesterRecords:
             # NewareNDA's own deprecation warnings from newer pandas are not the user's
             warnings.simplefilter("ignore", DeprecationWarning)
             warnings.simplefilter("ignore", FutureWarning)
-            table = NewareNDA.read(str(path), software_cycle_number=False)
+            table = NewareNDA.read(str(path))
         said.messages.append(printed.getvalue())
     except (*_ERRORS, struct.error, zipfile.BadZipFile) as exc:
         text = str(exc).strip().splitlines()
