@@ -25,14 +25,15 @@ message set):
   [mAh] and cell count (``BAT1_N_CELLS``) when the ground station fetched them.
 
 A file may hold several recordings joined together. A new **session** starts
-where the arrival time steps back, where no message arrived for more than
+where the arrival time steps back (and stays back), where no message arrived for more than
 :data:`SESSION_GAP_S`, or where the consumed-charge counter restarts. Sessions
 in time order and less than an hour apart keep their clock; otherwise they are
 laid end to end, :data:`SESSION_SPACER_S` apart, so time never steps back. Flights never span
 two sessions, and charge is never counted across the join.
 
 Corrupt messages (bad checksum, broken framing, an arrival time that jumps
-away and back) are skipped and counted; unknown values are missing values.
+while the next records carry on from before it) are skipped and counted;
+unknown values are missing values.
 
 References
 ----------
@@ -80,6 +81,10 @@ SESSION_GAP_S = 120.0
 #: Arrival times of messages from two links may step back by this much [s] (a reordered
 #: message, not a new recording; its record is dropped as out of time order).
 JITTER_S = 0.5
+#: Records looked at after a jump of the arrival time to tell a corrupt time from a new session.
+LOOK_AHEAD = 6
+#: Arrival times further apart than this [s] are checked against the records after them.
+STEP_S = JITTER_S
 #: Sessions that do not follow each other in time, or pause longer than
 #: :data:`KEEP_CLOCK_GAP_S` [s], are laid this far apart [s].
 SESSION_SPACER_S = 60.0
@@ -196,15 +201,26 @@ def _looks_truncated(data: bytes, pos: int) -> bool:
 # --------------------------------------------------------------------------- sessions
 
 def _spikes(times: np.ndarray) -> np.ndarray:
-    """Records whose arrival time lies more than :data:`JITTER_S` outside the span of both
-    neighbours while the neighbours agree (less than :data:`SESSION_GAP_S` apart): corrupt."""
+    """Records whose arrival time is corrupt: a step back (more than :data:`JITTER_S`) or
+    ahead (more than :data:`STEP_S`) after which most of the next :data:`LOOK_AHEAD`
+    records carry on from the time before it. A jump that lasts is a pause or a new
+    session, not a spike."""
     bad = np.zeros(times.size, dtype=bool)
-    if times.size < 3:
+    if times.size == 0:
         return bad
-    before, here, after = times[:-2], times[1:-1], times[2:]
-    agree = np.abs(after - before) <= SESSION_GAP_S
-    low, high = np.minimum(before, after) - JITTER_S, np.maximum(before, after) + JITTER_S
-    bad[1:-1] = agree & ((here < low) | (here > high))
+    last = float(times[0])
+    for k in range(1, times.size):
+        t = float(times[k])
+        if last - JITTER_S <= t <= last + STEP_S:
+            last = t
+            continue
+        ahead = times[k + 1:k + 1 + LOOK_AHEAD]
+        until = last + SESSION_GAP_S if t < last else min(t, last + SESSION_GAP_S) - JITTER_S
+        carry_on = np.sum((ahead >= last - JITTER_S) & (ahead <= until))
+        if ahead.size and carry_on > ahead.size / 2:
+            bad[k] = True
+        else:
+            last = t
     return bad
 
 
