@@ -180,6 +180,8 @@ def fit_cmd(data, columns, current, sign, units, segment, steps, cells, parallel
       dischargelab fit c10.csv c1.csv c4.csv --model ecm -o cell.json
       dischargelab fit 29.csv --capacity 1.6 --model ecm -o pack.json
       dischargelab fit btfl_001.bbl --flight 1,2,3 --capacity 1.3 --model ecm
+      dischargelab fit TestFile.nda -o cell.json          # a tester's file: its full discharges
+      dischargelab fit maccor_001.txt --step 7,22 -o cell.json
     """
     from ..fit import AUTO, fit_battery
     from ..models import get_family
@@ -504,6 +506,7 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
           time_s=0,current_A=1,voltage_V=2 --plot validation.png
       dischargelab validate battery.json log.txt --current 2.28 --cutoff 3.0 --json
       dischargelab validate pack.json btfl_001.bbl --flight 2 --cutoff 3.3
+      dischargelab validate cell.json maccor_001.txt --step 12,17 --cutoff 2.6
     """
     from ..validate import summarise
 
