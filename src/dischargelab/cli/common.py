@@ -196,17 +196,21 @@ def write_csv(frame, path) -> Path:
     return write_text(path, frame.to_csv(index=False))
 
 
-def step_numbers(values) -> list[int] | None:
-    """``--step 7 --step 12,17`` as [7, 12, 17]; None when not given."""
+def number_list(values, option: str, what: str) -> list[int] | None:
+    """``--step 7 --step 12,17`` as [7, 12, 17]; None when not given (numbers count from 1)."""
     if not values:
         return None
     numbers = []
     for value in values:
         for part in str(value).split(","):
-            if not part.strip().isdigit() or int(part) < 1:
-                raise DischargelabError(f"--step expects step numbers such as 7 or 7,12 "
-                                        f"(counting from 1); got {value!r}")
-            numbers.append(int(part))
+            try:
+                number = int(part)
+            except ValueError:
+                raise DischargelabError(f"{option} expects {what} numbers such as 1 or 1,2,3; "
+                                        f"got {value!r}") from None
+            if number < 1:
+                raise DischargelabError(f"{option} numbers count from 1; got {number}")
+            numbers.append(number)
     return numbers
 
 
@@ -246,7 +250,8 @@ def read_data_files(paths, columns=None, current=None, sign="auto", segment="aut
     for k, (path, amps) in enumerate(zip(paths, currents)):
         if status is not None:
             status.update(f"{verb} {Path(path).name} ({k + 1}/{len(paths)})")
-        loaded.extend(read_discharges(path, steps=step_numbers(steps), choose=choose,
+        loaded.extend(read_discharges(path, steps=number_list(steps, "--step", "step"),
+                                      choose=choose,
                                       columns=column_map, current_A=amps, sign=sign,
                                       segment=segment, units=unit_map, **(flight_options or {})))
     return loaded

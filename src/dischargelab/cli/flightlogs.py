@@ -17,6 +17,7 @@ from .common import (
     guard_outputs,
     json_option,
     load_battery_arg,
+    number_list,
     out,
     print_json,
     table,
@@ -25,20 +26,7 @@ from .common import (
 
 def flight_numbers_option(values) -> list[int] | None:
     """``--flight 1 --flight 2,3`` as [1, 2, 3]; None when not given."""
-    if not values:
-        return None
-    numbers = []
-    for value in values:
-        for part in str(value).split(","):
-            try:
-                number = int(part)
-            except ValueError:
-                raise DischargelabError(f"--flight expects flight numbers such as 1 or 1,2,3; "
-                                        f"got {value!r}") from None
-            if number < 1:
-                raise DischargelabError(f"--flight numbers count from 1; got {number}")
-            numbers.append(number)
-    return numbers
+    return number_list(values, "--flight", "flight")
 
 
 def flight_fit_wanted(paths, flights, battery_index, capacity) -> bool:
