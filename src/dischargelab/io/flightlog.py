@@ -309,6 +309,8 @@ def read_flight_discharge(path, *, flight=None, battery=None, current_A=None, si
         "segments": [_segment_dict(s, frame) for s in log.spans],
         "events": log.events, "flight_log_summary": log.summary(),
     })
+    if log.start_time:
+        meta["start_time"] = log.start_time
     meta["rest_sample"] = (_rest_before(frame, first, meta["time_offset_s"])
                            if rest_sample == "auto" and span is not None else None)
     meta["summary"] = summary_sentence(meta)

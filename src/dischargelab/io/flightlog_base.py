@@ -274,6 +274,9 @@ class FlightLog:
     skipped : dict
         Messages of the file skipped before any battery record was made, by reason
         (e.g. ``{"corrupt_messages": 3}`` for a telemetry log).
+    start_time : str or None
+        Clock time (ISO 8601, UTC) of ``time_s = 0`` when the log records one on a
+        clock that runs through the whole file (a telemetry log of one recording).
     """
 
     source: str
@@ -284,6 +287,7 @@ class FlightLog:
     notes: list[str] = field(default_factory=list)
     flight_number: int | None = None
     skipped: dict[str, int] = field(default_factory=dict)
+    start_time: str | None = None
 
     def battery(self, index: int | None = None) -> BatterySeries:
         """The battery with instance ``index``, or the first one with samples (None).
@@ -343,7 +347,8 @@ class FlightLog:
                 "flights": [s.to_dict() for s in self.spans],
                 "batteries": [b.to_dict() for b in self.batteries],
                 "events": list(self.events), "notes": list(self.notes),
-                "skipped": dict(self.skipped), "summary": self.summary()}
+                "skipped": dict(self.skipped), "start_time": self.start_time,
+                "summary": self.summary()}
 
 
 def _battery_sentence(series: BatterySeries, whole: bool = True) -> str:

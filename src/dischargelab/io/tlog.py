@@ -48,6 +48,7 @@ import math
 import struct
 from collections import defaultdict
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -235,6 +236,10 @@ def _session_of_records(times: np.ndarray) -> np.ndarray:
     return np.concatenate(([1], 1 + np.cumsum(new)))
 
 
+#: How :func:`_layout` says the sessions kept their clock.
+OWN_CLOCK = "on the recording's own clock"
+
+
 def _layout(times: np.ndarray, session: np.ndarray) -> tuple[np.ndarray, str]:
     """Log-clock time [s] from 0 for every record, and how the sessions were laid out."""
     numbers = np.unique(session)
@@ -242,7 +247,7 @@ def _layout(times: np.ndarray, session: np.ndarray) -> tuple[np.ndarray, str]:
     ends = np.array([times[session == s].max() for s in numbers])
     if numbers.size == 1 or (np.all(starts[1:] > ends[:-1])
                              and np.all(starts[1:] - ends[:-1] <= KEEP_CLOCK_GAP_S)):
-        return times - starts[0], "on the recording's own clock"
+        return times - starts[0], OWN_CLOCK
     out = np.empty_like(times)
     offset = 0.0
     for s, a, b in zip(numbers, starts, ends):
@@ -293,6 +298,10 @@ def read_tlog(path) -> FlightLog:
     collected.split_counter_restarts(session)
     clock = np.full(times.size, np.nan)
     clock[good], layout = _layout(times[good], session[good])
+    start_time = None
+    if layout == OWN_CLOCK:   # time_s = 0 is the first good record's arrival time
+        start_time = datetime.fromtimestamp(float(times[good][0]), tz=UTC).replace(
+            tzinfo=None).isoformat(timespec="seconds")
     batteries = collected.batteries(path.name, clock, session)
     notes = _notes(scan, int(spikes.sum()), session, layout, collected)
     events = collected.events(clock, session)
@@ -300,6 +309,7 @@ def read_tlog(path) -> FlightLog:
                            notes=notes)
     log.skipped = {"corrupt_messages": scan.corrupt + int(spikes.sum()),
                    "truncated_messages": int(scan.truncated)}
+    log.start_time = start_time
     return log
 
 
