@@ -232,3 +232,6 @@ def test_flight_and_logbook_take_telemetry_logs(tlogs, capsys):
     summary = summarise_source(tlogs / "thayer_rural.tlog", keep_raw=False)
     assert summary.format == "mavlink-tlog"
     assert [e["kind"] for e in summary.events] == ["flight", "flight"]
+    # the arrival times are UNIX times: the flights get their clock time (UTC)
+    assert [e["start_time"][:16] for e in summary.events] == ["2024-08-15T15:03",
+                                                              "2024-08-15T15:07"]
