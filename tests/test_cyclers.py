@@ -257,3 +257,25 @@ def test_fit_on_lithium_cells_validates_on_their_other_steps(cyclers):
     assert [c.summary["file"].endswith("step 2") for c in held_out] == [True]
     error = held_out[0].summary["endurance_error_s"] / held_out[0].summary["endurance_measured_s"]
     assert abs(error) < 0.15, error
+
+
+def test_ec_lab_text_export_with_decimal_commas_reads_like_the_mpr(cyclers, tmp_path):
+    """An EC-Lab .mpt: a long settings header, tab separated, decimal commas, I measured."""
+    from galvani import BioLogic
+
+    mpr = cyclers / "biologic/jdb11-1_c3_gcpl_5cycles_2V-3p8V_C-24_data_C09.mpr"
+    data = BioLogic.MPRfile(str(mpr)).data
+    table = pd.DataFrame({"Ns": data["Ns"], "time/s": data["time/s"], "Ewe/V": data["Ewe/V"],
+                          "<I>/mA": data["control/V/mA"], "cycle number": data["half cycle"] // 2,
+                          "Q charge/discharge/mA.h": data["Q charge/discharge/mA.h"]})
+    header = ["EC-Lab ASCII FILE", "Nb header lines : 120"] + \
+        [f"setting {k} : {k},5" for k in range(117)]
+    body = table.to_csv(sep="\t", index=False, float_format="%.7g").replace(".", ",")
+    path = tmp_path / "gcpl.mpt"
+    path.write_text("\n".join(header) + "\n" + body, encoding="latin-1")
+    assert detect_tester(path) == "text"
+    text, binary = read_tester(path), read_tester(mpr)
+    first_text, first_binary = full_discharges(text.steps)[0], full_discharges(binary.steps)[0]
+    assert first_text["number"] == first_binary["number"]
+    assert first_text["charge_Ah"] == pytest.approx(first_binary["charge_Ah"], rel=1e-5)
+    assert "voltage trend" in text.meta["sign_source"]

@@ -138,6 +138,10 @@ def is_tester_table(names: list[str]) -> bool:
 
 # --------------------------------------------------------------------------- text
 
+#: A tester table's header is looked for in this many first lines (EC-Lab text exports
+#: carry about a hundred lines of settings above it).
+HEADER_LINES = 300
+
 #: Records of a tester's table per (cycle, step) run, at least, among its first rows: a
 #: tester writes many records per step (a column that changes every row is not a step).
 MIN_RECORDS_PER_STEP = 3
@@ -149,7 +153,7 @@ def text_header(lines: list[str]) -> tuple[int, str] | None:
     The rows below the header must hold steps: runs of one (cycle, step) pair of
     :data:`MIN_RECORDS_PER_STEP` records or more on average.
     """
-    for k, line in enumerate(lines[:60]):
+    for k, line in enumerate(lines[:HEADER_LINES]):
         for delimiter in ("\t", ",", ";"):
             names = line.rstrip("\r\n").split(delimiter)
             if line.count(delimiter) >= 3 and is_tester_table(names):
@@ -159,7 +163,8 @@ def text_header(lines: list[str]) -> tuple[int, str] | None:
 
 def _holds_steps(lines: list[str], delimiter: str) -> bool:
     try:
-        table = pd.read_csv(io.StringIO("\n".join(lines)), sep=delimiter, header=0)
+        table = pd.read_csv(io.StringIO("\n".join(lines)), sep=delimiter, header=0,
+                            decimal=_decimal(lines[1:], delimiter))
     except (ValueError, pd.errors.ParserError):
         return False
     roles = find_roles([str(c) for c in table.columns])
@@ -180,11 +185,12 @@ def read_text_export(path, text: str | None = None) -> TesterRecords:
     found = text_header(lines)
     if found is None:
         raise DataError(f"{path.name}: no tester table header (time, voltage, current and a "
-                        "cycle or step column) in the first 60 lines")
+                        f"cycle or step column) in the first {HEADER_LINES} lines")
     k, delimiter = found
+    decimal = _decimal(lines[k + 1:k + 51], delimiter)
     try:
         table = pd.read_csv(io.StringIO("\n".join(lines[k:])), sep=delimiter, header=0,
-                            low_memory=False, skipinitialspace=False)
+                            low_memory=False, decimal=decimal)
     except (ValueError, pd.errors.ParserError) as exc:
         raise DataError(f"{path.name}: the tester table cannot be parsed "
                         f"({str(exc).splitlines()[0]})") from None
@@ -195,6 +201,14 @@ def read_text_export(path, text: str | None = None) -> TesterRecords:
     meta = {"format": f"{vendor}-text" if vendor else "tester-text", "preamble": preamble,
             "reader": "dischargelab's tester-table reader (columns by name and unit)"}
     return tester_records(table, records, path.name, meta)
+
+
+def _decimal(rows: list[str], delimiter: str) -> str:
+    """``","`` when the numbers are written with a decimal comma (European exports)."""
+    if delimiter == ",":
+        return "."
+    text = "\n".join(rows)
+    return "," if re.search(r"\d,\d", text) and not re.search(r"\d\.\d", text) else "."
 
 
 def _vendor(names: list[str], preamble: list[str]) -> str | None:
