@@ -78,6 +78,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/acquire_throughput.py
 	$(BIN)/python benchmarks/logbook.py
 	$(BIN)/python benchmarks/fleet.py
+	$(BIN)/python benchmarks/tester_files.py
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache

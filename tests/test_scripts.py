@@ -23,6 +23,7 @@ BENCHMARKS = {
                                 "peak RSS MB"),
     "logbook.py": (["--copies", "20"], "later capacities in band"),
     "fleet.py": (["--packs", "1", "--repeats", "1"], "One file's task"),
+    "tester_files.py": ([], "tester's counter"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }
