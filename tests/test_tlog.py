@@ -172,7 +172,7 @@ def test_unknown_values_are_missing_and_sys_status_stands_in(tmp_path):
     assert is_tlog(path.read_bytes()[:4096])
     log = read_flight_log(path)
     series = log.batteries[0]
-    assert series.rows == 37 and series.dropped["nan"] == 3
+    assert series.rows == 37 and series.dropped["unknown_value"] == 3
     assert "temperature_C" not in series.frame          # 32767 = unknown in every record
     assert any("voltage unknown" in n for n in series.notes)
     assert [s.found_by for s in log.spans] == ["arm/disarm"]

@@ -59,6 +59,7 @@ from .flightlog_base import (
     BatterySeries,
     FlightLog,
     build_flight_log,
+    drop_rows,
     drop_unmeasured_temperature,
 )
 
@@ -365,7 +366,7 @@ class _Collected:
             else:
                 index, label = k, f"{self.source[key]} of system {sysid}"
             series = _series(rows, index, label, clock, session)
-            _unknown_counts(series, self.unknown, key)
+            _unknown_notes(series, self.unknown, key)
             capacity, cells = self._configured(bid)
             if capacity:
                 series.capacity_mAh = capacity
@@ -542,11 +543,13 @@ def _series(rows, index: int, label: str, clock: np.ndarray, session: np.ndarray
     frame = frame[frame["session"] > 0].reset_index(drop=True)
     series = BatterySeries(index=index, label=label, frame=frame,
                            cells=width if width >= 2 else None)
+    unknown = ~np.isfinite(frame[["voltage_V", "current_A"]].to_numpy()).all(axis=1)
+    series.frame = drop_rows(frame, unknown, "unknown_value", series.dropped)
     drop_unmeasured_temperature(series, "temperature")
     return series
 
 
-def _unknown_counts(series: BatterySeries, unknown: dict, key: tuple) -> None:
+def _unknown_notes(series: BatterySeries, unknown: dict, key: tuple) -> None:
     for what in ("voltage", "current"):
         count = unknown.get(key + (what,), 0)
         if count:
