@@ -9,7 +9,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck docs min-versions bench browser postgres clean
+.PHONY: demo test lint typecheck docs min-versions bench browser postgres mdbtools clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/dischargelab demo --out demo-out --force
 
-test: $(STAMP) browser postgres
+test: $(STAMP) browser postgres mdbtools
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
@@ -68,6 +68,15 @@ postgres:
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq postgresql >/dev/null; \
 	  else echo "note: postgresql not found; the logbook's PostgreSQL tests will be skipped"; fi; }
 
+# Arbin .res files are MS Access databases, read through Debian's mdbtools (mdb-export):
+# installed when missing and we may; otherwise the .res tests are skipped (outside CI).
+mdbtools:
+	@command -v mdb-export >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing mdbtools (reader of Arbin .res files)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mdbtools >/dev/null; \
+	  else echo "note: mdbtools not found; the Arbin .res tests will be skipped"; fi; }
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fit_speed.py
 	$(BIN)/python benchmarks/fit_latency.py
@@ -79,6 +88,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/acquire_throughput.py
 	$(BIN)/python benchmarks/logbook.py
 	$(BIN)/python benchmarks/fleet.py
+	$(BIN)/python benchmarks/tester_files.py
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache docs/_build docs/generated docs/gallery

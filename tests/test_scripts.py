@@ -27,6 +27,7 @@ BENCHMARKS = {
                         "--cell-c", "3"], "uploads stored exactly once"),
     # needs Debian's chromium and chromium-driver (make browser), as the web page tests do
     "web_plot_speed.py": (["--points", "2000", "--repeats", "3"], "next draws, median"),
+    "tester_files.py": ([], "tester's counter"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }

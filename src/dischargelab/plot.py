@@ -51,6 +51,14 @@ def _axes(ax, figsize=(8, 5)):
     return ax
 
 
+def _stacked_axes(axes, figsize, ratios):
+    """The given axes, or a new figure of panels stacked on one time axis (heights ``ratios``)."""
+    if axes is None:
+        _, axes = pyplot().subplots(len(ratios), 1, figsize=figsize, sharex=True,
+                                    layout="constrained", gridspec_kw={"height_ratios": ratios})
+    return np.asarray(axes)
+
+
 #: File suffixes :func:`save` can write (matplotlib's static formats).
 FIGURE_SUFFIXES = (".png", ".svg", ".svgz", ".pdf", ".jpg", ".jpeg", ".eps", ".ps", ".tif",
                    ".tiff", ".webp")
@@ -392,13 +400,7 @@ def plot_flight_report(report: FlightReport, axes=None):
     -------
     numpy.ndarray of Axes
     """
-    from .plot import pyplot
-
-    plt = pyplot()
-    if axes is None:
-        fig, axes = plt.subplots(3, 1, figsize=(9, 8.5), sharex=True, layout="constrained",
-                                 gridspec_kw={"height_ratios": [3, 2, 3]})
-    axes = np.asarray(axes)
+    axes = _stacked_axes(axes, (9, 8.5), [3, 2, 3])
     av, ai, ar = axes
     seen = set()
 
@@ -563,3 +565,65 @@ def plot_health(health, axes=None):
     ax_r.set_xlabel("equivalent full cycles [EFC]")
     ax_r.grid(alpha=0.3)
     return np.asarray(axes)
+
+
+#: Shade of each kind of tester step in :func:`plot_tester_steps`.
+STEP_COLORS = {"charge": "C0", "discharge": "C3", "rest": "0.85"}
+#: Up to this many steps, the discharge steps are numbered on the plot.
+MAX_NUMBERED_STEPS = 60
+
+
+def plot_tester_steps(frame, steps: list[dict], meta: dict, axes=None):
+    """Voltage and current of a battery tester's file over test time, steps shaded by kind.
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        ``time_s`` [s], ``voltage_V`` [V], ``current_A`` [A, discharge positive].
+    steps : list of dict
+        The steps (:func:`dischargelab.io.cyclers.steps.step_table`).
+    meta : dict
+        ``source`` and ``format`` for the title.
+    axes : sequence of two matplotlib Axes, optional
+
+    Returns
+    -------
+    numpy.ndarray of Axes
+    """
+    axes = _stacked_axes(axes, (10, 6), [3, 2])
+    av, ai = axes
+    t = frame["time_s"].to_numpy(dtype=float)
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    scale, unit = (3600.0, "h") if span > 4 * 3600 else (60.0, "min") if span > 600 else (1.0, "s")
+    x = (t - t[0]) / scale
+    i = frame["current_A"].to_numpy(dtype=float)
+    current_scale, current_unit = (1e3, "mA") if np.max(np.abs(i)) < 0.5 else (1.0, "A")
+    av.plot(x, frame["voltage_V"].to_numpy(dtype=float), lw=0.8, color="k")
+    ai.plot(x, i * current_scale, lw=0.8, color="k")
+    shown = set()
+    for s in steps:
+        if s["kind"] == "rest" and s["rows"] < 2:
+            continue
+        a, b = (s["start_s"] - t[0]) / scale, (s["end_s"] - t[0]) / scale
+        label = s["kind"] if s["kind"] not in shown else None
+        shown.add(s["kind"])
+        for ax in axes:
+            ax.axvspan(a, b, color=STEP_COLORS.get(s["kind"], "0.9"), alpha=0.18, lw=0,
+                       label=label if ax is av else None)
+        full = s["kind"] == "discharge" and s.get("after_charge") and s.get("to_limit")
+        if len(steps) <= MAX_NUMBERED_STEPS and s["kind"] == "discharge":
+            av.annotate(f"{s['number']}" + ("*" if full else ""), ((a + b) / 2, 1.0),
+                        xycoords=("data", "axes fraction"), ha="center", va="bottom",
+                        fontsize=7, color="C3")
+    av.set_ylabel("voltage [V]")
+    ai.set_ylabel(f"current [{current_unit}] (discharge +)")
+    ai.set_xlabel(f"test time [{unit}]")
+    av.legend(loc="lower left", fontsize=8)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    name = Path(str(meta.get("source", ""))).name
+    numbered = ("; discharge steps numbered, * = full (from a charge to the lower limit)"
+                if len(steps) <= MAX_NUMBERED_STEPS else "")
+    av.set_title(f"{name} ({meta.get('format')}): {len(steps)} steps{numbered}", fontsize=9,
+                 pad=14)
+    return axes

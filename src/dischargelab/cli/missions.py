@@ -222,8 +222,7 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
 @force_option
 @json_option
 def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment,
-               units,
-               cells, parallel, draws, seed, title, output, force, as_json):
+               units, steps, cells, parallel, draws, seed, title, output, force, as_json):
     """Write one self-contained HTML report for the pilot: model, fit, mission, validation.
 
     \b
@@ -266,7 +265,7 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
                 raise DischargelabError("give --cutoff V (per cell) for the validation: the "
                                         "battery's chemistry is unknown")
             cases = validation_cases(bat, validate_paths, cut, columns, current, sign, segment,
-                                      units, status)
+                                      units, status, steps=steps)
         status.update("drawing plots")
         label = battery if isinstance(battery, str) else None
         from ..atomic import atomic_path

@@ -119,7 +119,9 @@ class FitResult:
         extra = {k: v for k, v in self.to_dict().items()
                  if k not in ("parameters", "cells_series", "strings_parallel",
                               "fit_currents_A", "model")}
-        extra["source"] = [dict(c.meta, name=c.name) for c in self.curves]
+        # where each curve came from; a tester file's list of every step stays in the file
+        extra["source"] = [dict({k: v for k, v in c.meta.items() if k != "steps"}, name=c.name)
+                           for c in self.curves]
         capacities = [float(c.charge_Ah[-1]) / self.strings_parallel for c in self.curves]
         lowest = int(np.argmin([abs(x) for x in self.fit_currents_A]))
         extra["measured_capacity_Ah"] = capacities[lowest]

@@ -54,7 +54,7 @@ TASK_FILES = 8
 
 #: File suffixes taken from folders (a file named on its own is always tried).
 DATA_SUFFIXES = (".csv", ".txt", ".tsv", ".lvm", ".log", ".bin", ".ulg", ".bbl", ".bfl",
-                 ".dat")
+                 ".dat", ".tlog", ".nda", ".ndax", ".mpr", ".res", ".xlsx")
 
 #: Files in folders whose names start with these are documentation, not data.
 SKIP_PREFIXES = ("license", "copying", "readme", "notice")
