@@ -14,8 +14,9 @@ Two parts go into every interval (and ``interval_includes`` says which did):
 * **Model error.** The model itself is not exact, and less so away from the
   currents it was fitted at. Its relative standard deviation of a time to cutoff
   (or endurance) is :func:`model_error_sd`: from held-out-curve residuals when
-  the fit had several rates, else from a documented prior; both grow with the
-  extrapolation ratio. Each draw's time is multiplied by ``exp(sigma z)``,
+  the fit had several rates, else from the one-rate errors measured on other cells
+  (:func:`one_rate_law`; a documented prior for presets and flights); both grow
+  with the extrapolation ratio. Each draw's time is multiplied by ``exp(sigma z)``,
   ``z ~ N(0, 1)`` (seeded, :data:`MODEL_ERROR_SAMPLES` values shared out over the
   draws) and the central percentile interval is taken. Without parameter draws
   (presets, hand-written files) the interval is the model error alone around the
@@ -38,7 +39,11 @@ References
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import json
 import math
+from importlib import resources
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -96,6 +101,22 @@ MAX_PLATEAU_FACTOR = 4.0
 #: that the data show, and the error grows with the rate (I^2 R heating).
 ISOTHERMAL_EXTRAPOLATION_GROWTH = 4.0
 SELF_HEATING_K = 5.0
+
+#: Plateau ratio (:func:`dischargelab.fit.result.plateau_ratio`) below which a constant-current
+#: discharge counts as flat (LiFePO4: about 0.1; NMC and LCO 0.3-0.4) for the measured
+#: one-rate error (:func:`one_rate_class`).
+FLAT_PLATEAU_RATIO = 0.2
+
+#: The one-rate errors measured on other cells (``benchmarks/one_rate_errors.py --write``).
+ONE_RATE_TABLE = "one_rate_error.json"
+
+#: Cells a class of the one-rate table must have been measured on to be used (one cell
+#: says how that cell extrapolates, not how a kind of cell does): else the documented prior.
+MIN_MEASURED_CELLS = 2
+
+#: One more run is advised (:func:`next_test`) when it would narrow the interval's
+#: half-width to less than this fraction of today's.
+NEXT_TEST_NARROWING = 0.8
 
 #: Relative standard deviation of a predicted temperature rise (peak - ambient) inside
 #: the fitted currents [-], and its growth with ln(extrapolation ratio). A lumped
@@ -333,6 +354,85 @@ def _model_error_base(battery: Battery) -> tuple[float, str, float | None]:
         None if dof is None else float(dof)
 
 
+def one_rate_class(battery: Battery) -> str | None:
+    """The class of a one-rate fit in the measured one-rate error table, from what the
+    fitted file shows: ``"<family> / <shape> / <temperature>"`` with shape ``flat``
+    (plateau ratio below :data:`FLAT_PLATEAU_RATIO`: LiFePO4) or ``sloped``, and
+    temperature ``temperature`` (a cell temperature was logged) or ``no temperature``.
+    None when the fit has no constant-current curve to judge the shape by (a flight, a
+    preset, a hand-written file)."""
+    extra = battery.extra if isinstance(battery.extra, dict) else {}
+    plateau = extra.get("fit_plateau_ratio")
+    if isinstance(plateau, bool) or not isinstance(plateau, (int, float)) or \
+            not math.isfinite(plateau):
+        return None
+    shape = "flat" if plateau < FLAT_PLATEAU_RATIO else "sloped"
+    logged = "temperature" if "fit_temperature_rise_K" in extra else "no temperature"
+    return f"{battery.model} / {shape} / {logged}"
+
+
+@functools.cache
+def _packaged_table() -> dict:
+    """The measured table shipped with the package ({} when missing or unreadable)."""
+    try:
+        text = (resources.files("dischargelab") / "data" / ONE_RATE_TABLE).read_text(
+            encoding="utf-8")
+        table = json.loads(text)
+    except (OSError, ValueError):
+        return {}
+    return table if isinstance(table, dict) else {}
+
+
+_table_override: list = []
+
+
+def one_rate_table() -> dict:
+    """The measured one-rate error table: ``{"one_rate": {class: law}, "two_rate": {class:
+    {"sd", "dof"}}}`` (see ``benchmarks/one_rate_errors.py``)."""
+    return _table_override[-1] if _table_override else _packaged_table()
+
+
+@contextlib.contextmanager
+def one_rate_table_override(table: dict):
+    """Use ``{"one_rate": ..., "two_rate": ...}`` (or a bare ``{class: law}``) instead of the
+    packaged table inside the ``with`` block (the leave-one-cell-out benchmark)."""
+    if "one_rate" not in table and "two_rate" not in table:
+        table = {"one_rate": table}
+    _table_override.append(table)
+    try:
+        yield table
+    finally:
+        _table_override.pop()
+
+
+def one_rate_law(battery: Battery) -> dict | None:
+    """The measured law of a one-rate fit's model error, or None (no class or no entry).
+
+    ``{"base", "up", "down", "cells", ...}``: the relative standard deviation of a time to
+    cutoff predicted at ``r`` times the fitted current is ``base + up * ln r`` (``r > 1``)
+    or ``base + down * ln(1 / r)``, measured on other cells by
+    ``benchmarks/one_rate_errors.py`` (``up``/``down`` None where no pair was measured);
+    None for a class measured on fewer than :data:`MIN_MEASURED_CELLS` cells.
+    """
+    cls = one_rate_class(battery)
+    entry = (one_rate_table().get("one_rate") or {}).get(cls) if cls else None
+    if not isinstance(entry, dict) or not isinstance(entry.get("base"), (int, float)):
+        return None
+    if entry.get("up") is None and entry.get("down") is None or \
+            len(entry.get("cells", ())) < MIN_MEASURED_CELLS:
+        return None
+    return dict(entry, name=cls)
+
+
+def extrapolation_side(battery: Battery, cell_current_A: float) -> str | None:
+    """``"up"`` above the fitted currents, ``"down"`` below them, None inside or unknown."""
+    fitted = [abs(x) for x in battery.fit_currents_A if x]
+    cell = abs(float(cell_current_A))
+    if not fitted or cell == 0:
+        return None
+    return "up" if cell > max(fitted) else "down" if cell < min(fitted) else None
+
+
 def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     """Relative standard deviation of a time to cutoff or endurance from the model's error.
 
@@ -346,6 +446,10 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
       by ``1 + 0.8 ln r_k``, and of the rate-capacity check between the fitted currents,
       pooled with the prior, and at least the fitted curves' own error of the time to
       cutoff; :func:`dischargelab.fit.heldout.held_out_error`);
+    * for one constant-current rate, the law measured on other cells
+      (:func:`one_rate_law`): ``sigma = base + growth |ln r|`` with the growth of the
+      side (above or below the fitted current) of the family, curve shape and logged
+      temperature of the fit;
     * ``s0 = 0.015`` otherwise (prior: the paper's endurance errors on unseen rates
       were 1-6 %), ``g`` the family's ``one_rate_growth`` (2: one rate cannot show how
       capacity and overpotentials change with rate) times
@@ -364,7 +468,8 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     float
         Relative standard deviation [-] (e.g. 0.015 = 1.5 %).
     """
-    return model_error_info(battery, battery.extrapolation_ratio(cell_current_A))["relative_sd"]
+    return model_error_info(battery, battery.extrapolation_ratio(cell_current_A),
+                            extrapolation_side(battery, cell_current_A))["relative_sd"]
 
 
 def extrapolation_growth(battery: Battery, source: str) -> float:
@@ -385,13 +490,124 @@ def extrapolation_growth(battery: Battery, source: str) -> float:
     return growth
 
 
-def model_error_info(battery: Battery, ratio: float) -> dict:
-    """Model error for an (effective) extrapolation ratio: sd, source, label."""
+def model_error_info(battery: Battery, ratio: float, side: str | None = None) -> dict:
+    """Model error for an (effective) extrapolation ratio: sd, source, label.
+
+    ``side`` is ``"up"`` (above the fitted currents) or ``"down"``; None takes the wider
+    of the two where they differ (the measured one-rate law)."""
     base, source, dof = _model_error_base(battery)
-    sd = base * (1.0 + extrapolation_growth(battery, source) * math.log(max(ratio, 1.0)))
+    log_ratio = math.log(max(ratio, 1.0))
+    law = one_rate_law(battery) if source == "prior" else None
+    if law is not None:
+        growths = [law.get(k) for k in ((side,) if side in ("up", "down") else ())
+                   + ("up", "down")]
+        growth = next(g for g in growths if g is not None) if side else \
+            max(g for g in growths if g is not None)
+        base = float(law["base"])
+        sd = base + float(growth) * log_ratio
+        source = "one-rate, measured"
+        return {"relative_sd": sd, "base_relative_sd": base, "source": source, "dof": None,
+                "extrapolation_ratio": float(ratio), "growth_per_log_ratio": float(growth),
+                "one_rate_class": law["name"], "measured_cells": len(law.get("cells", [])),
+                "label": f"model error ({source} on {len(law.get('cells', []))} other cells, "
+                         f"extrapolation x{ratio:.1f})"}
+    sd = base * (1.0 + extrapolation_growth(battery, source) * log_ratio)
     return {"relative_sd": sd, "base_relative_sd": base, "source": source, "dof": dof,
             "extrapolation_ratio": float(ratio),
             "label": f"model error ({source}, extrapolation x{ratio:.1f})"}
+
+
+def half_width_pct(sd: float, level: float = 0.95, dof: float | None = None) -> float:
+    """Half-width [% of the median] of the interval ``exp(+-z sd)`` of a relative sd."""
+    return 100.0 * math.sinh(z_level(level, dof) * sd)
+
+
+#: The extrapolation a one-rate fit's advice speaks of (:func:`fit_next_test`): x4 the
+#: fitted current, the far end of the x2-x4 range a bench test is mostly asked about.
+ADVICE_RATIO = 4.0
+
+
+def fit_next_test(battery: Battery, level: float = 0.95) -> dict | None:
+    """The next test after a one-rate fit: one more run at :data:`ADVICE_RATIO` times the
+    fitted current, and how it would narrow the model error of predictions up to there
+    (:func:`next_test`); None for a fit to several rates (each prediction says what would
+    narrow its own interval) or when it would not narrow."""
+    fitted = [abs(x) for x in battery.fit_currents_A if x]
+    if len(fitted) != 1:
+        return None
+    info = model_error_info(battery, ADVICE_RATIO, "up")
+    now = half_width_pct(info["relative_sd"], level, info["dof"])
+    advice = next_test(battery, ADVICE_RATIO * fitted[0], now, level)
+    if advice is None:
+        return None
+    pack = advice["current_A"]
+    advice["text"] = (f"next test: fitted on one rate, a prediction at {ADVICE_RATIO:g}x the "
+                      f"fitted current ({pack:.3g} A) carries a model error of "
+                      f"+-{now:.1f} % ({info['label']}); one more run at {pack:.3g} A would "
+                      f"narrow every prediction up to that current to about "
+                      f"+-{advice['half_width_pct_after']:.1f} %")
+    return advice
+
+
+def after_one_more_run(battery: Battery) -> tuple[float, float | None] | None:
+    """``(sd, dof)`` of the model error at the current of one more run, once that run is
+    fitted with the others: a multi-rate fit keeps its held-out error (the run is then a
+    fitted current); a one-rate fit becomes a two-rate fit, whose model error is the
+    median measured on two-rate fits of its class (``benchmarks/one_rate_errors.py``).
+    None when it cannot be told (no measured two-rate fits of the class)."""
+    base, source, dof = _model_error_base(battery)
+    if source == "held-out":
+        return base, dof
+    cls = one_rate_class(battery)
+    entry = (one_rate_table().get("two_rate") or {}).get(cls) if cls else None
+    if not isinstance(entry, dict) or not isinstance(entry.get("sd"), (int, float)):
+        return None
+    dof = entry.get("dof")
+    return float(entry["sd"]), float(dof) if isinstance(dof, (int, float)) and dof >= 1 \
+        else None
+
+
+def next_test(battery: Battery, cell_current_A: float, half_width_pct_now: float,
+              level: float = 0.95) -> dict | None:
+    """The one extra run that would narrow a prediction's interval most, and to about what.
+
+    A run at the predicted current itself: the prediction then lies at a fitted current,
+    where the model error is that of the fit inside its currents
+    (:func:`after_one_more_run`) and no longer grows with the extrapolation ratio. The
+    parameter draws' share is left out of the "after" figure (it is small at a fitted
+    current).
+
+    Parameters
+    ----------
+    battery : Battery
+    cell_current_A : float
+        Cell current of the prediction [A].
+    half_width_pct_now : float
+        Half-width of today's interval [% of the prediction].
+    level : float
+
+    Returns
+    -------
+    dict or None
+        ``current_A`` (pack current of the run [A]), ``cell_current_A``,
+        ``half_width_pct_now``, ``half_width_pct_after`` and ``text``; None when one more
+        run would not narrow the interval to :data:`NEXT_TEST_NARROWING` of today's.
+    """
+    after = after_one_more_run(battery)
+    if after is None or not math.isfinite(half_width_pct_now) or not cell_current_A:
+        return None
+    fitted = [abs(x) for x in battery.fit_currents_A if x]
+    if any(abs(abs(cell_current_A) / f - 1.0) < 0.05 for f in fitted):
+        return None  # the prediction is already at a fitted current
+    width = half_width_pct(after[0], level, after[1])
+    if not width < NEXT_TEST_NARROWING * half_width_pct_now:
+        return None
+    pack = abs(float(cell_current_A)) * battery.strings_parallel
+    return {"current_A": pack, "cell_current_A": abs(float(cell_current_A)),
+            "half_width_pct_now": float(half_width_pct_now), "half_width_pct_after": width,
+            "text": f"next test: one more run at {pack:.3g} A would narrow this interval "
+                    f"from +-{half_width_pct_now:.1f} % to about +-{width:.1f} % (the "
+                    f"model error measured on fits with one more rate)"}
 
 
 def z_level(level: float, dof: float | None = None) -> float:
@@ -527,7 +743,8 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
         ``bootstrap_draws``, ``draws_not_reaching_cutoff``, ``method``, ``warnings``.
         Draws that cannot reach the cutoff count with 0 s (see the module docstring).
     """
-    error = model_error_info(battery, battery.extrapolation_ratio(cell_current_A))
+    error = model_error_info(battery, battery.extrapolation_ratio(cell_current_A),
+                             extrapolation_side(battery, cell_current_A))
     params, info = parameter_draws(battery, draws, seed)
     out = {"level": level, "model_error": {k: v for k, v in error.items() if k != "label"},
            "draws": 0, "bootstrap_draws": 0, "draws_not_reaching_cutoff": 0, "warnings": []}
@@ -643,4 +860,6 @@ __all__ = ["sample_parameters", "bootstrap_parameters", "hasparameter_draws", "i
            "model_error_sd", "fly_draws", "prediction_interval", "simulation_interval",
            "DEFAULT_DRAWS",
            "PRIOR_RELATIVE_SD", "MIN_HELD_OUT_SD", "EXTRAPOLATION_GROWTH", "held_out_posterior",
-           "extrapolation_growth", "peak_temperature_interval", "held_out_summary"]
+           "extrapolation_growth", "peak_temperature_interval", "held_out_summary",
+           "one_rate_class", "one_rate_law", "one_rate_table", "next_test", "half_width_pct",
+           "fit_next_test"]

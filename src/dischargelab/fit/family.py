@@ -14,7 +14,14 @@ from scipy.special import stdtrit
 from ..cell import CellParameters
 from ..discharge import Curve
 from ..errors import FitError
-from ..identifiability import Identifiability, analyse, equilibrated_svd, plausibility, undetermined
+from ..identifiability import (
+    Identifiability,
+    analyse,
+    capacity_at_delivered_charge,
+    equilibrated_svd,
+    plausibility,
+    undetermined,
+)
 from ..models import Family, Samples, get_family
 from ..models.base import HELD_AT_AMBIENT_HEAT_CAPACITY, MIN_HEATING_K, fit_lumped_thermal
 from .problem import (
@@ -289,7 +296,7 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
     if family.thermal:
         params, thermal = _thermal(family, params, stack, notes, thermal_prior)
     ident = analyse(jac, mdl.free, values, bnds, paper_mode=paper_mode, svd=svd)
-    _physical_limits(family, ident, notes)
+    _physical_limits(family, ident, notes, stack.q_max)
     warnings += ident.warnings
     measured = ~stack.is_rest
     rmse = float(np.sqrt(np.mean(residual[measured] ** 2)))
@@ -334,12 +341,18 @@ def _interval95(value: float, stderr: float, t_crit: float, positive: bool) -> t
     return value - t_crit * stderr, value + t_crit * stderr
 
 
-def _physical_limits(family: Family, ident: Identifiability, notes: list) -> None:
-    """Parameters at a bound that marks an absent effect become notes, not bound problems."""
+def _physical_limits(family: Family, ident: Identifiability, notes: list,
+                     delivered_Ah: float | None = None) -> None:
+    """Parameters at a bound that marks an absent effect, and a capacity at the charge the
+    runs delivered (``delivered_Ah``, per cell), become notes, not bound problems."""
     keep = []
     for name, side, bound in ident.at_bounds:
         par = family.parameter(name) if name in family.names else None
-        if par is not None and par.limit_note:
+        if name == "C_Ah" and side == "lower" and delivered_Ah is not None and \
+                bound <= delivered_Ah * (1.0 + 1e-3):  # physics: the charge delivered
+            notes.append(capacity_at_delivered_charge(bound))
+            ident.warnings = [w for w in ident.warnings if not w.startswith("C_Ah = ")]
+        elif par is not None and par.limit_note:
             notes.append(f"{name} = {bound:g} at its {side} bound: {par.limit_note}")
             ident.warnings = [w for w in ident.warnings if not w.startswith(f"{name} = ")]
         else:

@@ -1,0 +1,391 @@
+"""The one-rate prior, measured: how far a fit to ONE rate misses the other rates.
+
+A fit to one constant-current run cannot show how the cell's capacity and overpotentials
+change with the current, so its predictions at other currents carry a model error that
+its own data cannot measure. This script measures it on every cell with a rate series:
+
+* **real cells** (``../shared/data``): Samsung 30Q S001 (C/10 ... 4C, cell temperature
+  logged; also with the temperature column dropped), Enertech LCO pouch (0.1C ... 2C, no
+  temperature);
+* **PyBaMM virtual cells** (``tests/data/virtual``, ``benchmarks/virtual_cells.py``): NMC
+  (Chen2020), LFP (Prada2013, DFN to 2.0 V and SPMe to 2.5 V), LCO (Marquis2019) at 15, 25
+  and 35 degC, and the NMC pouch (Ecker2015), NCA (NCA_Kim2011), NMC532 (Mohtat2020), LCO
+  pouch (Ai2020) and the LFP cell again (3C, 40 degC) at 25 and 40 degC; each with its
+  temperature and with the temperature column dropped.
+
+Every run of a series (one cell at one ambient) is fitted alone (``dischargelab.fit``,
+each family, ``bootstrap=30``) and predicts every other run of the series at its mean
+current, cutoff and ambient (``Battery.predict``). The relative error of the time to
+cutoff ``e`` and the extrapolation ratio ``r`` (predicted over fitted current) are kept
+with what the user's file shows: the family, the curve's shape (``flat`` when the plateau
+ratio of :func:`dischargelab.fit.result.plateau_ratio` is below
+:data:`dischargelab.uncertainty.FLAT_PLATEAU_RATIO`: LiFePO4; else ``sloped``) and whether
+a cell temperature was logged. Never the cell's name.
+
+**The law.** Per class (family, shape, temperature logged), the relative standard deviation
+of a one-rate prediction is ``sd(r) = base + k |ln r|``, with ``k`` the RMS of ``e / |ln r|``
+over the pairs of that class extrapolating up (``r > 1``; and, separately, down) by at
+least x1.5, and ``base`` the RMS error of the fitted run's own time to cutoff (at least
+0.5 %). **Leave one cell out**: the law used for a cell's predictions is measured on the
+other cells only (a cell is its parameter set or its real cell, whatever its ambient or
+cutoff; Ai2020 is the Enertech cell), and the intervals reported here are the package's
+own (``Battery.predict``, parameter draws times this model error) with that law. The
+law from all cells is written to ``src/dischargelab/data/one_rate_error.json``
+(``--write``), which :mod:`dischargelab.uncertainty` reads.
+
+**Two-rate fits** (for the advice on the next test): every series is also fitted on two
+runs a factor 2-5 apart; the median model error (``FitResult.model_error``) of each
+class is written to the same file.
+
+Usage: python benchmarks/one_rate_errors.py [--write] [--families shepherd,...]
+       [--cells samsung,...] [--json rows.json]
+"""
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import accuracy  # noqa: E402
+import dischargelab as dl  # noqa: E402
+from _machine import machine_line  # noqa: E402
+from dischargelab import uncertainty  # noqa: E402
+from dischargelab.predict import predict as predict_point  # noqa: E402
+
+VIRTUAL = accuracy.VIRTUAL
+TABLE_PATH = HERE.parent / "src" / "dischargelab" / "data" / "one_rate_error.json"
+FAMILIES = ("shepherd", "shepherd-thermal", "ecm")
+BOOTSTRAP = 30
+#: Extrapolations by less than this ratio do not set the growth (``e / ln r`` is noisy).
+MIN_GROWTH_RATIO = 1.5
+#: The acceptance's range of one-rate extrapolations (up, x2 to x4; mean currents of the
+#: measured runs differ from the nominal rates by a little).
+ACCEPT_RATIOS = (1.9, 4.2)
+#: Two-rate fits: runs a factor 2-5 apart.
+TWO_RATE_RATIOS = (1.9, 5.5)
+COVERAGE_GOAL, HALF_WIDTH_GOAL = 90.0, 6.0
+
+#: Cell identity of each virtual parameter set (leave-one-cell-out groups).
+CELL_OF_SET = {"Chen2020": "LG M50 (Chen2020)", "Prada2013": "A123 26650 (Prada2013)",
+               "Marquis2019": "Marquis2019 LCO", "Ecker2015": "Kokam pouch (Ecker2015)",
+               "NCA_Kim2011": "NCA (Kim2011)", "Mohtat2020": "NMC532 (Mohtat2020)",
+               "Ai2020": "Enertech LCO"}
+
+
+@dataclass
+class Series:
+    """Runs of one cell at one ambient (``accuracy.Run`` by label)."""
+
+    cell: str
+    title: str
+    runs: dict
+    temperature: bool
+
+
+def real_series(data: Path):
+    out = []
+    _, runs, _ = accuracy.load_samsung(data)
+    out.append(Series("Samsung 30Q S001", "Samsung 30Q", runs, True))
+    _, runs, _ = accuracy.load_enertech(data)
+    out.append(Series("Enertech LCO", "Enertech LCO", runs, False))
+    return out
+
+
+def virtual_series():
+    """Every virtual constant-current series of ``index.json``, by (set, ambient)."""
+    index = json.loads((VIRTUAL / "index.json").read_text(encoding="utf-8"))
+    groups = {}
+    for entry in index["files"]:
+        if entry.get("rate_C") is None:
+            continue
+        key = (entry.get("set", entry["chemistry"]), float(entry["ambient_C"]))
+        groups.setdefault(key, []).append(entry)
+    out = []
+    for (set_name, ambient), entries in sorted(groups.items()):
+        if len(entries) < 2:
+            continue
+        runs = {}
+        for entry in sorted(entries, key=lambda e: e["rate_C"]):
+            d = dl.read(VIRTUAL / entry["file"])
+            label = f"{entry['rate_C']:g}C"
+            runs[label] = accuracy.make_run(label, d, entry["cutoff_V"], ambient)
+        cell = CELL_OF_SET.get(entries[0]["parameter_set"], entries[0]["parameter_set"])
+        out.append(Series(cell, f"virtual {set_name} {ambient:g}degC", runs, True))
+    return out
+
+
+def without_temperature(series: Series) -> Series:
+    runs = {k: accuracy.make_run(k, replace(r.discharge, temperature_C=None), r.cutoff_V,
+                                 r.ambient_C) for k, r in series.runs.items()}
+    return Series(series.cell, series.title + ", no temperature", runs, False)
+
+
+def covariates(battery) -> dict:
+    """What the user's file shows, from the fitted battery (``uncertainty.one_rate_class``)."""
+    extra = battery.extra
+    return {"plateau": extra.get("fit_plateau_ratio"),
+            "temperature": "fit_temperature_rise_K" in extra,
+            "class": uncertainty.one_rate_class(battery)}
+
+
+def one_rate_rows(series: Series, family: str):
+    """Fit each run alone, predict the others (point values): one row per pair."""
+    rows = []
+    for key, run in series.runs.items():
+        try:
+            res = dl.fit(run.discharge, model=family, bootstrap=BOOTSTRAP, seed=0)
+        except dl.DischargelabError as exc:
+            print(f"  ({series.title} {key} {family}: fit failed: {exc})")
+            continue
+        bat = res.battery
+        cov = covariates(bat)
+        for target_key, target in series.runs.items():
+            load = dict(current=target.current_A, cutoff=target.cutoff_V,
+                        ambient=target.ambient_C)
+            try:
+                t = predict_point(bat, interval=False, **load).time_to_cutoff_s
+            except dl.DischargelabError:
+                t = float("nan")
+            rows.append(dict(cell=series.cell, series=series.title, family=family,
+                             model=res.model, fitted=key, target=target_key,
+                             ratio=target.current_A / run.current_A,
+                             error=t / target.measured_s - 1.0, predicted_s=t,
+                             measured_s=target.measured_s, load=load, battery=bat, **cov))
+    return rows
+
+
+# ---- the law --------------------------------------------------------------------------------
+
+def law(rows) -> dict:
+    """``{class: {"base", "up", "down", "pairs", "cells"}}`` from one-rate rows."""
+    out = {}
+    for cls in sorted({r["class"] for r in rows}):
+        sel = [r for r in rows if r["class"] == cls and np.isfinite(r["error"])]
+        self_err = [r["error"] for r in sel if r["fitted"] == r["target"]]
+        base = max(float(np.sqrt(np.mean(np.square(self_err)))) if self_err else 0.0,
+                   uncertainty.MIN_HELD_OUT_SD)
+        entry = {"base": base, "cells": sorted({r["cell"] for r in sel})}
+        for side, keep in (("up", lambda x: x >= MIN_GROWTH_RATIO),
+                           ("down", lambda x: x <= 1.0 / MIN_GROWTH_RATIO)):
+            part = [r for r in sel if keep(r["ratio"])]
+            entry[f"{side}_pairs"] = len(part)
+            entry[side] = (float(np.sqrt(np.mean([(max(abs(r["error"]) - base, 0.0)
+                                                    / abs(math.log(r["ratio"]))) ** 2
+                                                   for r in part]))) if part else None)
+        out[cls] = entry
+    return out
+
+
+def apply_law(table: dict, rows) -> None:
+    """Each row's interval with ``table`` in place of the package's (leave one cell out)."""
+    for r in rows:
+        if r["fitted"] == r["target"] or not np.isfinite(r["error"]):
+            continue
+        with uncertainty.one_rate_table_override(table):
+            out = r["battery"].predict(**r["load"]).to_dict()
+        lo, hi = out["interval95"]["time_to_cutoff_s"]
+        pred = out["time_to_cutoff_s"]
+        r["interval"] = (lo, hi)
+        r["covered"] = bool(lo <= r["measured_s"] <= hi)
+        r["half_width_pct"] = 100.0 * (hi - lo) / 2.0 / pred
+
+
+def loco_tables(rows, families):
+    """``{cell: table}``: the law of every family measured without that cell."""
+    tables = {}
+    for cell in sorted({r["cell"] for r in rows}):
+        tables[cell] = law([r for r in rows if r["cell"] != cell and r["family"] in families])
+    return tables
+
+
+# ---- two-rate fits ---------------------------------------------------------------------------
+
+def two_rate_rows(series: Series, family: str):
+    keys = list(series.runs)
+    rows = []
+    for a in range(len(keys)):
+        for b in range(a + 1, len(keys)):
+            ra, rb = series.runs[keys[a]], series.runs[keys[b]]
+            ratio = rb.current_A / ra.current_A
+            if not TWO_RATE_RATIOS[0] <= ratio <= TWO_RATE_RATIOS[1]:
+                continue
+            try:
+                res = dl.fit([ra.discharge, rb.discharge], model=family, bootstrap=0, seed=0)
+            except dl.DischargelabError:
+                continue
+            err = res.model_error or {}
+            if "relative_sd" not in err:
+                continue
+            rows.append(dict(cell=series.cell, series=series.title, family=family,
+                             model=res.model, fitted=f"{keys[a]} + {keys[b]}",
+                             sd=float(err["relative_sd"]), dof=float(err.get("dof") or 0),
+                             **covariates(res.battery)))
+    return rows
+
+
+def two_rate_law(rows) -> dict:
+    out = {}
+    for cls in sorted({r["class"] for r in rows}):
+        sel = [r for r in rows if r["class"] == cls]
+        out[cls] = {"sd": float(np.median([r["sd"] for r in sel])),
+                    "dof": float(np.median([r["dof"] for r in sel])), "fits": len(sel),
+                    "cells": sorted({r["cell"] for r in sel})}
+    return out
+
+
+# ---- tables --------------------------------------------------------------------------------
+
+def pct(x) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{100 * x:.2f} %"
+
+
+def print_law(table):
+    print("| class (family / shape / temperature) | base | growth up (per ln r) | pairs up | "
+          "growth down | pairs down | cells |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for cls, e in table.items():
+        print(f"| {cls} | {pct(e['base'])} | {pct(e['up'])} | {e['up_pairs']} | "
+              f"{pct(e['down'])} | {e['down_pairs']} | {len(e['cells'])} |")
+
+
+def print_errors_by_ratio(rows):
+    """RMS error per class and ratio bin (is the growth linear in ln r?)."""
+    bins = [(1.4, 2.6), (2.6, 4.5), (4.5, 12.0), (12.0, 50.0)]
+    print("| class | " + " | ".join(f"x{a:g}-{b:g}: RMS (n)" for a, b in bins) + " |")
+    print("|---|" + "---:|" * len(bins))
+    for cls in sorted({r["class"] for r in rows}):
+        cells = []
+        for a, b in bins:
+            e = [r["error"] for r in rows if r["class"] == cls and a <= r["ratio"] < b
+                 and np.isfinite(r["error"])]
+            cells.append(f"{pct(float(np.sqrt(np.mean(np.square(e)))))} ({len(e)})" if e
+                         else "")
+        print(f"| {cls} | " + " | ".join(cells) + " |")
+
+
+def accept_rows(rows):
+    return [r for r in rows if "covered" in r and ACCEPT_RATIOS[0] <= r["ratio"]
+            <= ACCEPT_RATIOS[1]]
+
+
+def print_acceptance(rows, families):
+    print("| family | one-rate runs predicting x2-x4 | coverage of 95 % intervals | median "
+          "half-width | worst error | verdict |")
+    print("|---|---:|---:|---:|---|---|")
+    for fam in [*families, "auto"]:
+        sel = accept_rows([r for r in rows if r["family"] == fam])
+        if not sel:
+            continue
+        cov = 100.0 * np.mean([r["covered"] for r in sel])
+        med = float(np.median([r["half_width_pct"] for r in sel]))
+        w = max(sel, key=lambda r: abs(r["error"]))
+        ok = cov >= COVERAGE_GOAL and med <= HALF_WIDTH_GOAL
+        print(f"| {fam} | {len(sel)} | {cov:.0f} % ({sum(r['covered'] for r in sel)}/"
+              f"{len(sel)}) | {med:.2f} % | {100 * w['error']:+.2f} % ({w['series']} "
+              f"{w['fitted']} -> {w['target']}) | {'met' if ok else 'NOT met'} |")
+
+
+def print_classes(rows):
+    print("| family | class | runs x2-x4 | coverage | median half-width | RMS error |")
+    print("|---|---|---:|---:|---:|---:|")
+    for fam in sorted({r["family"] for r in rows}):
+        for cls in sorted({r["class"] for r in rows if r["family"] == fam}):
+            sel = accept_rows([r for r in rows if r["family"] == fam and r["class"] == cls])
+            if not sel:
+                continue
+            cov = sum(r["covered"] for r in sel)
+            rms = float(np.sqrt(np.mean([r["error"] ** 2 for r in sel])))
+            print(f"| {fam} | {cls} | {len(sel)} | {100 * cov / len(sel):.0f} % ({cov}/"
+                  f"{len(sel)}) | {np.median([r['half_width_pct'] for r in sel]):.2f} % | "
+                  f"{pct(rms)} |")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=accuracy.default_data_dir())
+    parser.add_argument("--families", default=",".join(FAMILIES))
+    parser.add_argument("--cells", default=None,
+                        help="only series whose title contains one of these (comma list)")
+    parser.add_argument("--no-two-rate", action="store_true", help="skip the two-rate fits")
+    parser.add_argument("--write", action="store_true",
+                        help=f"write the law from all cells to {TABLE_PATH.name}")
+    parser.add_argument("--json", type=Path, help="write every one-rate row here")
+    args = parser.parse_args(argv)
+    families = [f for f in args.families.split(",") if f]
+    t0 = time.perf_counter()
+    series = real_series(args.data) if (args.data / "samsung30q_S001").is_dir() else []
+    series += virtual_series()
+    series += [without_temperature(s) for s in series if s.temperature]
+    if args.cells:
+        wanted = [w.lower() for w in args.cells.split(",")]
+        series = [s for s in series if any(w in s.title.lower() for w in wanted)]
+    rows, two = [], []
+    for s in series:
+        for fam in families:
+            rows += one_rate_rows(s, fam)
+            if not args.no_two_rate:
+                two += two_rate_rows(s, fam)
+        print(f"  {s.title}: {len(s.runs)} runs, {time.perf_counter() - t0:.0f} s",
+              file=sys.stderr)
+    # auto on one rate is shepherd-thermal (choose_model): its rows are that family's
+    rows += [dict(r, family="auto") for r in rows if r["family"] == "shepherd-thermal"]
+    tables = loco_tables([r for r in rows if r["family"] != "auto"], families)
+    for r in rows:
+        r["loco"] = tables[r["cell"]]
+    for cell, table in tables.items():
+        apply_law(table, [r for r in rows if r["cell"] == cell])
+    full = law([r for r in rows if r["family"] != "auto"])
+    two_law = two_rate_law(two)
+
+    print(f"## One-rate extrapolation: the law from every cell ({len(rows)} pairs, "
+          f"{len({r['cell'] for r in rows})} cells, {len(series)} series)\n")
+    print_law(full)
+    print("\n## One-rate errors by extrapolation ratio (up)\n")
+    print_errors_by_ratio([r for r in rows if r["family"] != "auto" and r["ratio"] > 1])
+    print("\n## Acceptance: one-rate 95 % intervals, x2-x4 up, each cell's law measured "
+          "without it (leave one cell out)\n")
+    print_acceptance(rows, families)
+    print("\n## Per class\n")
+    print_classes(rows)
+    if two:
+        print("\n## Two-rate fits (runs x2-x5 apart): median model error inside the fitted "
+              "currents\n")
+        print("| class | fits | median sd | median dof | cells |")
+        print("|---|---:|---:|---:|---:|")
+        for cls, e in two_law.items():
+            print(f"| {cls} | {e['fits']} | {pct(e['sd'])} | {e['dof']:.0f} | "
+                  f"{len(e['cells'])} |")
+    if args.write:
+        doc = {"generator": "python benchmarks/one_rate_errors.py --write",
+               "law": "relative sd of a one-rate time to cutoff = base + growth * |ln r|, "
+                      "r = predicted / fitted current (up: r > 1, down: r < 1)",
+               "measured": machine_line(),
+               "one_rate": {cls: {k: v for k, v in e.items()} for cls, e in full.items()},
+               "two_rate": two_law}
+        from dischargelab.atomic import write_text_atomic
+
+        write_text_atomic(TABLE_PATH, json.dumps(doc, indent=1) + "\n")
+        print(f"\nwritten: {TABLE_PATH}")
+    if args.json:
+        keep = ("cell", "series", "family", "model", "fitted", "target", "ratio", "error",
+                "class", "plateau", "temperature", "covered", "half_width_pct")
+        args.json.write_text(json.dumps([{k: r.get(k) for k in keep} for r in rows],
+                                        indent=1, default=str), encoding="utf-8")
+    print(f"\nRun time {time.perf_counter() - t0:.0f} s. Machine: {machine_line()}; load "
+          f"average {os.getloadavg()[0]:.1f} (shared machine)")
+
+
+if __name__ == "__main__":
+    main()
