@@ -22,7 +22,7 @@ import numpy as np
 
 from .errors import DataError, DischargelabError
 from .model import CUTOFF_CELL_VOLTAGE_V, Battery, load_battery
-from .uncertainty import held_out_summary
+from .uncertainty import fit_next_test, held_out_summary
 
 CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#1d2430;
@@ -185,6 +185,9 @@ def _battery_section(battery: Battery) -> str:
         parts.append(_messages([src["note"]], "note"))
     parts.append(_messages([str(m) for m in extra.get("notes", []) or []], "note"))
     parts.append(_messages([str(m) for m in extra.get("warnings", []) or []], "warn"))
+    advice = fit_next_test(battery)
+    if advice is not None:
+        parts.append(_messages([advice["text"]], "note"))
     return "".join(parts)
 
 
