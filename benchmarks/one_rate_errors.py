@@ -73,9 +73,17 @@ MIN_GROWTH_RATIO = 1.5
 #: The acceptance's range of one-rate extrapolations (up, x2 to x4; mean currents of the
 #: measured runs differ from the nominal rates by a little).
 ACCEPT_RATIOS = (1.9, 4.2)
-#: Two-rate fits: runs a factor 2-5 apart.
+#: Two-rate fits: runs a factor 2-5 apart, at most this many pairs per series and family.
 TWO_RATE_RATIOS = (1.9, 5.5)
+TWO_RATE_PAIRS = 2
 COVERAGE_GOAL, HALF_WIDTH_GOAL = 90.0, 6.0
+
+#: Ambient of the virtual series measured [degC] (the cells' 15, 35 and 40 degC runs
+#: repeat the same cells: they would weigh those cells more, and cost the time of the run).
+SERIES_AMBIENT_C = 25.0
+#: Predicted runs: up to this ratio above the fitted current and down to its inverse below
+#: (a C/10 run predicted from a fast fit is ten hours of simulation for one more pair).
+TARGET_RATIOS = (1.0 / 4.5, 12.0)
 
 #: Cell identity of each virtual parameter set (leave-one-cell-out groups).
 CELL_OF_SET = {"Chen2020": "LG M50 (Chen2020)", "Prada2013": "A123 26650 (Prada2013)",
@@ -114,7 +122,7 @@ def virtual_series():
         groups.setdefault(key, []).append(entry)
     out = []
     for (set_name, ambient), entries in sorted(groups.items()):
-        if len(entries) < 2:
+        if len(entries) < 2 or abs(ambient - SERIES_AMBIENT_C) > 0.1:
             continue
         runs = {}
         for entry in sorted(entries, key=lambda e: e["rate_C"]):
@@ -152,6 +160,8 @@ def one_rate_rows(series: Series, family: str):
         bat = res.battery
         cov = covariates(bat)
         for target_key, target in series.runs.items():
+            if not TARGET_RATIOS[0] <= target.current_A / run.current_A <= TARGET_RATIOS[1]:
+                continue
             load = dict(current=target.current_A, cutoff=target.cutoff_V,
                         ambient=target.ambient_C)
             try:
@@ -189,9 +199,11 @@ def law(rows) -> dict:
 
 
 def apply_law(table: dict, rows) -> None:
-    """Each row's interval with ``table`` in place of the package's (leave one cell out)."""
+    """The interval of each row in the acceptance's range (x2-x4 up) with ``table`` in
+    place of the package's (leave one cell out)."""
     for r in rows:
-        if r["fitted"] == r["target"] or not np.isfinite(r["error"]):
+        if not ACCEPT_RATIOS[0] <= r["ratio"] <= ACCEPT_RATIOS[1] or \
+                not np.isfinite(r["error"]):
             continue
         with uncertainty.one_rate_table_override(table):
             out = r["battery"].predict(**r["load"]).to_dict()
@@ -213,25 +225,29 @@ def loco_tables(rows, families):
 # ---- two-rate fits ---------------------------------------------------------------------------
 
 def two_rate_rows(series: Series, family: str):
+    """Fits to two runs :data:`TWO_RATE_RATIOS` apart (the :data:`TWO_RATE_PAIRS` pairs
+    nearest a factor 3) with their held-out model error."""
     keys = list(series.runs)
-    rows = []
+    pairs = []
     for a in range(len(keys)):
         for b in range(a + 1, len(keys)):
-            ra, rb = series.runs[keys[a]], series.runs[keys[b]]
-            ratio = rb.current_A / ra.current_A
-            if not TWO_RATE_RATIOS[0] <= ratio <= TWO_RATE_RATIOS[1]:
-                continue
-            try:
-                res = dl.fit([ra.discharge, rb.discharge], model=family, bootstrap=0, seed=0)
-            except dl.DischargelabError:
-                continue
-            err = res.model_error or {}
-            if "relative_sd" not in err:
-                continue
-            rows.append(dict(cell=series.cell, series=series.title, family=family,
-                             model=res.model, fitted=f"{keys[a]} + {keys[b]}",
-                             sd=float(err["relative_sd"]), dof=float(err.get("dof") or 0),
-                             **covariates(res.battery)))
+            ratio = series.runs[keys[b]].current_A / series.runs[keys[a]].current_A
+            if TWO_RATE_RATIOS[0] <= ratio <= TWO_RATE_RATIOS[1]:
+                pairs.append((abs(math.log(ratio / 3.0)), a, b))
+    rows = []
+    for _, a, b in sorted(pairs)[:TWO_RATE_PAIRS]:
+        ra, rb = series.runs[keys[a]], series.runs[keys[b]]
+        try:
+            res = dl.fit([ra.discharge, rb.discharge], model=family, bootstrap=0, seed=0)
+        except dl.DischargelabError:
+            continue
+        err = res.model_error or {}
+        if "relative_sd" not in err:
+            continue
+        rows.append(dict(cell=series.cell, series=series.title, family=family,
+                         model=res.model, fitted=f"{keys[a]} + {keys[b]}",
+                         sd=float(err["relative_sd"]), dof=float(err.get("dof") or 0),
+                         **covariates(res.battery)))
     return rows
 
 
@@ -312,6 +328,25 @@ def print_classes(rows):
                   f"{pct(rms)} |")
 
 
+def write_table(doc: dict) -> None:
+    from dischargelab.atomic import write_text
+
+    write_text(TABLE_PATH, json.dumps(doc, indent=1) + "\n")
+    print(f"\nwritten: {TABLE_PATH}")
+
+
+def merge(paths) -> None:
+    """The package's table from runs of different families (``--table-out`` files)."""
+    docs = [json.loads(Path(p).read_text(encoding="utf-8")) for p in paths]
+    doc = dict(docs[0], one_rate={}, two_rate={},
+               measured="; ".join(sorted({d["measured"] for d in docs})))
+    for d in docs:
+        doc["one_rate"].update(d["one_rate"])
+        doc["two_rate"].update(d["two_rate"])
+    print_law(doc["one_rate"])
+    write_table(doc)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=accuracy.default_data_dir())
@@ -322,7 +357,14 @@ def main(argv=None):
     parser.add_argument("--write", action="store_true",
                         help=f"write the law from all cells to {TABLE_PATH.name}")
     parser.add_argument("--json", type=Path, help="write every one-rate row here")
+    parser.add_argument("--table-out", type=Path,
+                        help="write this run's law (its families) to a JSON file")
+    parser.add_argument("--merge", type=Path, nargs="+",
+                        help="only merge the --table-out files of runs of other families "
+                             "into the package's table, and print it")
     args = parser.parse_args(argv)
+    if args.merge:
+        return merge(args.merge)
     families = [f for f in args.families.split(",") if f]
     t0 = time.perf_counter()
     series = real_series(args.data) if (args.data / "samsung30q_S001").is_dir() else []
@@ -367,17 +409,14 @@ def main(argv=None):
         for cls, e in two_law.items():
             print(f"| {cls} | {e['fits']} | {pct(e['sd'])} | {e['dof']:.0f} | "
                   f"{len(e['cells'])} |")
+    doc = {"generator": "python benchmarks/one_rate_errors.py --write",
+           "law": "relative sd of a one-rate time to cutoff = base + growth * |ln r|, "
+                  "r = predicted / fitted current (up: r > 1, down: r < 1)",
+           "measured": machine_line(), "one_rate": full, "two_rate": two_law}
+    if args.table_out:
+        args.table_out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     if args.write:
-        doc = {"generator": "python benchmarks/one_rate_errors.py --write",
-               "law": "relative sd of a one-rate time to cutoff = base + growth * |ln r|, "
-                      "r = predicted / fitted current (up: r > 1, down: r < 1)",
-               "measured": machine_line(),
-               "one_rate": {cls: {k: v for k, v in e.items()} for cls, e in full.items()},
-               "two_rate": two_law}
-        from dischargelab.atomic import write_text_atomic
-
-        write_text_atomic(TABLE_PATH, json.dumps(doc, indent=1) + "\n")
-        print(f"\nwritten: {TABLE_PATH}")
+        write_table(doc)
     if args.json:
         keep = ("cell", "series", "family", "model", "fitted", "target", "ratio", "error",
                 "class", "plateau", "temperature", "covered", "half_width_pct")

@@ -23,7 +23,12 @@ from ..identifiability import (
     undetermined,
 )
 from ..models import Family, Samples, get_family
-from ..models.base import HELD_AT_AMBIENT_HEAT_CAPACITY, MIN_HEATING_K, fit_lumped_thermal
+from ..models.base import (
+    HELD_AT_AMBIENT_HEAT_CAPACITY,
+    MAX_THERMAL_RESISTANCE,
+    MIN_HEATING_K,
+    fit_lumped_thermal,
+)
 from .problem import (
     COARSE_FTOL,
     CURRENT_SCALE,
@@ -294,7 +299,7 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
 
     thermal = None
     if family.thermal:
-        params, thermal = _thermal(family, params, stack, notes, thermal_prior)
+        params, thermal = _thermal(family, params, stack, notes, thermal_prior, warnings)
     ident = analyse(jac, mdl.free, values, bnds, paper_mode=paper_mode, svd=svd)
     _physical_limits(family, ident, notes, stack.q_max)
     warnings += ident.warnings
@@ -361,9 +366,10 @@ def _physical_limits(family: Family, ident: Identifiability, notes: list,
 
 
 def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list,
-             prior: dict | None = None):
+             prior: dict | None = None, warnings: list | None = None):
     """Heat capacity and thermal resistance from the logged temperature, else from the
-    thermal prior, else held at the ambient (else defaults)."""
+    thermal prior, else held at the ambient (else defaults); a thermal resistance at its
+    limit (no cooling in the log) adds a warning that says so."""
     if not stack.has_temperature and prior is not None:
         params = params.replace(Cth_J_per_K=prior["Cth_J_per_K"],
                                 Rth_K_per_W=prior["Rth_K_per_W"])
@@ -400,7 +406,20 @@ def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list
     notes.append("thermal model fitted to the logged cell temperature: "
                  + how.format(fitted["Cth_J_per_K"], fitted["Rth_K_per_W"])
                  + f" (RMSE {fitted['rmse_K']:.2f} K)")
+    if fitted["Rth_K_per_W"] >= MAX_THERMAL_RESISTANCE and warnings is not None:
+        warnings.append(adiabatic_warning())
     return params, dict(fitted, source=source)
+
+
+def adiabatic_warning() -> str:
+    """A thermal resistance at its limit: what the log showed and what it means."""
+    return (f"Rth_K_per_W = {MAX_THERMAL_RESISTANCE:g} K/W is its limit, not a measurement: "
+            f"the logged temperature rises as if the cell lost no heat to the ambient during "
+            f"the runs (an adiabatic cell), so the model's heat (current x overpotential) is "
+            f"less than what warmed the cell (heat the model lacks, such as the entropic heat, "
+            f"or an ambient that warmed with the cell). Predictions of runs longer than the "
+            f"fitted ones overstate the heating; log the ambient temperature, or include a "
+            f"run that shows the cell cooling (a rest after the load)")
 
 
 # ---- self-heating without a logged temperature ----------------------------------------
