@@ -19,6 +19,9 @@ Cases
 * Every chemistry also at 0.2C, 0.5C, 1C, 2C at 15 and 35 degC (and 0.2C at 25 degC).
 * The LFP plateau set: ``Prada2013`` with SPMe, 0.2C, 0.5C, 1C, 2C to 2.5 V (on the
   knee after the flat plateau), solver output every 5 s, at 25 and 15 degC.
+* Cells for the measured one-rate error (:data:`PRIOR_CHEMISTRIES`): ``Ecker2015`` (NMC
+  pouch), ``NCA_Kim2011``, ``Mohtat2020`` (NMC532), ``Ai2020`` (LCO pouch) and
+  ``Prada2013`` again, 0.2C-3C at 25 degC and 0.5C-2C at 40 degC.
 
 Every run: 10 s rest at 0 A from full charge (state of charge 1, i.e. the open
 circuit voltage equals the set's upper cut-off), then the load until the set's
