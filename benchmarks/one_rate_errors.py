@@ -19,7 +19,7 @@ current, cutoff and ambient (``Battery.predict``). The relative error of the tim
 cutoff ``e`` and the extrapolation ratio ``r`` (predicted over fitted current) are kept
 with what the user's file shows: the family, the curve's shape (``flat`` when the plateau
 ratio of :func:`dischargelab.fit.result.plateau_ratio` is below
-:data:`dischargelab.uncertainty.FLAT_PLATEAU_RATIO`: LiFePO4; else ``sloped``) and whether
+:data:`dischargelab.onerate.FLAT_PLATEAU_RATIO`: LiFePO4; else ``sloped``) and whether
 a cell temperature was logged. Never the cell's name.
 
 **The law.** Per class (family, shape, temperature logged), the relative standard deviation
@@ -31,7 +31,7 @@ other cells only (a cell is its parameter set or its real cell, whatever its amb
 cutoff; Ai2020 is the Enertech cell), and the intervals reported here are the package's
 own (``Battery.predict``, parameter draws times this model error) with that law. The
 law from all cells is written to ``src/dischargelab/data/one_rate_error.json``
-(``--write``), which :mod:`dischargelab.uncertainty` reads.
+(``--write``), which :mod:`dischargelab.onerate` reads.
 
 **Two-rate fits** (for the advice on the next test): every series is also fitted on two
 runs a factor 2-5 apart; the median model error (``FitResult.model_error``) of each
@@ -61,7 +61,7 @@ sys.path.insert(0, str(HERE))
 import accuracy  # noqa: E402
 import dischargelab as dl  # noqa: E402
 from _machine import machine_line  # noqa: E402
-from dischargelab import uncertainty  # noqa: E402
+from dischargelab import onerate, uncertainty  # noqa: E402
 from dischargelab.predict import predict as predict_point  # noqa: E402
 
 VIRTUAL = accuracy.VIRTUAL
@@ -141,11 +141,11 @@ def without_temperature(series: Series) -> Series:
 
 
 def covariates(battery) -> dict:
-    """What the user's file shows, from the fitted battery (``uncertainty.one_rate_class``)."""
+    """What the user's file shows, from the fitted battery (``onerate.one_rate_class``)."""
     extra = battery.extra
     return {"plateau": extra.get("fit_plateau_ratio"),
             "temperature": "fit_temperature_rise_K" in extra,
-            "class": uncertainty.one_rate_class(battery)}
+            "class": onerate.one_rate_class(battery)}
 
 
 def one_rate_rows(series: Series, family: str):
@@ -205,7 +205,7 @@ def apply_law(table: dict, rows) -> None:
         if not ACCEPT_RATIOS[0] <= r["ratio"] <= ACCEPT_RATIOS[1] or \
                 not np.isfinite(r["error"]):
             continue
-        with uncertainty.one_rate_table_override(table):
+        with onerate.one_rate_table_override(table):
             out = r["battery"].predict(**r["load"]).to_dict()
         lo, hi = out["interval95"]["time_to_cutoff_s"]
         pred = out["time_to_cutoff_s"]

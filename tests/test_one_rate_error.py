@@ -10,17 +10,18 @@ import pytest
 import dischargelab as dl
 from dischargelab.cli import main as cli_main
 from dischargelab.model import Battery, CellParameters
-from dischargelab.uncertainty import (
+from dischargelab.nexttest import fit_next_test, next_test
+from dischargelab.onerate import (
     FLAT_PLATEAU_RATIO,
-    PRIOR_RELATIVE_SD,
-    fit_next_test,
-    half_width_pct,
-    model_error_info,
-    model_error_sd,
-    next_test,
     one_rate_class,
     one_rate_table,
     one_rate_table_override,
+)
+from dischargelab.uncertainty import (
+    PRIOR_RELATIVE_SD,
+    half_width_pct,
+    model_error_info,
+    model_error_sd,
 )
 
 CELL = CellParameters(E0_V=3.75, R_ohm=0.03, K_V_per_Ah=0.008, A_V=0.35, B_per_Ah=2.0,

@@ -16,6 +16,7 @@ from dischargelab.mission import Mission, Phase, RepeatBlock, load_mission, run_
 from dischargelab.mission import fly as mission_module
 from dischargelab.model import PRESETS, Battery, CellParameters
 from dischargelab.models import FAMILIES, get_family
+from dischargelab.onerate import one_rate_table_override
 from dischargelab.simulate import simulate_current
 from dischargelab.uncertainty import (
     EXTRAPOLATION_GROWTH,
@@ -26,7 +27,6 @@ from dischargelab.uncertainty import (
     bootstrap_parameters,
     held_out_posterior,
     model_error_sd,
-    one_rate_table_override,
     peak_temperature_interval,
     prediction_interval,
     simulation_interval,

@@ -32,7 +32,7 @@ class Prediction:
     warnings: list = field(default_factory=list)
     sensitivity: dict | None = None
     #: The one extra run that would narrow the interval most
-    #: (:func:`dischargelab.uncertainty.next_test`), or None.
+    #: (:func:`dischargelab.nexttest.next_test`), or None.
     next_test: dict | None = None
 
     @property
@@ -127,8 +127,9 @@ def predict(battery: Battery, *, current: float | None = None, c_rate: float | N
     -------
     Prediction
     """
+    from .nexttest import next_test
     from .simulate import simulate_current, simulate_power
-    from .uncertainty import next_test, simulation_interval
+    from .uncertainty import simulation_interval
 
     require_battery(battery)
     bat: Battery = battery

@@ -22,7 +22,8 @@ import numpy as np
 
 from .errors import DataError, DischargelabError
 from .model import CUTOFF_CELL_VOLTAGE_V, Battery, load_battery
-from .uncertainty import fit_next_test, held_out_summary
+from .nexttest import fit_next_test
+from .uncertainty import held_out_summary
 
 CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#1d2430;

@@ -39,11 +39,7 @@ References
 
 from __future__ import annotations
 
-import contextlib
-import functools
-import json
 import math
-from importlib import resources
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -51,6 +47,7 @@ import numpy as np
 from . import engine
 from .cell import CellParameters
 from .errors import DataError, SimulationError
+from .onerate import one_rate_law
 
 if TYPE_CHECKING:
     from .model import Battery
@@ -101,22 +98,6 @@ MAX_PLATEAU_FACTOR = 4.0
 #: that the data show, and the error grows with the rate (I^2 R heating).
 ISOTHERMAL_EXTRAPOLATION_GROWTH = 4.0
 SELF_HEATING_K = 5.0
-
-#: Plateau ratio (:func:`dischargelab.fit.result.plateau_ratio`) below which a constant-current
-#: discharge counts as flat (LiFePO4: about 0.1; NMC and LCO 0.3-0.4) for the measured
-#: one-rate error (:func:`one_rate_class`).
-FLAT_PLATEAU_RATIO = 0.2
-
-#: The one-rate errors measured on other cells (``benchmarks/one_rate_errors.py --write``).
-ONE_RATE_TABLE = "one_rate_error.json"
-
-#: Cells a class of the one-rate table must have been measured on to be used (one cell
-#: says how that cell extrapolates, not how a kind of cell does): else the documented prior.
-MIN_MEASURED_CELLS = 2
-
-#: One more run is advised (:func:`next_test`) when it would narrow the interval's
-#: half-width to less than this fraction of today's.
-NEXT_TEST_NARROWING = 0.8
 
 #: Relative standard deviation of a predicted temperature rise (peak - ambient) inside
 #: the fitted currents [-], and its growth with ln(extrapolation ratio). A lumped
@@ -335,7 +316,7 @@ def held_out_summary(model_error: dict) -> str:
     return "; ".join(parts)
 
 
-def _model_error_base(battery: Battery) -> tuple[float, str, float | None]:
+def model_error_base(battery: Battery) -> tuple[float, str, float | None]:
     """(relative sd inside the fitted currents, "held-out" | "prior", Student-t degrees
     of freedom or None for a normal)."""
     stored = battery.extra.get("model_error") if isinstance(battery.extra, dict) else None
@@ -352,76 +333,6 @@ def _model_error_base(battery: Battery) -> tuple[float, str, float | None]:
         raise DataError(f"battery file model_error.dof must be a number >= 1, got {dof!r}")
     return max(float(value), MIN_HELD_OUT_SD), "held-out", \
         None if dof is None else float(dof)
-
-
-def one_rate_class(battery: Battery) -> str | None:
-    """The class of a one-rate fit in the measured one-rate error table, from what the
-    fitted file shows: ``"<family> / <shape> / <temperature>"`` with shape ``flat``
-    (plateau ratio below :data:`FLAT_PLATEAU_RATIO`: LiFePO4) or ``sloped``, and
-    temperature ``temperature`` (a cell temperature was logged) or ``no temperature``.
-    None when the fit has no constant-current curve to judge the shape by (a flight, a
-    preset, a hand-written file)."""
-    extra = battery.extra if isinstance(battery.extra, dict) else {}
-    plateau = extra.get("fit_plateau_ratio")
-    if isinstance(plateau, bool) or not isinstance(plateau, (int, float)) or \
-            not math.isfinite(plateau):
-        return None
-    shape = "flat" if plateau < FLAT_PLATEAU_RATIO else "sloped"
-    logged = "temperature" if "fit_temperature_rise_K" in extra else "no temperature"
-    return f"{battery.model} / {shape} / {logged}"
-
-
-@functools.cache
-def _packaged_table() -> dict:
-    """The measured table shipped with the package ({} when missing or unreadable)."""
-    try:
-        text = (resources.files("dischargelab") / "data" / ONE_RATE_TABLE).read_text(
-            encoding="utf-8")
-        table = json.loads(text)
-    except (OSError, ValueError):
-        return {}
-    return table if isinstance(table, dict) else {}
-
-
-_table_override: list = []
-
-
-def one_rate_table() -> dict:
-    """The measured one-rate error table: ``{"one_rate": {class: law}, "two_rate": {class:
-    {"sd", "dof"}}}`` (see ``benchmarks/one_rate_errors.py``)."""
-    return _table_override[-1] if _table_override else _packaged_table()
-
-
-@contextlib.contextmanager
-def one_rate_table_override(table: dict):
-    """Use ``{"one_rate": ..., "two_rate": ...}`` (or a bare ``{class: law}``) instead of the
-    packaged table inside the ``with`` block (the leave-one-cell-out benchmark)."""
-    if "one_rate" not in table and "two_rate" not in table:
-        table = {"one_rate": table}
-    _table_override.append(table)
-    try:
-        yield table
-    finally:
-        _table_override.pop()
-
-
-def one_rate_law(battery: Battery) -> dict | None:
-    """The measured law of a one-rate fit's model error, or None (no class or no entry).
-
-    ``{"base", "up", "down", "cells", ...}``: the relative standard deviation of a time to
-    cutoff predicted at ``r`` times the fitted current is ``base + up * ln r`` (``r > 1``)
-    or ``base + down * ln(1 / r)``, measured on other cells by
-    ``benchmarks/one_rate_errors.py`` (``up``/``down`` None where no pair was measured);
-    None for a class measured on fewer than :data:`MIN_MEASURED_CELLS` cells.
-    """
-    cls = one_rate_class(battery)
-    entry = (one_rate_table().get("one_rate") or {}).get(cls) if cls else None
-    if not isinstance(entry, dict) or not isinstance(entry.get("base"), (int, float)):
-        return None
-    if entry.get("up") is None and entry.get("down") is None or \
-            len(entry.get("cells", ())) < MIN_MEASURED_CELLS:
-        return None
-    return dict(entry, name=cls)
 
 
 def extrapolation_side(battery: Battery, cell_current_A: float) -> str | None:
@@ -495,7 +406,7 @@ def model_error_info(battery: Battery, ratio: float, side: str | None = None) ->
 
     ``side`` is ``"up"`` (above the fitted currents) or ``"down"``; None takes the wider
     of the two where they differ (the measured one-rate law)."""
-    base, source, dof = _model_error_base(battery)
+    base, source, dof = model_error_base(battery)
     log_ratio = math.log(max(ratio, 1.0))
     law = one_rate_law(battery) if source == "prior" else None
     if law is not None:
@@ -520,94 +431,6 @@ def model_error_info(battery: Battery, ratio: float, side: str | None = None) ->
 def half_width_pct(sd: float, level: float = 0.95, dof: float | None = None) -> float:
     """Half-width [% of the median] of the interval ``exp(+-z sd)`` of a relative sd."""
     return 100.0 * math.sinh(z_level(level, dof) * sd)
-
-
-#: The extrapolation a one-rate fit's advice speaks of (:func:`fit_next_test`): x4 the
-#: fitted current, the far end of the x2-x4 range a bench test is mostly asked about.
-ADVICE_RATIO = 4.0
-
-
-def fit_next_test(battery: Battery, level: float = 0.95) -> dict | None:
-    """The next test after a one-rate fit: one more run at :data:`ADVICE_RATIO` times the
-    fitted current, and how it would narrow the model error of predictions up to there
-    (:func:`next_test`); None for a fit to several rates (each prediction says what would
-    narrow its own interval) or when it would not narrow."""
-    fitted = [abs(x) for x in battery.fit_currents_A if x]
-    if len(fitted) != 1:
-        return None
-    info = model_error_info(battery, ADVICE_RATIO, "up")
-    now = half_width_pct(info["relative_sd"], level, info["dof"])
-    advice = next_test(battery, ADVICE_RATIO * fitted[0], now, level)
-    if advice is None:
-        return None
-    pack = advice["current_A"]
-    advice["text"] = (f"next test: fitted on one rate, a prediction at {ADVICE_RATIO:g}x the "
-                      f"fitted current ({pack:.3g} A) carries a model error of "
-                      f"+-{now:.1f} % ({info['label']}); one more run at {pack:.3g} A would "
-                      f"narrow every prediction up to that current to about "
-                      f"+-{advice['half_width_pct_after']:.1f} %")
-    return advice
-
-
-def after_one_more_run(battery: Battery) -> tuple[float, float | None] | None:
-    """``(sd, dof)`` of the model error at the current of one more run, once that run is
-    fitted with the others: a multi-rate fit keeps its held-out error (the run is then a
-    fitted current); a one-rate fit becomes a two-rate fit, whose model error is the
-    median measured on two-rate fits of its class (``benchmarks/one_rate_errors.py``).
-    None when it cannot be told (no measured two-rate fits of the class)."""
-    base, source, dof = _model_error_base(battery)
-    if source == "held-out":
-        return base, dof
-    cls = one_rate_class(battery)
-    entry = (one_rate_table().get("two_rate") or {}).get(cls) if cls else None
-    if not isinstance(entry, dict) or not isinstance(entry.get("sd"), (int, float)):
-        return None
-    dof = entry.get("dof")
-    return float(entry["sd"]), float(dof) if isinstance(dof, (int, float)) and dof >= 1 \
-        else None
-
-
-def next_test(battery: Battery, cell_current_A: float, half_width_pct_now: float,
-              level: float = 0.95) -> dict | None:
-    """The one extra run that would narrow a prediction's interval most, and to about what.
-
-    A run at the predicted current itself: the prediction then lies at a fitted current,
-    where the model error is that of the fit inside its currents
-    (:func:`after_one_more_run`) and no longer grows with the extrapolation ratio. The
-    parameter draws' share is left out of the "after" figure (it is small at a fitted
-    current).
-
-    Parameters
-    ----------
-    battery : Battery
-    cell_current_A : float
-        Cell current of the prediction [A].
-    half_width_pct_now : float
-        Half-width of today's interval [% of the prediction].
-    level : float
-
-    Returns
-    -------
-    dict or None
-        ``current_A`` (pack current of the run [A]), ``cell_current_A``,
-        ``half_width_pct_now``, ``half_width_pct_after`` and ``text``; None when one more
-        run would not narrow the interval to :data:`NEXT_TEST_NARROWING` of today's.
-    """
-    after = after_one_more_run(battery)
-    if after is None or not math.isfinite(half_width_pct_now) or not cell_current_A:
-        return None
-    fitted = [abs(x) for x in battery.fit_currents_A if x]
-    if any(abs(abs(cell_current_A) / f - 1.0) < 0.05 for f in fitted):
-        return None  # the prediction is already at a fitted current
-    width = half_width_pct(after[0], level, after[1])
-    if not width < NEXT_TEST_NARROWING * half_width_pct_now:
-        return None
-    pack = abs(float(cell_current_A)) * battery.strings_parallel
-    return {"current_A": pack, "cell_current_A": abs(float(cell_current_A)),
-            "half_width_pct_now": float(half_width_pct_now), "half_width_pct_after": width,
-            "text": f"next test: one more run at {pack:.3g} A would narrow this interval "
-                    f"from +-{half_width_pct_now:.1f} % to about +-{width:.1f} % (the "
-                    f"model error measured on fits with one more rate)"}
 
 
 def z_level(level: float, dof: float | None = None) -> float:
@@ -861,5 +684,4 @@ __all__ = ["sample_parameters", "bootstrap_parameters", "hasparameter_draws", "i
            "DEFAULT_DRAWS",
            "PRIOR_RELATIVE_SD", "MIN_HELD_OUT_SD", "EXTRAPOLATION_GROWTH", "held_out_posterior",
            "extrapolation_growth", "peak_temperature_interval", "held_out_summary",
-           "one_rate_class", "one_rate_law", "one_rate_table", "next_test", "half_width_pct",
-           "fit_next_test"]
+           "half_width_pct", "model_error_info", "extrapolation_side"]

@@ -129,8 +129,8 @@ class FitResult:
     @property
     def next_test(self) -> dict | None:
         """After a one-rate fit: the one more run that would narrow its predictions most
-        (:func:`dischargelab.uncertainty.fit_next_test`), else None."""
-        from ..uncertainty import fit_next_test
+        (:func:`dischargelab.nexttest.fit_next_test`), else None."""
+        from ..nexttest import fit_next_test
 
         return None if self.paper_mode else fit_next_test(self.battery)
 
