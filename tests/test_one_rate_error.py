@@ -53,6 +53,7 @@ def test_measured_law_sets_the_one_rate_model_error():
         info = model_error_info(SLOPED_LOGGED, 4.0)    # side unknown: the wider growth
         assert info["relative_sd"] == pytest.approx(0.004 + 0.02 * math.log(4))
         assert info["measured_cells"] == 3 and "3 other cells" in info["label"]
+        assert info["dof"] == 2                      # Student's t: the cells less one
         # a side never measured takes the other's growth
         flat = replace(SLOPED_LOGGED, extra={"fit_plateau_ratio": 0.05})
         assert model_error_sd(flat, 0.75) == pytest.approx(0.005 + 0.05 * math.log(4))
@@ -81,7 +82,7 @@ def test_packaged_table_narrows_sloped_curves_with_temperature_and_not_flat_ones
 def test_next_test_names_the_run_and_the_narrower_interval():
     with one_rate_table_override(TABLE):
         sd_now = model_error_sd(SLOPED_LOGGED, 12.0)
-        now = half_width_pct(sd_now)
+        now = half_width_pct(sd_now, dof=2)
         advice = next_test(SLOPED_LOGGED, 12.0, now)
         assert advice["current_A"] == pytest.approx(12.0)
         assert advice["half_width_pct_after"] == pytest.approx(

@@ -358,9 +358,11 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
       pooled with the prior, and at least the fitted curves' own error of the time to
       cutoff; :func:`dischargelab.fit.heldout.held_out_error`);
     * for one constant-current rate, the law measured on other cells
-      (:func:`one_rate_law`): ``sigma = base + growth |ln r|`` with the growth of the
-      side (above or below the fitted current) of the family, curve shape and logged
-      temperature of the fit;
+      (:func:`dischargelab.onerate.one_rate_law`): ``sigma = base + growth |ln r|`` with
+      the growth of the side (above or below the fitted current) of the family, curve
+      shape and logged temperature of the fit; intervals then use Student's t with one
+      degree of freedom fewer than the cells the law was measured on (the spread between
+      cells is measured on a few of them);
     * ``s0 = 0.015`` otherwise (prior: the paper's endurance errors on unseen rates
       were 1-6 %), ``g`` the family's ``one_rate_growth`` (2: one rate cannot show how
       capacity and overpotentials change with rate) times
@@ -417,7 +419,9 @@ def model_error_info(battery: Battery, ratio: float, side: str | None = None) ->
         base = float(law["base"])
         sd = base + float(growth) * log_ratio
         source = "one-rate, measured"
-        return {"relative_sd": sd, "base_relative_sd": base, "source": source, "dof": None,
+        # the spread between cells is measured on a few of them: Student's t
+        dof = float(max(len(law.get("cells", [])) - 1, 1))
+        return {"relative_sd": sd, "base_relative_sd": base, "source": source, "dof": dof,
                 "extrapolation_ratio": float(ratio), "growth_per_log_ratio": float(growth),
                 "one_rate_class": law["name"], "measured_cells": len(law.get("cells", [])),
                 "label": f"model error ({source} on {len(law.get('cells', []))} other cells, "
