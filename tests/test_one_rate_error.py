@@ -31,7 +31,7 @@ SLOPED_LOGGED = Battery(CELL, fit_currents_A=(3.0,), extra={
 TABLE = {"one_rate": {"shepherd / sloped / temperature": {
              "base": 0.004, "up": 0.01, "down": 0.02, "cells": ["a", "b", "c"]},
                       "shepherd / flat / no temperature": {
-             "base": 0.005, "up": 0.05, "down": None, "cells": ["d", "e"]},
+             "base": 0.005, "up": 0.05, "down": None, "cells": ["d", "e", "g"]},
                       "shepherd / sloped / no temperature": {
              "base": 0.005, "up": 0.01, "down": 0.01, "cells": ["f"]}},
          "two_rate": {"shepherd / sloped / temperature": {"sd": 0.006, "dof": 8.0}}}
@@ -57,7 +57,7 @@ def test_measured_law_sets_the_one_rate_model_error():
         # a side never measured takes the other's growth
         flat = replace(SLOPED_LOGGED, extra={"fit_plateau_ratio": 0.05})
         assert model_error_sd(flat, 0.75) == pytest.approx(0.005 + 0.05 * math.log(4))
-        # a class measured on one cell only, or not held at all: the documented prior
+        # a class measured on fewer than three cells, or not held at all: the documented prior
         one_cell = replace(SLOPED_LOGGED, extra={"fit_plateau_ratio": 0.35})
         assert model_error_sd(one_cell, 3.0) == pytest.approx(PRIOR_RELATIVE_SD)
         unknown = replace(SLOPED_LOGGED, model="ecm",

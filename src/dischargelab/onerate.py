@@ -30,9 +30,11 @@ FLAT_PLATEAU_RATIO = 0.2
 #: The one-rate errors measured on other cells (``benchmarks/one_rate_errors.py --write``).
 ONE_RATE_TABLE = "one_rate_error.json"
 
-#: Cells a class of the one-rate table must have been measured on to be used (one cell
-#: says how that cell extrapolates, not how a kind of cell does): else the documented prior.
-MIN_MEASURED_CELLS = 2
+#: Cells a class of the one-rate table must have been measured on to be used (one or two
+#: cells say how those cells extrapolate, not how a kind of cell does; their Student-t
+#: interval, with one degree of freedom, would be 6x wider than a normal one): else the
+#: documented prior.
+MIN_MEASURED_CELLS = 3
 
 
 def one_rate_class(battery: Battery) -> str | None:
