@@ -42,10 +42,12 @@ def fit_next_test(battery: Battery, level: float = 0.95) -> dict | None:
     if advice is None:
         return None
     pack = advice["current_A"]
+    source = (f"one-rate errors measured on {info['measured_cells']} other cells"
+              if info.get("measured_cells") else "the documented one-rate prior")
     advice["text"] = (f"next test: fitted on one rate, a prediction at {ADVICE_RATIO:g}x the "
                       f"fitted current ({pack:.3g} A) carries a model error of "
-                      f"+-{now:.1f} % ({info['label']}); one more run at {pack:.3g} A would "
-                      f"narrow every prediction up to that current to about "
+                      f"+-{now:.1f} % ({source}); one more run at {pack:.3g} A would narrow "
+                      f"every prediction up to that current to about "
                       f"+-{advice['half_width_pct_after']:.1f} %")
     return advice
 
