@@ -157,12 +157,12 @@ def delivered_Ah(run) -> float:
     return run.current_A * run.measured_s / 3600.0
 
 
-def covariates(battery) -> dict:
+def covariates(battery, one_rate: bool = True) -> dict:
     """What the user's file shows, from the fitted battery (``onerate.one_rate_class``)."""
     extra = battery.extra
     return {"plateau": extra.get("fit_plateau_ratio"),
             "temperature": "fit_temperature_rise_K" in extra,
-            "class": onerate.one_rate_class(battery)}
+            "class": onerate.one_rate_class(battery, one_rate)}
 
 
 def one_rate_rows(series: Series, family: str):
@@ -273,7 +273,7 @@ def two_rate_rows(series: Series, family: str):
         rows.append(dict(cell=series.cell, series=series.title, family=family,
                          model=res.model, fitted=f"{keys[a]} + {keys[b]}",
                          sd=float(err["relative_sd"]), dof=float(err.get("dof") or 0),
-                         **covariates(res.battery)))
+                         **covariates(res.battery, one_rate=False)))
     return rows
 
 

@@ -43,6 +43,13 @@ def test_class_is_what_the_file_shows():
     flat = replace(SLOPED_LOGGED, extra={"fit_plateau_ratio": FLAT_PLATEAU_RATIO / 2})
     assert one_rate_class(flat) == "shepherd / flat / no temperature"
     assert one_rate_class(Battery(CELL, fit_currents_A=(3.0,))) is None   # a flight, a preset
+    # ecm on one steady rate: measured with its dynamics held absent, not fitted anyway
+    ecm = dl.models.get_family("ecm")
+    held = Battery(CellParameters(ecm.defaults()), fit_currents_A=(3.0,), model="ecm",
+                   extra={"fit_plateau_ratio": 0.35, "fixed": dict(ecm.steady_fixed)})
+    assert one_rate_class(held) == "ecm / sloped / no temperature"
+    freed = replace(held, extra={"fit_plateau_ratio": 0.35, "fixed": {}})
+    assert one_rate_class(freed) is None
 
 
 def test_measured_law_sets_the_one_rate_model_error():

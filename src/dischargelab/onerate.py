@@ -37,18 +37,24 @@ ONE_RATE_TABLE = "one_rate_error.json"
 MIN_MEASURED_CELLS = 3
 
 
-def one_rate_class(battery: Battery) -> str | None:
+def one_rate_class(battery: Battery, one_rate: bool = True) -> str | None:
     """The class of a one-rate fit in the measured one-rate error table, from what the
     fitted file shows: ``"<family> / <shape> / <temperature>"`` with shape ``flat``
     (plateau ratio below :data:`FLAT_PLATEAU_RATIO`: LiFePO4) or ``sloped``, and
     temperature ``temperature`` (a cell temperature was logged) or ``no temperature``.
     None when the fit has no constant-current curve to judge the shape by (a flight, a
-    preset, a hand-written file)."""
+    preset, a hand-written file), or when it fitted the dynamics that one steady rate cannot
+    show (``Family.steady_fixed``, held on such data by default) as the measured fits did
+    not. ``one_rate=False`` classes a fit to two rates (the two-rate table), which fits
+    those dynamics."""
     extra = battery.extra if isinstance(battery.extra, dict) else {}
     plateau = extra.get("fit_plateau_ratio")
     if isinstance(plateau, bool) or not isinstance(plateau, (int, float)) or \
             not math.isfinite(plateau):
         return None
+    fixed = extra.get("fixed") if isinstance(extra.get("fixed"), dict) else {}
+    if one_rate and any(name not in fixed for name in battery.family.steady_fixed):
+        return None  # dynamics fitted to one steady rate anyway: not what was measured
     shape = "flat" if plateau < FLAT_PLATEAU_RATIO else "sloped"
     logged = "temperature" if "fit_temperature_rise_K" in extra else "no temperature"
     return f"{battery.model} / {shape} / {logged}"
