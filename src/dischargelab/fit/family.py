@@ -348,8 +348,9 @@ def _interval95(value: float, stderr: float, t_crit: float, positive: bool) -> t
 
 def _physical_limits(family: Family, ident: Identifiability, notes: list,
                      delivered_Ah: float | None = None) -> None:
-    """Parameters at a bound that marks an absent effect, and a capacity at the charge the
-    runs delivered (``delivered_Ah``, per cell), become notes, not bound problems."""
+    """Parameters at a bound that marks an absent effect become notes, not bound problems;
+    a capacity at the charge the runs delivered (``delivered_Ah``, per cell) is a note that
+    says so instead of a warning to widen the bound (it stays in ``at_bounds``)."""
     keep = []
     for name, side, bound in ident.at_bounds:
         par = family.parameter(name) if name in family.names else None
@@ -357,6 +358,9 @@ def _physical_limits(family: Family, ident: Identifiability, notes: list,
                 bound <= delivered_Ah * (1.0 + 1e-3):  # physics: the charge delivered
             notes.append(capacity_at_delivered_charge(bound))
             ident.warnings = [w for w in ident.warnings if not w.startswith("C_Ah = ")]
+            # still at a bound for the automatic choice (a family whose capacity the data
+            # do not pin down above the charge drawn is not preferred as plausible)
+            keep.append((name, side, bound))
         elif par is not None and par.limit_note:
             notes.append(f"{name} = {bound:g} at its {side} bound: {par.limit_note}")
             ident.warnings = [w for w in ident.warnings if not w.startswith(f"{name} = ")]
