@@ -19,6 +19,9 @@ Cases
 * Every chemistry also at 0.2C, 0.5C, 1C, 2C at 15 and 35 degC (and 0.2C at 25 degC).
 * The LFP plateau set: ``Prada2013`` with SPMe, 0.2C, 0.5C, 1C, 2C to 2.5 V (on the
   knee after the flat plateau), solver output every 5 s, at 25 and 15 degC.
+* Cells for the measured one-rate error (:data:`PRIOR_CHEMISTRIES`): ``Ecker2015`` (NMC
+  pouch), ``NCA_Kim2011``, ``Mohtat2020`` (NMC532), ``Ai2020`` (LCO pouch) and
+  ``Prada2013`` again, 0.2C-3C at 25 degC and 0.5C-2C at 40 degC.
 
 Every run: 10 s rest at 0 A from full charge (state of charge 1, i.e. the open
 circuit voltage equals the set's upper cut-off), then the load until the set's
@@ -124,14 +127,65 @@ CHEMISTRIES = {
     },
 }
 
+#: Further cells for the measured one-rate error (``benchmarks/one_rate_errors.py``): other
+#: published parameter sets, and the LFP cell of ``lfp`` again (the same cell: its runs at
+#: 3C and at 40 degC), each at :data:`PRIOR_RATES_C` at 25 degC and
+#: :data:`PRIOR_WARM_RATES_C` at 40 degC. (A 5x faster LFP particle diffusivity does not
+#: move these runs: the Prada2013 cell's rate loss is not set by it, so it gives no second
+#: LFP cell.)
+PRIOR_CHEMISTRIES = {
+    "nmc-pouch": {
+        "parameter_set": "Ecker2015",
+        "cell": "Kokam SLPB 75106100 NMC / graphite pouch, one layer (Ecker et al. 2015)",
+        "extra": {}, "options": {},
+        "thermal_note": "geometry and heat capacities from the parameter set (one layer)",
+    },
+    "nca": {
+        "parameter_set": "NCA_Kim2011",
+        "cell": "NCA / graphite pouch (Kim et al. 2011)",
+        "extra": {}, "options": {},
+        "thermal_note": "geometry and heat capacities from the parameter set",
+    },
+    "nmc532": {
+        "parameter_set": "Mohtat2020",
+        "cell": "NMC532 / graphite pouch, 5 Ah (Mohtat et al. 2020)",
+        "extra": {}, "options": {},
+        "thermal_note": "geometry and heat capacities from the parameter set",
+    },
+    "lco-pouch": {
+        "parameter_set": "Ai2020",
+        "cell": "Enertech LCO / graphite pouch, 2.28 Ah (Ai et al. 2020)",
+        "extra": {}, "options": {},
+        "thermal_note": "geometry and heat capacities from the parameter set",
+    },
+    "lfp-a123": {
+        "parameter_set": "Prada2013",
+        "cell": "A123 ANR26650M1 LFP / graphite (Prada et al. 2013)",
+        "extra": _a123_26650(),
+        "options": {"use lumped thermal capacity": "true"},
+        "thermal_note": ("26650 geometry, 76 g x 1000 J/(kg K) cell heat capacity and Cu/Al "
+                         "collectors added"),
+    },
+}
+PRIOR_RATES_C = (0.2, 0.5, 1.0, 2.0, 3.0)
+PRIOR_WARM_RATES_C = (0.5, 1.0, 2.0)
+PRIOR_WARM_C = 40.0
+#: Rows per file of those cells (they only set times to cutoff and fits of 500 samples).
+PRIOR_MAX_ROWS = 400
+
 #: The NMC mission: (current as a multiple of 1C, duration [s]); the cycle repeats.
 MISSION_TAKEOFF = (3.0, 60.0)
 MISSION_CYCLE = ((2.0, 50.0), (3.5, 10.0))
 
 
+def spec_of(chem: str) -> dict:
+    """The description of a chemistry (:data:`CHEMISTRIES` or :data:`PRIOR_CHEMISTRIES`)."""
+    return CHEMISTRIES[chem] if chem in CHEMISTRIES else PRIOR_CHEMISTRIES[chem]
+
+
 def parameter_values(chem: str, ambient_C: float):
     """PyBaMM parameter values of a chemistry at an ambient temperature [degC]."""
-    spec = CHEMISTRIES[chem]
+    spec = spec_of(chem)
     values = pybamm.ParameterValues(spec["parameter_set"])
     kelvin = ambient_C + 273.15
     values.update({
@@ -144,7 +198,7 @@ def parameter_values(chem: str, ambient_C: float):
 
 
 def make_model(kind: str, chem: str):
-    options = {"thermal": "lumped", **CHEMISTRIES[chem]["options"]}
+    options = {"thermal": "lumped", **spec_of(chem)["options"]}
     if kind == "DFN":
         return pybamm.lithium_ion.DFN(options)
     return pybamm.lithium_ion.SPMe(options)
@@ -327,6 +381,11 @@ def cases():
         for rate in AMBIENT_RATES_C:
             yield Case("lfp", rate, ambient, kind="SPMe", cutoff_V=PLATEAU_CUTOFF_V,
                        period_s=PLATEAU_PERIOD_S)
+    for chem in PRIOR_CHEMISTRIES:
+        for rate in PRIOR_RATES_C:
+            yield Case(chem, rate, 25.0)
+        for rate in PRIOR_WARM_RATES_C:
+            yield Case(chem, rate, PRIOR_WARM_C)
 
 
 def main(argv=None) -> int:
@@ -356,7 +415,7 @@ def main(argv=None) -> int:
         chem, rate, ambient, name = case.chem, case.rate, case.ambient, case.name
         if args.only and not any(part in name for part in args.only.split(",")):
             continue
-        spec = CHEMISTRIES[chem]
+        spec = spec_of(chem)
         values = pybamm.ParameterValues(spec["parameter_set"])
         capacity = float(values["Nominal cell capacity [A.h]"])
         cutoff = float(values["Lower voltage cut-off [V]"]) if case.cutoff_V is None \
@@ -385,8 +444,9 @@ def main(argv=None) -> int:
         # evenly spaced solver output: the mission from the load step, a constant
         # current after its first (finely sampled) minute
         uniform_from = t_load if rate is None else t_load + EARLY_S[-1]
+        max_rows = args.max_rows if chem in CHEMISTRIES else min(args.max_rows, PRIOR_MAX_ROWS)
         rows = np.arange(run["t"].size) if case.period_s is not None else \
-            thin(run, args.max_rows, uniform_from)
+            thin(run, max_rows, uniform_from)
         meta = {
             "file": name, "chemistry": chem.upper(), "set": case.set_name,
             "parameter_set": spec["parameter_set"],

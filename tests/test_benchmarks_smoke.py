@@ -58,3 +58,23 @@ def test_large_csv_reads_back(tmp_path):
     assert 4900 <= d.time_s.size <= 5000
     assert np.allclose(d.current_A, 3.0)
     assert d.temperature_C is not None
+
+
+def test_one_rate_law_from_rows():
+    """The measured law: base from the fitted run's own error, the growth per ln r from the
+    95th percentile of the errors (a collapsed run left out), up and down apart."""
+    bench = _load("one_rate_errors")
+
+    def row(ratio, error, cell="a", collapse=False):
+        return {"class": "x", "cell": cell, "ratio": ratio, "error": error, "fitted": "1C",
+                "target": "1C" if ratio == 1 else "2C", "collapse": collapse}
+
+    rows = [row(1.0, 0.001), row(1.0, -0.002)]
+    rows += [row(2.0, 0.01 * k * math.log(2.0), cell=str(k % 3)) for k in range(1, 21)]
+    rows += [row(0.5, -0.02 * math.log(2.0)), row(3.0, 0.9, collapse=True)]
+    table = bench.law(rows)["x"]
+    assert table["base"] == bench.uncertainty.MIN_HELD_OUT_SD        # fitted runs: 0.2 %
+    k = [max(0.01 * j * math.log(2.0) - table["base"], 0) / math.log(2.0) for j in range(1, 21)]
+    assert table["up"] == np.quantile(k, 0.95) / 1.959964
+    assert table["up_pairs"] == 20 and table["down_pairs"] == 1      # the collapse left out
+    assert table["cells"] == ["0", "1", "2", "a"]

@@ -155,3 +155,41 @@ def test_real_samsung_fits_and_predicts(shared_data):
         t_meas = curve.time_s[k[0]] if k.size else curve.time_s[-1]
         pred = simulate_current(res.battery, curve.mean_current_A, cutoff_cell_V=2.5)
         assert abs(pred.time_to_cutoff_s / t_meas - 1) < 0.03, curve.name
+
+
+def test_capacity_at_the_delivered_charge_is_physics_not_a_bound_problem():
+    """A capacity at its lower bound (the charge the runs delivered) is a note that says a
+    cell cannot hold less than it delivered, not "widen the bound"; a capacity bound the
+    user set stays a bound problem."""
+    from dischargelab.fit.family import _physical_limits
+    from dischargelab.identifiability import Identifiability
+    from dischargelab.models import get_family
+
+    def ident():
+        return Identifiability(["C_Ah"], np.ones(1), [], np.eye(1), [],
+                               [("C_Ah", "lower", 2.9403)],
+                               ["C_Ah = 2.9403 sits at its lower bound 2.9403: the bound, not "
+                                "the data, sets it. Widen it with --bound C_Ah=LOW:HIGH"])
+
+    notes, found = [], ident()
+    _physical_limits(get_family("shepherd"), found, notes, delivered_Ah=2.9400)
+    assert not found.warnings and found.at_bounds   # auto still prefers a pinned capacity
+    assert "cannot hold less than it delivered" in notes[0] and "widen" not in notes[0].lower()
+    notes, found = [], ident()
+    _physical_limits(get_family("shepherd"), found, notes, delivered_Ah=2.0)   # user's bound
+    assert found.at_bounds and "Widen" in found.warnings[0] and not notes
+
+
+def test_adiabatic_log_gets_a_thermal_resistance_limit_warning():
+    """A logged temperature that never shows cooling (its rise speeds up while the heat
+    stays about constant: no loss to the ambient could explain it) fits the thermal
+    resistance at its limit, and the fit says it is a limit, not a measurement."""
+    import dischargelab as dl
+
+    curve = synthetic_curve(6.0, dt_s=5.0)
+    charge = np.concatenate([[0.0], np.cumsum(np.diff(curve.time_s) * curve.current_A[1:])])
+    heated = dl.Discharge(curve.time_s, curve.voltage_V, curve.current_A,
+                          25.0 + 12.0 * (charge / charge[-1]) ** 2, name="adiabatic")
+    res = dl.fit(heated, model="shepherd-thermal", bootstrap=0)
+    assert res.thermal["Rth_K_per_W"] >= 1e4
+    assert any("limit, not a measurement" in w for w in res.warnings)

@@ -254,3 +254,14 @@ def test_report_example_script_runs(tmp_path):
                            "--out", str(tmp_path)], capture_output=True, text=True, timeout=180)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "report.html").stat().st_size > 50_000
+
+
+def test_one_rate_report_names_the_next_test(bundled_data):
+    """A battery fitted on one rate: the report says which run would narrow its
+    predictions, and to about what."""
+    import dischargelab as dl
+
+    fit = dl.fit(dl.read(bundled_data / "Q30_S001_1C.csv", columns=COLUMNS), bootstrap=0)
+    page = build_report(fit.battery)
+    assert "next test: fitted on one rate" in page
+    assert f"one more run at {fit.next_test['current_A']:.3g} A" in page

@@ -16,6 +16,7 @@ from dischargelab.mission import Mission, Phase, RepeatBlock, load_mission, run_
 from dischargelab.mission import fly as mission_module
 from dischargelab.model import PRESETS, Battery, CellParameters
 from dischargelab.models import FAMILIES, get_family
+from dischargelab.onerate import one_rate_table_override
 from dischargelab.simulate import simulate_current
 from dischargelab.uncertainty import (
     EXTRAPOLATION_GROWTH,
@@ -78,9 +79,15 @@ def test_model_error_prior_grows_with_the_extrapolation_ratio():
 
 
 def test_one_rate_growth_widens_on_a_flat_plateau():
-    """A flat curve (the middle 60 % of the charge holds a tenth of the drop, LiFePO4)
-    multiplies the one-rate growth by (1/3) / ratio, at most 4; a sloped one keeps it;
-    ecm (its dynamics held absent on one steady rate) has the same growth as eq. 6."""
+    """Without a measured one-rate law (an empty table): a flat curve (the middle 60 % of
+    the charge holds a tenth of the drop, LiFePO4) multiplies the one-rate growth by
+    (1/3) / ratio, at most 4; a sloped one keeps it; ecm (its dynamics held absent on one
+    steady rate) has the same growth as eq. 6."""
+    with one_rate_table_override({}):
+        _check_fallback_one_rate_growth()
+
+
+def _check_fallback_one_rate_growth():
     four = PRIOR_RELATIVE_SD * (1 + 2.0 * math.log(4.0))
     sloped = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.35})
     assert model_error_sd(sloped, 12.0) == pytest.approx(four, rel=1e-12)

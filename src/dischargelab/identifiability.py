@@ -161,6 +161,19 @@ def analyse(jacobian, names, values: dict, bounds: dict, *, paper_mode: bool = F
     return Identifiability(names, rel, directions, corr, pairs, at_bounds, warnings)
 
 
+def capacity_at_delivered_charge(capacity_Ah: float) -> str:
+    """What a capacity at its lower bound means: the charge the fitted runs delivered.
+
+    That bound is physics, not a limit of the search: a cell cannot hold less than it
+    delivered. The fit wanted a smaller capacity, so the model's capacity is the charge
+    drawn by the run that drew the most (the slowest, which drained the cell furthest).
+    """
+    return (f"C_Ah = {capacity_Ah:.6g} Ah: the capacity equals the charge the fitted runs "
+            f"delivered, its lower limit (a cell cannot hold less than it delivered). The "
+            f"slowest run drained the cell to the end of what the model can hold; the capacity "
+            f"is that measured charge, not a fitted extrapolation beyond it")
+
+
 _SCALING_TEXT = (
     "the current and C, K, R, B scale together (i -> l*i, C -> l*C, K -> K/l, R -> R/l, "
     "B -> B/l leaves the voltage curve unchanged): one curve cannot tell the capacity C nor the "

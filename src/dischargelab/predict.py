@@ -31,6 +31,9 @@ class Prediction:
     interval: dict | None
     warnings: list = field(default_factory=list)
     sensitivity: dict | None = None
+    #: The one extra run that would narrow the interval most
+    #: (:func:`dischargelab.nexttest.next_test`), or None.
+    next_test: dict | None = None
 
     @property
     def time_to_cutoff_s(self) -> float:
@@ -51,6 +54,8 @@ class Prediction:
                                                         - self.interval["failed"])
         if self.sensitivity is not None:
             out["beta_sensitivity"] = dict(self.sensitivity)
+        if self.next_test is not None:
+            out["next_test"] = dict(self.next_test)
         out["warnings"] = list(self.warnings)
         return out
 
@@ -122,6 +127,7 @@ def predict(battery: Battery, *, current: float | None = None, c_rate: float | N
     -------
     Prediction
     """
+    from .nexttest import next_test
     from .simulate import simulate_current, simulate_power
     from .uncertainty import simulation_interval
 
@@ -150,7 +156,14 @@ def predict(battery: Battery, *, current: float | None = None, c_rate: float | N
     side = bat.extrapolation(cell_current)
     if side:
         warnings.append(extrapolation_warning(bat, cell_current, side))
-    return Prediction(sim, spread, warnings, sensitivity)
+    advice = None
+    if spread is not None and spread.get("time_to_cutoff_s") and sim.time_to_cutoff_s > 0:
+        lo, hi = spread["time_to_cutoff_s"]
+        now = 100.0 * (hi - lo) / 2.0 / sim.time_to_cutoff_s
+        mean_cell = sim.capacity_Ah * 3600.0 / sim.duration_s / bat.strings_parallel \
+            if sim.duration_s > 0 else cell_current
+        advice = next_test(bat, mean_cell, now)
+    return Prediction(sim, spread, warnings, sensitivity, advice)
 
 
 #: Arrhenius coefficients [K] tried when the fit held beta at its prior (E_a ~ 12-33 kJ/mol).

@@ -22,6 +22,7 @@ import numpy as np
 
 from .errors import DataError, DischargelabError
 from .model import CUTOFF_CELL_VOLTAGE_V, Battery, load_battery
+from .nexttest import fit_next_test
 from .uncertainty import held_out_summary
 
 CSS = """
@@ -260,6 +261,9 @@ def _battery_section(battery: Battery) -> str:
         parts.append(_messages([src["note"]], "note"))
     parts.append(_messages([str(m) for m in extra.get("notes", []) or []], "note"))
     parts.append(_messages([str(m) for m in extra.get("warnings", []) or []], "warn"))
+    advice = fit_next_test(battery)
+    if advice is not None:
+        parts.append(_messages([advice["text"]], "note"))
     return "".join(parts)
 
 

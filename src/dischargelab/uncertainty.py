@@ -14,8 +14,9 @@ Two parts go into every interval (and ``interval_includes`` says which did):
 * **Model error.** The model itself is not exact, and less so away from the
   currents it was fitted at. Its relative standard deviation of a time to cutoff
   (or endurance) is :func:`model_error_sd`: from held-out-curve residuals when
-  the fit had several rates, else from a documented prior; both grow with the
-  extrapolation ratio. Each draw's time is multiplied by ``exp(sigma z)``,
+  the fit had several rates, else from the one-rate errors measured on other cells
+  (:func:`one_rate_law`; a documented prior for presets and flights); both grow
+  with the extrapolation ratio. Each draw's time is multiplied by ``exp(sigma z)``,
   ``z ~ N(0, 1)`` (seeded, :data:`MODEL_ERROR_SAMPLES` values shared out over the
   draws) and the central percentile interval is taken. Without parameter draws
   (presets, hand-written files) the interval is the model error alone around the
@@ -46,6 +47,7 @@ import numpy as np
 from . import engine
 from .cell import CellParameters
 from .errors import DataError, SimulationError
+from .onerate import one_rate_law
 
 if TYPE_CHECKING:
     from .model import Battery
@@ -314,7 +316,7 @@ def held_out_summary(model_error: dict) -> str:
     return "; ".join(parts)
 
 
-def _model_error_base(battery: Battery) -> tuple[float, str, float | None]:
+def model_error_base(battery: Battery) -> tuple[float, str, float | None]:
     """(relative sd inside the fitted currents, "held-out" | "prior", Student-t degrees
     of freedom or None for a normal)."""
     stored = battery.extra.get("model_error") if isinstance(battery.extra, dict) else None
@@ -333,6 +335,15 @@ def _model_error_base(battery: Battery) -> tuple[float, str, float | None]:
         None if dof is None else float(dof)
 
 
+def extrapolation_side(battery: Battery, cell_current_A: float) -> str | None:
+    """``"up"`` above the fitted currents, ``"down"`` below them, None inside or unknown."""
+    fitted = [abs(x) for x in battery.fit_currents_A if x]
+    cell = abs(float(cell_current_A))
+    if not fitted or cell == 0:
+        return None
+    return "up" if cell > max(fitted) else "down" if cell < min(fitted) else None
+
+
 def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     """Relative standard deviation of a time to cutoff or endurance from the model's error.
 
@@ -346,6 +357,12 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
       by ``1 + 0.8 ln r_k``, and of the rate-capacity check between the fitted currents,
       pooled with the prior, and at least the fitted curves' own error of the time to
       cutoff; :func:`dischargelab.fit.heldout.held_out_error`);
+    * for one constant-current rate, the law measured on other cells
+      (:func:`dischargelab.onerate.one_rate_law`): ``sigma = base + growth |ln r|`` with
+      the growth of the side (above or below the fitted current) of the family, curve
+      shape and logged temperature of the fit; intervals then use Student's t with one
+      degree of freedom fewer than the cells the law was measured on (the spread between
+      cells is measured on a few of them);
     * ``s0 = 0.015`` otherwise (prior: the paper's endurance errors on unseen rates
       were 1-6 %), ``g`` the family's ``one_rate_growth`` (2: one rate cannot show how
       capacity and overpotentials change with rate) times
@@ -364,7 +381,8 @@ def model_error_sd(battery: Battery, cell_current_A: float) -> float:
     float
         Relative standard deviation [-] (e.g. 0.015 = 1.5 %).
     """
-    return model_error_info(battery, battery.extrapolation_ratio(cell_current_A))["relative_sd"]
+    return model_error_info(battery, battery.extrapolation_ratio(cell_current_A),
+                            extrapolation_side(battery, cell_current_A))["relative_sd"]
 
 
 def extrapolation_growth(battery: Battery, source: str) -> float:
@@ -385,13 +403,38 @@ def extrapolation_growth(battery: Battery, source: str) -> float:
     return growth
 
 
-def model_error_info(battery: Battery, ratio: float) -> dict:
-    """Model error for an (effective) extrapolation ratio: sd, source, label."""
-    base, source, dof = _model_error_base(battery)
-    sd = base * (1.0 + extrapolation_growth(battery, source) * math.log(max(ratio, 1.0)))
+def model_error_info(battery: Battery, ratio: float, side: str | None = None) -> dict:
+    """Model error for an (effective) extrapolation ratio: sd, source, label.
+
+    ``side`` is ``"up"`` (above the fitted currents) or ``"down"``; None takes the wider
+    of the two where they differ (the measured one-rate law)."""
+    base, source, dof = model_error_base(battery)
+    log_ratio = math.log(max(ratio, 1.0))
+    law = one_rate_law(battery) if source == "prior" else None
+    if law is not None:
+        growths = [law.get(k) for k in ((side,) if side in ("up", "down") else ())
+                   + ("up", "down")]
+        growth = next(g for g in growths if g is not None) if side else \
+            max(g for g in growths if g is not None)
+        base = float(law["base"])
+        sd = base + float(growth) * log_ratio
+        source = "one-rate, measured"
+        # the spread between cells is measured on a few of them: Student's t
+        dof = float(max(len(law.get("cells", [])) - 1, 1))
+        return {"relative_sd": sd, "base_relative_sd": base, "source": source, "dof": dof,
+                "extrapolation_ratio": float(ratio), "growth_per_log_ratio": float(growth),
+                "one_rate_class": law["name"], "measured_cells": len(law.get("cells", [])),
+                "label": f"model error ({source} on {len(law.get('cells', []))} other cells, "
+                         f"extrapolation x{ratio:.1f})"}
+    sd = base * (1.0 + extrapolation_growth(battery, source) * log_ratio)
     return {"relative_sd": sd, "base_relative_sd": base, "source": source, "dof": dof,
             "extrapolation_ratio": float(ratio),
             "label": f"model error ({source}, extrapolation x{ratio:.1f})"}
+
+
+def half_width_pct(sd: float, level: float = 0.95, dof: float | None = None) -> float:
+    """Half-width [% of the median] of the interval ``exp(+-z sd)`` of a relative sd."""
+    return 100.0 * math.sinh(z_level(level, dof) * sd)
 
 
 def z_level(level: float, dof: float | None = None) -> float:
@@ -527,7 +570,8 @@ def prediction_interval(battery: Battery, steps, *, nominal: dict, cutoff_pack_V
         ``bootstrap_draws``, ``draws_not_reaching_cutoff``, ``method``, ``warnings``.
         Draws that cannot reach the cutoff count with 0 s (see the module docstring).
     """
-    error = model_error_info(battery, battery.extrapolation_ratio(cell_current_A))
+    error = model_error_info(battery, battery.extrapolation_ratio(cell_current_A),
+                             extrapolation_side(battery, cell_current_A))
     params, info = parameter_draws(battery, draws, seed)
     out = {"level": level, "model_error": {k: v for k, v in error.items() if k != "label"},
            "draws": 0, "bootstrap_draws": 0, "draws_not_reaching_cutoff": 0, "warnings": []}
@@ -643,4 +687,5 @@ __all__ = ["sample_parameters", "bootstrap_parameters", "hasparameter_draws", "i
            "model_error_sd", "fly_draws", "prediction_interval", "simulation_interval",
            "DEFAULT_DRAWS",
            "PRIOR_RELATIVE_SD", "MIN_HELD_OUT_SD", "EXTRAPOLATION_GROWTH", "held_out_posterior",
-           "extrapolation_growth", "peak_temperature_interval", "held_out_summary"]
+           "extrapolation_growth", "peak_temperature_interval", "held_out_summary",
+           "half_width_pct", "model_error_info", "extrapolation_side"]

@@ -98,6 +98,9 @@ def _print_fit(result, battery_path=None):
         out.print(f"note: {note}", markup=False)
     for warning in result.warnings:
         out.print(f"[bold yellow]warning:[/] {warning}")
+    advice = result.next_test
+    if advice is not None:
+        out.print(advice["text"], markup=False)
     if battery_path:
         out.print(f"battery file written to {battery_path}")
 
@@ -349,6 +352,8 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
                   markup=False)
     for warning in warnings + list((spread or {}).get("warnings", [])):
         out.print(f"warning: {warning}", markup=False)
+    if summary.get("next_test"):
+        out.print(summary["next_test"]["text"], markup=False)
 
 
 @click.command("curves")

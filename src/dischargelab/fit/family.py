@@ -14,9 +14,21 @@ from scipy.special import stdtrit
 from ..cell import CellParameters
 from ..discharge import Curve
 from ..errors import FitError
-from ..identifiability import Identifiability, analyse, equilibrated_svd, plausibility, undetermined
+from ..identifiability import (
+    Identifiability,
+    analyse,
+    capacity_at_delivered_charge,
+    equilibrated_svd,
+    plausibility,
+    undetermined,
+)
 from ..models import Family, Samples, get_family
-from ..models.base import HELD_AT_AMBIENT_HEAT_CAPACITY, MIN_HEATING_K, fit_lumped_thermal
+from ..models.base import (
+    HELD_AT_AMBIENT_HEAT_CAPACITY,
+    MAX_THERMAL_RESISTANCE,
+    MIN_HEATING_K,
+    fit_lumped_thermal,
+)
 from .problem import (
     COARSE_FTOL,
     CURRENT_SCALE,
@@ -287,9 +299,9 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
 
     thermal = None
     if family.thermal:
-        params, thermal = _thermal(family, params, stack, notes, thermal_prior)
+        params, thermal = _thermal(family, params, stack, notes, thermal_prior, warnings)
     ident = analyse(jac, mdl.free, values, bnds, paper_mode=paper_mode, svd=svd)
-    _physical_limits(family, ident, notes)
+    _physical_limits(family, ident, notes, stack.q_max)
     warnings += ident.warnings
     measured = ~stack.is_rest
     rmse = float(np.sqrt(np.mean(residual[measured] ** 2)))
@@ -334,12 +346,22 @@ def _interval95(value: float, stderr: float, t_crit: float, positive: bool) -> t
     return value - t_crit * stderr, value + t_crit * stderr
 
 
-def _physical_limits(family: Family, ident: Identifiability, notes: list) -> None:
-    """Parameters at a bound that marks an absent effect become notes, not bound problems."""
+def _physical_limits(family: Family, ident: Identifiability, notes: list,
+                     delivered_Ah: float | None = None) -> None:
+    """Parameters at a bound that marks an absent effect become notes, not bound problems;
+    a capacity at the charge the runs delivered (``delivered_Ah``, per cell) is a note that
+    says so instead of a warning to widen the bound (it stays in ``at_bounds``)."""
     keep = []
     for name, side, bound in ident.at_bounds:
         par = family.parameter(name) if name in family.names else None
-        if par is not None and par.limit_note:
+        if name == "C_Ah" and side == "lower" and delivered_Ah is not None and \
+                bound <= delivered_Ah * (1.0 + 1e-3):  # physics: the charge delivered
+            notes.append(capacity_at_delivered_charge(bound))
+            ident.warnings = [w for w in ident.warnings if not w.startswith("C_Ah = ")]
+            # still at a bound for the automatic choice (a family whose capacity the data
+            # do not pin down above the charge drawn is not preferred as plausible)
+            keep.append((name, side, bound))
+        elif par is not None and par.limit_note:
             notes.append(f"{name} = {bound:g} at its {side} bound: {par.limit_note}")
             ident.warnings = [w for w in ident.warnings if not w.startswith(f"{name} = ")]
         else:
@@ -348,9 +370,10 @@ def _physical_limits(family: Family, ident: Identifiability, notes: list) -> Non
 
 
 def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list,
-             prior: dict | None = None):
+             prior: dict | None = None, warnings: list | None = None):
     """Heat capacity and thermal resistance from the logged temperature, else from the
-    thermal prior, else held at the ambient (else defaults)."""
+    thermal prior, else held at the ambient (else defaults); a thermal resistance at its
+    limit (no cooling in the log) adds a warning that says so."""
     if not stack.has_temperature and prior is not None:
         params = params.replace(Cth_J_per_K=prior["Cth_J_per_K"],
                                 Rth_K_per_W=prior["Rth_K_per_W"])
@@ -387,7 +410,20 @@ def _thermal(family: Family, params: CellParameters, stack: Samples, notes: list
     notes.append("thermal model fitted to the logged cell temperature: "
                  + how.format(fitted["Cth_J_per_K"], fitted["Rth_K_per_W"])
                  + f" (RMSE {fitted['rmse_K']:.2f} K)")
+    if fitted["Rth_K_per_W"] >= MAX_THERMAL_RESISTANCE and warnings is not None:
+        warnings.append(adiabatic_warning())
     return params, dict(fitted, source=source)
+
+
+def adiabatic_warning() -> str:
+    """A thermal resistance at its limit: what the log showed and what it means."""
+    return (f"Rth_K_per_W = {MAX_THERMAL_RESISTANCE:g} K/W is its limit, not a measurement: "
+            f"the logged temperature rises as if the cell lost no heat to the ambient during "
+            f"the runs (an adiabatic cell), so the model's heat (current x overpotential) is "
+            f"less than what warmed the cell (heat the model lacks, such as the entropic heat, "
+            f"or an ambient that warmed with the cell). Predictions of runs longer than the "
+            f"fitted ones overstate the heating; log the ambient temperature, or include a "
+            f"run that shows the cell cooling (a rest after the load)")
 
 
 # ---- self-heating without a logged temperature ----------------------------------------

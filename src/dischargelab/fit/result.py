@@ -116,7 +116,7 @@ class FitResult:
     @property
     def battery(self) -> Battery:
         """The fitted battery (pack configuration as fitted) with covariance."""
-        extra = {k: v for k, v in self.to_dict().items()
+        extra = {k: v for k, v in self._document(advice=False).items()
                  if k not in ("parameters", "cells_series", "strings_parallel",
                               "fit_currents_A", "model")}
         # where each curve came from; a tester file's list of every step stays in the file
@@ -142,8 +142,19 @@ class FitResult:
                        covariance=self.covariance, fit_currents_A=self.fit_currents_A,
                        extra=extra, model=self.model)
 
+    @property
+    def next_test(self) -> dict | None:
+        """After a one-rate fit: the one more run that would narrow its predictions most
+        (:func:`dischargelab.nexttest.fit_next_test`), else None."""
+        from ..nexttest import fit_next_test
+
+        return None if self.paper_mode else fit_next_test(self.battery)
+
     def to_dict(self) -> dict:
         """The ``fit --json`` document (keys are only ever added, never renamed)."""
+        return self._document(advice=True)
+
+    def _document(self, advice: bool) -> dict:
         names = self.family.names
         out = {
             "model": self.model,
@@ -170,6 +181,8 @@ class FitResult:
             out["thermal"] = dict(self.thermal)
         if self.model_error is not None:
             out["model_error"] = dict(self.model_error)
+        if advice and self.next_test is not None:
+            out["next_test"] = self.next_test
         if self.paper_mode:
             out["paper_mode"] = {
                 "current_scale": self.current_scale,
@@ -216,6 +229,9 @@ class FitResult:
                      f"({self.rmse_V * self.cells_series * 1000:.1f} mV pack)")
         lines += [f"  note: {m}" for m in self.notes]
         lines += [f"  warning: {m}" for m in self.warnings]
+        advice = self.next_test
+        if advice is not None:
+            lines.append(f"  {advice['text']}")
         return "\n".join(lines)
 
     def plot(self, ax=None, **kwargs):

@@ -381,6 +381,12 @@ HELD_AT_AMBIENT_HEAT_CAPACITY = 1e6
 MIN_HEATING_K = 2.0
 
 
+#: Thermal resistance [K/W] the regression of :func:`fit_lumped_thermal` returns when the
+#: logged temperature shows no cooling (an adiabatic cell over the fitted runs): a limit,
+#: not a measurement (the fit says so).
+MAX_THERMAL_RESISTANCE = 1e4
+
+
 def fit_lumped_thermal(family: Family, p, data: Samples):
     """Heat capacity [J/K] and thermal resistance [K/W] from the logged cell temperature.
 
@@ -433,7 +439,8 @@ def fit_lumped_thermal(family: Family, p, data: Samples):
         if a > 0:
             rmse = float(np.sqrt(np.mean((x @ coef - y) ** 2)))
             return {"Cth_J_per_K": float(1.0 / a),
-                    "Rth_K_per_W": float(min(a / b if b > 0 else 1e4, 1e4)), "rmse_K": rmse,
+                    "Rth_K_per_W": float(min(a / b if b > 0 else MAX_THERMAL_RESISTANCE,
+                                             MAX_THERMAL_RESISTANCE)), "rmse_K": rmse,
                     "heat_capacity_fitted": True}
     if not rows[False][0]:
         return None
@@ -447,5 +454,6 @@ def fit_lumped_thermal(family: Family, p, data: Samples):
     if not b > 0:  # no cooling seen: the log's drift, not the cell, sets the temperature
         return None
     rmse = float(np.sqrt(np.mean((x[:, 0] / cth + b * x[:, 1] - y) ** 2)))
-    return {"Cth_J_per_K": cth, "Rth_K_per_W": float(min(1.0 / (b * cth), 1e4)),
+    return {"Cth_J_per_K": cth, "Rth_K_per_W": float(min(1.0 / (b * cth),
+                                                         MAX_THERMAL_RESISTANCE)),
             "rmse_K": rmse, "heat_capacity_fitted": False}
