@@ -6,7 +6,8 @@ PostgreSQL (``postgresql+psycopg://user@host/db`` for a team).
 Tables (all values SI, discharge positive; ``*_json`` columns hold JSON text)::
 
     logbook_meta  key, value                     -- "schema_version"
-    packs         id, name (unique), label_capacity_Ah, chemistry, cells, created_at
+    packs         id, name (unique), label_capacity_Ah, chemistry, cells, created_at,
+                  version                         -- raised by every write that changes it
     blobs         sha256 (key), compression, size_bytes, data   -- raw files, zlib
     sources       id, sha256 (unique), pack_id, file_name, path, size_bytes, format,
                   added_at, options_json, notes_json
@@ -19,15 +20,24 @@ Tables (all values SI, discharge positive; ``*_json`` columns hold JSON text)::
                   curve_json, details_json        -- unique (source_id, idx)
     models        id, pack_id, fitted_at, reference_event_id, capacity_Ah,
                   resistance_ohm, battery_json    -- the pack's fitted battery models
+    pack_figures  pack_id (key), pack_version, figures_version, computed_at, summary_json,
+                  fleet_json, health_json, model_json, error  -- see .figures
 
 Versions (``logbook_meta.schema_version``; a database is migrated forward when
-opened, a newer one is refused):
+opened, a newer one is refused). Each step is an Alembic revision shipped in the
+package (``migrations/versions/000N_*.py``, revision id ``000N`` for version N), run
+on the opening connection inside its write transaction (on PostgreSQL under an
+advisory lock, so concurrent openers migrate once); ``alembic_version`` holds the
+revision, ``schema_version`` the same number for older dischargelab releases, which
+read only it:
 
 * 1: packs, blobs, sources, events without ``cycle`` and ``cell_spread_V``.
 * 2: ``events.cycle`` (cycle number from the file name, for the equivalent full
   cycles between logged ones), ``events.cell_spread_V``, and the ``models`` table.
 * 3: ``events.details_json``: the event's further figures (rests and their relaxation,
   charges, per-cell figures, how well the sampling resolves the current), JSON.
+* 4: ``packs.version`` and ``pack_figures``: each pack's figures stored with the
+  version of the pack they were computed from (:mod:`.figures`).
 """
 
 from __future__ import annotations
@@ -62,8 +72,11 @@ from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 
 from ..errors import LogbookError
 
-#: Version of the tables this code writes.
-SCHEMA_VERSION = 3
+#: Version of the tables this code writes (the newest revision in ``migrations/versions``).
+SCHEMA_VERSION = 4
+
+#: Folder of the Alembic environment and revisions (package data).
+MIGRATIONS_DIR = Path(__file__).with_name("migrations")
 
 #: File name of the default SQLite logbook in the user's data folder.
 DEFAULT_FILE_NAME = "logbook.sqlite"
@@ -90,6 +103,7 @@ packs = Table(
     Column("chemistry", String(20)),
     Column("cells", Integer),
     Column("created_at", String(40), nullable=False),
+    Column("version", Integer, nullable=False, server_default="0"),
 )
 
 blobs = Table(
@@ -148,6 +162,19 @@ models = Table(
     Column("capacity_Ah", Float),
     Column("resistance_ohm", Float),
     Column("battery_json", Text, nullable=False),
+)
+
+pack_figures = Table(
+    "pack_figures", metadata,
+    Column("pack_id", Integer, ForeignKey("packs.id"), primary_key=True, autoincrement=False),
+    Column("pack_version", Integer, nullable=False),
+    Column("figures_version", String(60), nullable=False),
+    Column("computed_at", String(40), nullable=False),
+    Column("summary_json", Text),
+    Column("fleet_json", Text),
+    Column("health_json", Text),
+    Column("model_json", Text),
+    Column("error", Text),
 )
 
 
@@ -332,23 +359,9 @@ def database_errors(url: str):
 
 # --------------------------------------------------------------------------- versions
 
-def _add_column(conn, table: str, column: str, sql_type: str) -> None:
-    quote = conn.dialect.identifier_preparer.quote  # mixed case stays mixed case
-    conn.execute(text(f"ALTER TABLE {quote(table)} ADD COLUMN {quote(column)} {sql_type}"))
-
-
-def _migrate_1_to_2(conn) -> None:
-    _add_column(conn, "events", "cycle", "INTEGER")
-    _add_column(conn, "events", "cell_spread_V", "FLOAT")
-    models.create(conn, checkfirst=True)
-
-
-def _migrate_2_to_3(conn) -> None:
-    _add_column(conn, "events", "details_json", "TEXT")
-
-
-#: Forward migrations: version -> function taking it to version + 1.
-MIGRATIONS = {1: _migrate_1_to_2, 2: _migrate_2_to_3}
+def revision_id(version: int) -> str:
+    """The Alembic revision of a schema version (``0004`` for 4)."""
+    return f"{int(version):04d}"
 
 
 def schema_version(conn) -> int | None:
@@ -361,6 +374,32 @@ def schema_version(conn) -> int | None:
         return int(value)
     except (TypeError, ValueError):
         raise LogbookError(f"the logbook's schema version is unreadable ({value!r})") from None
+
+
+def stored_revision(conn) -> str | None:
+    """The Alembic revision the database is at, or None when it was made before the
+    revisions were kept (schema 1 to 3 by dischargelab 0.3 and earlier) or is empty."""
+    if not inspect(conn).has_table("alembic_version"):
+        return None
+    return conn.execute(text("SELECT version_num FROM alembic_version")).scalar()
+
+
+def migrate(conn, found: int | None, target: str = "head") -> None:
+    """Run the Alembic revisions from the database's version to ``target`` on ``conn``
+    (inside its transaction); a database without Alembic's record is stamped first."""
+    from ..errors import require
+
+    require("alembic", "logbook")
+    from alembic import command
+    from alembic.config import Config
+
+    config = Config()
+    config.set_main_option("script_location", str(MIGRATIONS_DIR))
+    config.set_main_option("path_separator", "os")
+    config.attributes["connection"] = conn
+    if found is not None and stored_revision(conn) is None:
+        command.stamp(config, revision_id(found))
+    command.upgrade(config, target)
 
 
 def prepare(engine: Engine, url: str) -> int:
@@ -383,28 +422,23 @@ def prepare(engine: Engine, url: str) -> int:
         found = schema_version(conn)
         if found is None:
             present = set(inspect(conn).get_table_names())
-            clash = present & {t.name for t in metadata.sorted_tables}
+            clash = present & ({t.name for t in metadata.sorted_tables} | {"alembic_version"})
             if clash:
                 raise LogbookError(f"{shown_url(url)} holds tables named like a logbook's "
                                    f"({', '.join(sorted(clash))}) but no schema version; "
                                    "give another database")
-            metadata.create_all(conn)
-            conn.execute(logbook_meta.insert().values(key="schema_version",
-                                                      value=str(SCHEMA_VERSION)))
-            return 0
-        if found > SCHEMA_VERSION:
+        elif found > SCHEMA_VERSION:
             raise LogbookError(f"the logbook {shown_url(url)} has schema version {found}, newer "
                                f"than this dischargelab understands ({SCHEMA_VERSION}); "
                                "upgrade dischargelab")
-        for version in range(found, SCHEMA_VERSION):
-            MIGRATIONS[version](conn)
-        if found < SCHEMA_VERSION:
-            conn.execute(logbook_meta.update().where(logbook_meta.c.key == "schema_version")
-                         .values(value=str(SCHEMA_VERSION)))
-        return found
+        if found == SCHEMA_VERSION and stored_revision(conn) == revision_id(SCHEMA_VERSION):
+            return found
+        migrate(conn, found)
+        return found or 0
 
 
-__all__ = ["SCHEMA_VERSION", "MIGRATIONS", "metadata", "packs", "blobs", "sources", "events",
+__all__ = ["SCHEMA_VERSION", "MIGRATIONS_DIR", "migrate", "revision_id", "stored_revision",
+           "metadata", "pack_figures", "packs", "blobs", "sources", "events",
            "models", "logbook_meta", "resolve_url", "user_data_dir", "create", "prepare",
            "writing", "reading", "database_errors", "shown_url", "schema_version", "now_iso",
            "EVENT_FLOATS", "ENV_VARIABLE"]
