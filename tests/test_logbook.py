@@ -68,10 +68,12 @@ def test_add_twice_health_and_outlier(url, shared_data):
     files = cell_c_files(shared_data, AROUND_300)
     seen = []
     with Logbook(url) as lb:
-        result = lb.add(files, pack="cell C", progress=lambda d, t, m: seen.append((d, t)))
+        result = lb.add(files, pack="cell C", progress=lambda d, t, m: seen.append((d, t, m)))
         assert sorted(result.added) == sorted(p.name for p in files)
         assert result.events == len(files) and not result.rejected
-        assert seen[-1] == (len(files), len(files))
+        # every file, then the pack's figures recomputed and stored once
+        assert seen[-2][:2] == (len(files), len(files))
+        assert seen[-1] == (1, 1, "figures of cell C") and lb.stale() == []
         again = lb.add(files, pack="cell C")
         assert again.added == [] and again.events == 0
         assert sorted(again.skipped) == sorted(p.name for p in files)
@@ -80,7 +82,9 @@ def test_add_twice_health_and_outlier(url, shared_data):
     data = health.to_dict()
     assert data["pack"] == "cell C"
     assert set(data["events"][0]) == {"source", "start", "kind", "discharged_Ah", "capacity_Ah",
-                                      "capacity_interval95", "resistance_ohm", "efc", "outlier"}
+                                      "capacity_interval95", "resistance_ohm", "efc", "outlier",
+                                      "event_id", "event_kind", "cycle", "full",
+                                      "capacity_method", "resistance_interval95", "notes"}
     assert {e["kind"] for e in data["events"]} == {"full"}
     by_name = {e["source"]: e for e in data["events"]}
     for path in files:
@@ -103,7 +107,9 @@ def test_add_twice_health_and_outlier(url, shared_data):
     assert efc[-1] == pytest.approx(total / caps[0], rel=1e-4)
     assert np.all(np.diff(efc) > 0)
     forecast = data["forecast"]
-    assert set(forecast) == {"threshold_Ah", "eol_efc", "eol_efc_interval95", "band"}
+    assert set(forecast) == {"threshold_Ah", "eol_efc", "eol_efc_interval95", "band", "eol",
+                             "observed", "first_efc", "capacity_trend", "resistance_trend",
+                             "future_band"}
     band = forecast["band"]
     assert len(band["efc"]) == len(band["lo"]) == len(band["hi"]) == len(band["capacity_Ah"])
     assert all(lo <= m <= hi for lo, m, hi in zip(band["lo"], band["capacity_Ah"], band["hi"]))
@@ -227,7 +233,8 @@ def test_newer_database_is_refused_with_one_line(url):
     Logbook(url).close()
     _execute(url, [f"UPDATE logbook_meta SET value = '{SCHEMA_VERSION + 7}' "
                    "WHERE key = 'schema_version'"])
-    with pytest.raises(LogbookError, match=rf"schema version {SCHEMA_VERSION + 7}, newer than .*upgrade") as err:
+    with pytest.raises(LogbookError, match=rf"schema version {SCHEMA_VERSION + 7}, newer "
+                                           r"than .*upgrade") as err:
         Logbook(url)
     assert "\n" not in str(err.value)
 

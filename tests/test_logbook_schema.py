@@ -22,13 +22,12 @@ from pg_cluster import start_cluster, stop_cluster
 pytest.importorskip("sqlalchemy")
 pytest.importorskip("alembic")
 
-from sqlalchemy import MetaData, Table, create_engine, inspect, select, text  # noqa: E402
+from sqlalchemy import MetaData, Table, create_engine, inspect, select, text
 
-from dischargelab.errors import LogbookError  # noqa: E402
-from dischargelab.logbook import Logbook  # noqa: E402
-from dischargelab.logbook import schema  # noqa: E402
-from dischargelab.logbook.ingest import event_row  # noqa: E402
-from dischargelab.logbook.summarise import summarise_source  # noqa: E402
+from dischargelab.errors import LogbookError
+from dischargelab.logbook import Logbook, schema
+from dischargelab.logbook.ingest import event_row
+from dischargelab.logbook.summarise import summarise_source
 
 DDL = Path(__file__).resolve().parent / "data" / "logbook_schema"
 CYCLES = (1, 100, 200)

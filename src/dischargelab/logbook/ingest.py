@@ -80,12 +80,15 @@ class AddResult:
         ``(path, one-line reason)`` of files that could not be read.
     events : int
         Events stored.
+    changed : set of str
+        Packs that got events (their figures are recomputed after the add).
     """
 
     added: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     rejected: list[tuple[str, str]] = field(default_factory=list)
     events: int = 0
+    changed: set[str] = field(default_factory=set)
 
     def summary(self) -> str:
         """One line: files added, events, files already there, files rejected."""
@@ -153,6 +156,14 @@ def _insert(conn, table):
     return insert(table)
 
 
+def bump_versions(conn, pack_ids_: Iterable[int]) -> None:
+    """Raise the version of the packs a write changed (in id order, so two writers take the
+    rows' locks in the same order); their stored figures are then stale (:mod:`.figures`)."""
+    for pid in sorted(set(pack_ids_)):
+        conn.execute(schema.packs.update().where(schema.packs.c.id == pid)
+                     .values(version=schema.packs.c.version + 1))
+
+
 def known_hashes(conn, hashes: Iterable[str]) -> set[str]:
     """The hashes among ``hashes`` already stored as sources."""
     hashes = list(hashes)
@@ -192,12 +203,22 @@ def event_row(event: dict) -> dict:
 def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
                     result: AddResult) -> None:
     """Store ``(summary, pack, original path)`` items in one transaction (the raw file
-    as the summary carries it, compressed)."""
+    as the summary carries it, compressed).
+
+    The items are written in SHA-256 order, so two writers holding overlapping files take
+    the unique keys' locks in the same order and one waits for the other instead of
+    deadlocking; PostgreSQL aborting the transaction anyway (a deadlock, a serialization
+    failure) runs it again (:func:`~dischargelab.logbook.schema.write`). ``result`` is
+    told only once the transaction is committed.
+    """
     if not batch:
         return
-    with schema.writing(engine) as conn:
-        ids = pack_ids(conn, [pack for _, pack, _ in batch])
-        for summary, pack, path in batch:
+    ordered = sorted(batch, key=lambda item: item[0].sha256)
+
+    def work(conn) -> tuple[list, list, int, set]:
+        ids = pack_ids(conn, [pack for _, pack, _ in ordered])
+        added, skipped, events, changed = [], [], 0, set()
+        for summary, pack, path in ordered:
             if summary.raw_zlib:          # else only the path is recorded (keep_raw=False)
                 conn.execute(_insert(conn, schema.blobs).values(
                     sha256=summary.sha256, compression="zlib", size_bytes=summary.size_bytes,
@@ -210,14 +231,23 @@ def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
             ).on_conflict_do_nothing(index_elements=["sha256"])
                 .returning(schema.sources.c.id)).scalar()
             if source_id is None:  # another writer stored it first
-                result.skipped.append(summary.file_name)
+                skipped.append(summary.file_name)
                 continue
             rows = [dict(event_row(e), source_id=source_id, pack_id=ids[pack])
                     for e in summary.events]
             if rows:
                 conn.execute(schema.events.insert(), rows)
-            result.added.append(summary.file_name)
-            result.events += len(rows)
+            added.append(summary.file_name)
+            events += len(rows)
+            changed.add(pack)
+        bump_versions(conn, [ids[pack] for pack in changed])
+        return added, skipped, events, changed
+
+    added, skipped, events, changed = schema.write(engine, work)
+    result.added += added
+    result.skipped += skipped
+    result.events += events
+    result.changed.update(changed)
 
 
 def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, executor=None,

@@ -43,6 +43,7 @@ read only it:
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 from contextlib import closing, contextmanager
 from datetime import UTC, datetime
@@ -70,7 +71,7 @@ from sqlalchemy import (
 from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 
-from ..errors import LogbookError
+from ..errors import LogbookError, LogbookStorageError
 
 #: Version of the tables this code writes (the newest revision in ``migrations/versions``).
 SCHEMA_VERSION = 4
@@ -239,6 +240,37 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cursor.close()
 
 
+def _sqlite_read_only_pragmas(dbapi_connection, _record) -> None:
+    dbapi_connection.isolation_level = None
+    cursor = dbapi_connection.cursor()
+    cursor.execute("PRAGMA foreign_keys=ON")
+    cursor.execute(f"PRAGMA busy_timeout={int(BUSY_TIMEOUT_S * 1000)}")
+    cursor.close()
+
+
+def _read_only_file_system(path: Path) -> bool:
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):  # AttributeError: no statvfs (Windows)
+        return False
+
+
+def _read_only_flags(path: Path) -> str:
+    """SQLite URI flags to read ``path`` without writing: read-only mode, and immutable on a
+    read-only file system when no write-ahead log is beside it (with one, the log and its
+    shared-memory file are read as they are)."""
+    wal = path.with_name(path.name + "-wal")
+    frozen = _read_only_file_system(path.parent) and not (wal.is_file() and wal.stat().st_size)
+    return "mode=ro" + ("&immutable=1" if frozen else "")
+
+
+def sqlite_writable(path: Path) -> bool:
+    """Whether this process may write the SQLite file ``path`` and create its WAL and
+    shared-memory files beside it (file, folder and file system writable)."""
+    return (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK)
+            and not _read_only_file_system(path.parent))
+
+
 def _sqlite_begin(conn) -> None:
     # a writer takes the write lock at BEGIN, so two writers queue instead of deadlocking
     conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.info.get("write") else "BEGIN")
@@ -281,14 +313,41 @@ def create(url: str, new: bool = True) -> Engine:
     if not new and not path.is_file():
         raise LogbookError(f"no logbook at {path}: adding files creates one "
                            "(Logbook.add, `dischargelab logbook add`)")
+    read_only = path.is_file() and not sqlite_writable(path)
     if path.is_file() and path.stat().st_size > 0:
         _check_sqlite_is_a_logbook(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if read_only:
+        return _read_only_sqlite(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise LogbookStorageError(f"cannot create the logbook {path}: {exc.strerror or exc} "
+                                  "(its folder); give a place you may write", "read-only"
+                                  ) from None
     try:
         engine = create_engine(parsed, connect_args={"timeout": BUSY_TIMEOUT_S})
     except NoSuchModuleError:  # pragma: no cover - sqlite3 is in the standard library
         raise LogbookError("this Python has no sqlite3 module") from None
     event.listen(engine, "connect", _sqlite_pragmas)
+    event.listen(engine, "begin", _sqlite_begin)
+    return engine
+
+
+def _read_only_sqlite(path: Path) -> Engine:
+    """An engine reading a SQLite logbook this process may not write, in SQLite's read-only
+    mode (see :func:`_read_only_flags`). A write fails with SQLITE_READONLY, which
+    :func:`database_errors` says in one line."""
+    import sqlite3
+
+    from sqlalchemy.pool import QueuePool
+
+    uri = f"{path.resolve().as_uri()}?{_read_only_flags(path)}"
+
+    def connect():
+        return sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_S, check_same_thread=False)
+
+    engine = create_engine("sqlite://", creator=connect, poolclass=QueuePool)
+    event.listen(engine, "connect", _sqlite_read_only_pragmas)
     event.listen(engine, "begin", _sqlite_begin)
     return engine
 
@@ -309,7 +368,8 @@ def _check_sqlite_is_a_logbook(path: Path) -> None:
     import sqlite3
 
     try:
-        with closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)) as db:
+        with closing(sqlite3.connect(f"{path.resolve().as_uri()}?{_read_only_flags(path)}",
+                                     uri=True)) as db:
             names = {row[0] for row in db.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'")}
     except sqlite3.DatabaseError:
@@ -332,6 +392,41 @@ def writing(engine: Engine):
             conn.info.pop("write", None)
 
 
+#: Tries of a write transaction that PostgreSQL aborts for a serialization failure or a
+#: deadlock (SQLSTATE 40001, 40P01), and the wait before the first retry [s], doubled at
+#: each (with jitter, at most :data:`RETRY_MAX_S`): a busy server gets a few seconds, then
+#: the error is raised.
+RETRY_TRIES = 6
+RETRY_FIRST_S = 0.05
+RETRY_MAX_S = 2.0
+RETRYABLE_STATES = ("40001", "40P01")
+
+
+def retryable(exc: DBAPIError) -> bool:
+    """A transaction the server aborted so that another could go on: run it again."""
+    return getattr(exc.orig, "sqlstate", None) in RETRYABLE_STATES
+
+
+def write(engine: Engine, work, tries: int = RETRY_TRIES):
+    """``work(conn)`` in one write transaction (:func:`writing`), run again from the start
+    when PostgreSQL aborts it for a serialization failure or a deadlock (bounded,
+    :data:`RETRY_TRIES`); returns what ``work`` returns. ``work`` must keep its effects
+    inside the transaction (it may run more than once)."""
+    import random
+    import time
+
+    for attempt in range(tries):
+        try:
+            with writing(engine) as conn:
+                return work(conn)
+        except DBAPIError as exc:
+            if not retryable(exc) or attempt == tries - 1:
+                raise
+            wait = min(RETRY_MAX_S, RETRY_FIRST_S * 2 ** attempt)
+            time.sleep(wait * random.uniform(0.5, 1.0))
+    raise AssertionError("unreachable")  # pragma: no cover - the loop returns or raises
+
+
 @contextmanager
 def reading(engine: Engine):
     """A read transaction."""
@@ -339,22 +434,86 @@ def reading(engine: Engine):
         yield conn
 
 
+#: SQLite result codes (the low byte of an extended code) and PostgreSQL SQLSTATE classes
+#: that say the storage itself refuses, not the request.
+SQLITE_READONLY, SQLITE_BUSY, SQLITE_IOERR, SQLITE_FULL, SQLITE_CANTOPEN, SQLITE_NOTADB = \
+    8, 5, 10, 13, 14, 26
+PG_DISK_FULL = "53100"
+PG_READ_ONLY = ("25006", "42501")      # read-only transaction or server; no privilege
+PG_GONE = ("08", "57P01", "57P02", "57P03")  # connection exceptions; server shut down
+
+
+def storage_error(exc: DBAPIError, url: str) -> LogbookError | None:
+    """The one line for a driver error that says the storage refuses (full, read-only, gone,
+    busy, failing), or None for any other error (a bug, raised as it is)."""
+    orig = exc.orig
+    where = shown_url(url)
+    kept = "what was stored before is kept"
+    files = sqlite_files(url)
+    if files:
+        path = files[0]
+        code = getattr(orig, "sqlite_errorcode", None)
+        code = None if code is None else code & 0xFF
+        text_ = str(orig).lower()
+        if code == SQLITE_FULL or "disk is full" in text_:
+            try:
+                free = f"{shutil.disk_usage(path.parent).free / 1e6:.1f} MB free"
+            except OSError:
+                free = "no space"
+            return LogbookStorageError(
+                f"no space left on the device holding the logbook {path} ({free}); free space "
+                f"there or move the logbook to a larger disk (Logbook(url), --db); {kept}",
+                "full")
+        if code == SQLITE_READONLY or "readonly database" in text_:
+            return LogbookStorageError(
+                f"the logbook {path} is read-only (its file, folder or file system): nothing "
+                "was changed; make it writable or give a logbook you may write "
+                "(Logbook(url), --db)", "read-only")
+        if code == SQLITE_BUSY or "database is locked" in text_:
+            return LogbookStorageError(
+                f"another program held the logbook {path} locked for {BUSY_TIMEOUT_S:.0f} s; "
+                f"try again when it has finished; {kept}", "busy")
+        if code == SQLITE_IOERR or "disk i/o error" in text_:
+            return LogbookStorageError(
+                f"cannot read or write the logbook {path} (disk I/O error: a failing disk, "
+                f"a network folder that went away, or the file removed); check the disk; {kept}",
+                "io")
+        if code in (SQLITE_CANTOPEN, SQLITE_NOTADB) or "not a database" in text_ \
+                or "unable to open" in text_:
+            return LogbookStorageError(
+                f"{path} is not a logbook database that can be opened (not an SQLite file, "
+                "or no permission)", "unreachable")
+        return None
+    state = getattr(orig, "sqlstate", None) or ""
+    if state == PG_DISK_FULL:
+        return LogbookStorageError(
+            f"the PostgreSQL server of the logbook {where} has no space left on its disk; free "
+            f"space on the server; {kept}", "full")
+    if state in PG_READ_ONLY:
+        return LogbookStorageError(
+            f"the logbook database {where} is read-only for this user (a read-only server or "
+            "transaction, or no write privilege): nothing was changed; grant the user INSERT "
+            "and UPDATE or give another database", "read-only")
+    if state.startswith(PG_GONE) or exc.connection_invalidated or \
+            "connect" in type(orig).__name__.lower() or "connection" in str(orig).lower():
+        return LogbookStorageError(
+            f"cannot reach the logbook database {where}: is the server running and the URL "
+            f"(host, port, user, database) right? {kept}; run the command again when it is "
+            "back", "unreachable")
+    return None
+
+
 @contextmanager
 def database_errors(url: str):
-    """Turn the driver's errors into one line that names the logbook."""
+    """Turn the driver's errors that say the storage refuses into one line that names the
+    logbook and the fix (:func:`storage_error`); any other error is raised as it is."""
     try:
         yield
     except DBAPIError as exc:
-        where = shown_url(url)
-        if exc.connection_invalidated or "connect" in type(exc.orig).__name__.lower() or \
-                "could not connect" in str(exc.orig) or "connection" in str(exc.orig).lower():
-            raise LogbookError(f"cannot reach the logbook database {where}: is the server "
-                               "running and the URL (host, port, user, database) right?"
-                               ) from None
-        if "not a database" in str(exc.orig) or "unable to open" in str(exc.orig):
-            raise LogbookError(f"{where} is not a logbook database that can be opened "
-                               "(not an SQLite file, or no permission)") from None
-        raise
+        problem = storage_error(exc, url)
+        if problem is None:
+            raise
+        raise problem from None
 
 
 # --------------------------------------------------------------------------- versions
@@ -416,6 +575,11 @@ def prepare(engine: Engine, url: str) -> int:
         The database was written by a newer dischargelab, or holds tables that are
         not a logbook's.
     """
+    with reading(engine) as conn:       # the common case: current, nothing to write
+        found = schema_version(conn)
+        if found == SCHEMA_VERSION and stored_revision(conn) == revision_id(SCHEMA_VERSION):
+            return found
+        _check_not_newer(found, url)
     with writing(engine) as conn:
         if engine.dialect.name == "postgresql":  # one process creates or migrates at a time
             conn.execute(text("SELECT pg_advisory_xact_lock(7283640151)"))
@@ -427,18 +591,23 @@ def prepare(engine: Engine, url: str) -> int:
                 raise LogbookError(f"{shown_url(url)} holds tables named like a logbook's "
                                    f"({', '.join(sorted(clash))}) but no schema version; "
                                    "give another database")
-        elif found > SCHEMA_VERSION:
-            raise LogbookError(f"the logbook {shown_url(url)} has schema version {found}, newer "
-                               f"than this dischargelab understands ({SCHEMA_VERSION}); "
-                               "upgrade dischargelab")
+        _check_not_newer(found, url)
         if found == SCHEMA_VERSION and stored_revision(conn) == revision_id(SCHEMA_VERSION):
             return found
         migrate(conn, found)
         return found or 0
 
 
+def _check_not_newer(found: int | None, url: str) -> None:
+    if found is not None and found > SCHEMA_VERSION:
+        raise LogbookError(f"the logbook {shown_url(url)} has schema version {found}, newer "
+                           f"than this dischargelab understands ({SCHEMA_VERSION}); "
+                           "upgrade dischargelab")
+
+
 __all__ = ["SCHEMA_VERSION", "MIGRATIONS_DIR", "migrate", "revision_id", "stored_revision",
-           "metadata", "pack_figures", "packs", "blobs", "sources", "events",
-           "models", "logbook_meta", "resolve_url", "user_data_dir", "create", "prepare",
-           "writing", "reading", "database_errors", "shown_url", "schema_version", "now_iso",
-           "EVENT_FLOATS", "ENV_VARIABLE"]
+           "metadata", "pack_figures", "packs", "blobs", "sources", "events", "models",
+           "logbook_meta", "resolve_url", "user_data_dir", "create", "prepare", "writing",
+           "write", "retryable", "reading", "database_errors", "storage_error",
+           "sqlite_writable", "shown_url", "schema_version", "now_iso", "EVENT_FLOATS",
+           "ENV_VARIABLE"]
