@@ -31,6 +31,7 @@ import numpy as np
 from sqlalchemy import select
 
 from ..errors import DischargelabError, LogbookError
+from ..io.prepare import LOGGER_STOP
 from . import schema
 from .summarise import (
     SourceSummary,
@@ -82,6 +83,9 @@ class AddResult:
         Events stored.
     changed : set of str
         Packs that got events (their figures are recomputed after the add).
+    notes : list of (str, str)
+        ``(file name, note)`` for what a reader dropped from a file that went in (the
+        logger's record of zeros that ends a test cut short).
     """
 
     added: list[str] = field(default_factory=list)
@@ -89,6 +93,7 @@ class AddResult:
     rejected: list[tuple[str, str]] = field(default_factory=list)
     events: int = 0
     changed: set[str] = field(default_factory=set)
+    notes: list[tuple[str, str]] = field(default_factory=list)
 
     def summary(self) -> str:
         """One line: files added, events, files already there, files rejected."""
@@ -100,15 +105,17 @@ class AddResult:
         return text
 
     def lines(self) -> list[str]:
-        """One line per skipped or rejected file, for printing."""
-        out = [f"{name}: already in the logbook" for name in self.skipped]
+        """One line per note, skipped file and rejected file, for printing."""
+        out = [f"{name}: {note}" for name, note in self.notes]
+        out += [f"{name}: already in the logbook" for name in self.skipped]
         out += [f"{Path(path).name}: rejected: {reason}" for path, reason in self.rejected]
         return out
 
     def to_dict(self) -> dict:
         return {"added": list(self.added), "skipped": list(self.skipped),
                 "rejected": [{"path": p, "reason": r} for p, r in self.rejected],
-                "events": int(self.events)}
+                "events": int(self.events),
+                "notes": [{"file": f, "note": n} for f, n in self.notes]}
 
 
 def _is_data_file(path: Path) -> bool:
@@ -248,6 +255,10 @@ def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
     result.skipped += skipped
     result.events += events
     result.changed.update(changed)
+    stored = set(added)
+    result.notes += [(summary.file_name, note) for summary, _, _ in ordered
+                     if summary.file_name in stored
+                     for note in summary.notes if LOGGER_STOP in note]
 
 
 def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, executor=None,
