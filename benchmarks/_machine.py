@@ -3,6 +3,7 @@
 import os
 import platform
 from datetime import UTC, datetime
+from pathlib import Path
 
 
 def machine_line() -> str:
@@ -22,3 +23,17 @@ def machine_line() -> str:
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     return (f"{now}; {cpu}; {os.cpu_count()} cores; Python {platform.python_version()}; "
             f"numpy {numpy.__version__}; scipy {scipy.__version__}")
+
+
+def shared_data() -> Path:
+    """The real data sets: ``$DISCHARGELAB_SHARED_DATA``, else ``shared/data`` beside the
+    checkout or one of its parents (as the tests find them)."""
+    env = os.environ.get("DISCHARGELAB_SHARED_DATA")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve().parents[1]
+    for parent in [here, *here.parents]:
+        candidate = parent / "shared" / "data"
+        if (candidate / "samsung30q_S001").is_dir():
+            return candidate
+    return here.parent / "shared" / "data"

@@ -269,6 +269,7 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
 
     options = check_reader_options(reader_options)
     files, missing = list_files(paths, pack=pack, pack_from=pack_from, recursive=recursive)
+    schema.check_writable(engine)       # a read-only logbook says so before any file is read
     result = AddResult(rejected=list(missing))
     total = len(files)
     hashed: dict[str, tuple[Path, str, str]] = {}

@@ -392,6 +392,20 @@ def writing(engine: Engine):
             conn.info.pop("write", None)
 
 
+def check_writable(engine: Engine) -> None:
+    """Raise the driver's error now if the logbook cannot be written (a read-only file or
+    server), before any long work: a write of nothing, rolled back."""
+    with engine.connect() as conn:
+        conn.info["write"] = True
+        try:
+            with conn.begin() as transaction:
+                conn.execute(logbook_meta.update().where(logbook_meta.c.key == "schema_version")
+                             .values(value=logbook_meta.c.value))
+                transaction.rollback()
+        finally:
+            conn.info.pop("write", None)
+
+
 #: Tries of a write transaction that PostgreSQL aborts for a serialization failure or a
 #: deadlock (SQLSTATE 40001, 40P01), and the wait before the first retry [s], doubled at
 #: each (with jitter, at most :data:`RETRY_MAX_S`): a busy server gets a few seconds, then
@@ -608,6 +622,6 @@ def _check_not_newer(found: int | None, url: str) -> None:
 __all__ = ["SCHEMA_VERSION", "MIGRATIONS_DIR", "migrate", "revision_id", "stored_revision",
            "metadata", "pack_figures", "packs", "blobs", "sources", "events", "models",
            "logbook_meta", "resolve_url", "user_data_dir", "create", "prepare", "writing",
-           "write", "retryable", "reading", "database_errors", "storage_error",
+           "write", "retryable", "check_writable", "reading", "database_errors", "storage_error",
            "sqlite_writable", "shown_url", "schema_version", "now_iso", "EVENT_FLOATS",
            "ENV_VARIABLE"]
