@@ -17,8 +17,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pg_cluster import start_cluster, stop_cluster
-
 pytest.importorskip("sqlalchemy")
 
 import dischargelab as dl
@@ -44,22 +42,6 @@ def integrated_Ah(path: Path) -> float:
                     if line.strip()])
     load = raw[:, 1] < -1.0  # -3 A discharge, negative in these files
     return float(np.trapezoid(-raw[load, 1], raw[load, 0]) / 3600.0)
-
-
-@pytest.fixture(scope="module")
-def pg():
-    cluster = start_cluster()
-    try:
-        yield cluster
-    finally:
-        stop_cluster(cluster)
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def url(request, tmp_path):
-    if request.param == "sqlite":
-        return str(tmp_path / "logbook.sqlite")
-    return request.getfixturevalue("pg").new_database()
 
 
 # --------------------------------------------------------------------------- ingest

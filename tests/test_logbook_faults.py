@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from pg_cluster import _pid_alive, start_cluster, start_server, stop_cluster, stop_server
+from pg_cluster import _pid_alive, start_server, stop_server
 
 pytest.importorskip("sqlalchemy")
 
@@ -215,15 +215,6 @@ def test_a_read_only_logbook_is_read_and_refuses_writes_with_one_line(shared_dat
 
 # --------------------------------------------------------------------------- PostgreSQL
 
-@pytest.fixture(scope="module")
-def pg():
-    cluster = start_cluster()
-    try:
-        yield cluster
-    finally:
-        stop_cluster(cluster)
-
-
 def pg_contents(url: str) -> dict:
     from sqlalchemy import create_engine, text
 
@@ -275,6 +266,16 @@ def test_postgresql_stopped_mid_add_is_one_line_and_a_rerun_completes(pg, shared
     assert len(final) == len(files)
 
 
+def together(target, n: int = 2, timeout_s: float = 120) -> None:
+    """``target(k)`` for k = 0..n-1 in threads of their own, waited for (bounded)."""
+    threads = [threading.Thread(target=target, args=(k,)) for k in range(n)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=timeout_s)
+        assert not t.is_alive(), "a writer is still running"
+
+
 def test_two_writers_with_overlapping_files_in_opposite_orders_store_each_once(
         pg, shared_data):
     """Two clients write the same 24 files at the same moment, one in the reverse order of
@@ -296,11 +297,7 @@ def test_two_writers_with_overlapping_files_in_opposite_orders_store_each_once(
         except Exception as exc:  # reported below with the other writer's outcome
             errors.append(exc)
 
-    threads = [threading.Thread(target=writer, args=(k,)) for k in range(2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(timeout=120)
+    together(writer)
     engine.dispose()
     assert not errors, errors
     added = results[0].added + results[1].added
@@ -348,11 +345,7 @@ def test_a_transaction_postgresql_aborts_is_run_again(pg, fault):
         except Exception as exc:  # reported below
             errors.append(exc)
 
-    threads = [threading.Thread(target=run, args=(k,)) for k in range(2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(timeout=120)
+    together(run)
     with engine.connect() as conn:
         versions = dict(conn.execute(text("SELECT name, version FROM packs")).all())
     engine.dispose()

@@ -17,8 +17,6 @@ from pathlib import Path
 
 import pytest
 
-from pg_cluster import start_cluster, stop_cluster
-
 pytest.importorskip("sqlalchemy")
 pytest.importorskip("alembic")
 
@@ -31,22 +29,6 @@ from dischargelab.logbook.summarise import summarise_source
 
 DDL = Path(__file__).resolve().parent / "data" / "logbook_schema"
 CYCLES = (1, 100, 200)
-
-
-@pytest.fixture(scope="module")
-def pg():
-    cluster = start_cluster()
-    try:
-        yield cluster
-    finally:
-        stop_cluster(cluster)
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def url(request, tmp_path):
-    if request.param == "sqlite":
-        return str(tmp_path / "logbook.sqlite")
-    return request.getfixturevalue("pg").new_database()
 
 
 def cell_c(shared_data, cycles=CYCLES) -> list[Path]:
@@ -114,7 +96,8 @@ def test_every_earlier_version_migrates_in_place_and_keeps_its_data(url, version
     assert len(migrated) == len(expected) == len(files)
     for old, new in zip(migrated, expected):
         for key, value in new.items():
-            assert old[key] == (None if key in ADDED_LATER[version] else value), key
+            if key != "id":      # where it was stored: the batch goes in SHA-256 order
+                assert old[key] == (None if key in ADDED_LATER[version] else value), key
     assert [e.discharged_Ah for e in health.events] == [r["discharged_Ah"] for r in expected]
 
 

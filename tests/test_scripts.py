@@ -23,6 +23,7 @@ BENCHMARKS = {
                                 "peak RSS MB"),
     "logbook.py": (["--copies", "20"], "later capacities in band"),
     "fleet.py": (["--packs", "1", "--repeats", "1"], "One file's task"),
+    "logbook_pages.py": (["--sizes", "2,3", "--requests", "3", "--workers", "1"], "goals at 3"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }
