@@ -213,6 +213,23 @@ def test_a_read_only_logbook_is_read_and_refuses_writes_with_one_line(shared_dat
             folder.chmod(0o755)
 
 
+def test_a_sqlite_logbook_removed_while_open_takes_no_more_writes(shared_data, tmp_path):
+    """The SQLite file is removed (a user, a sync tool) while a logbook is open: SQLite in
+    WAL mode would go on writing to the removed file and lose everything; the next write is
+    refused with one line instead."""
+    files = cell_c(shared_data)[:3]
+    db = tmp_path / "lb.sqlite"
+    with Logbook(db) as lb:
+        lb.add(files[:1], pack="C", refresh=False)
+        for suffix in ("", "-wal", "-shm"):
+            Path(f"{db}{suffix}").unlink(missing_ok=True)
+        with pytest.raises(LogbookStorageError, match=r"was removed or replaced while it was "
+                                                      r"open: nothing more was written") as err:
+            lb.add(files[1:], pack="C")
+        assert err.value.reason == "unreachable"
+    assert not db.exists()
+
+
 # --------------------------------------------------------------------------- PostgreSQL
 
 def pg_contents(url: str) -> dict:

@@ -330,7 +330,34 @@ def create(url: str, new: bool = True) -> Engine:
         raise LogbookError("this Python has no sqlite3 module") from None
     event.listen(engine, "connect", _sqlite_pragmas)
     event.listen(engine, "begin", _sqlite_begin)
+    _watch_file(engine, path)
     return engine
+
+
+def _watch_file(engine: Engine, path: Path) -> None:
+    """Refuse a write once the SQLite file was removed or replaced while open: SQLite in WAL
+    mode would go on writing to the removed file, and everything written would be lost."""
+    opened: dict = {}
+
+    def identity() -> tuple | None:
+        try:
+            info = os.stat(path)
+        except FileNotFoundError:
+            return None
+        return (info.st_dev, info.st_ino)
+
+    def on_connect(_dbapi_connection, _record) -> None:
+        opened.setdefault("file", identity())
+
+    def on_begin(conn) -> None:
+        if conn.info.get("write") and opened.get("file") != identity():
+            raise LogbookStorageError(
+                f"the logbook {path} was removed or replaced while it was open: nothing more "
+                "was written to it; restore it, or run the command again to start a new one "
+                "there", "unreachable")
+
+    event.listen(engine, "connect", on_connect)
+    event.listen(engine, "begin", on_begin)
 
 
 def _read_only_sqlite(path: Path) -> Engine:
