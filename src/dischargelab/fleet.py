@@ -57,6 +57,11 @@ WORKER_DEATHS_ALLOWED = 1
 #: Seconds to wait for a cluster's workers to come up (or connect to a scheduler).
 START_TIMEOUT_S = 60.0
 
+#: Modules a local cluster's workers import as they start (the readers and the logbook's
+#: tasks, with pandas and scipy): a few seconds each worker would otherwise spend on its
+#: first task, spent while the client lists and hashes its files.
+PRELOAD = ("dischargelab.io", "dischargelab.logbook.summarise", "dischargelab.logbook.figures")
+
 
 class FleetError(DischargelabError):
     """The cluster cannot be started or reached, or it lost every worker."""
@@ -170,7 +175,7 @@ class DaskExecutor:
                         n_workers=int(workers), threads_per_worker=1, processes=True,
                         host="127.0.0.1", dashboard_address=None, silence_logs=50,
                         scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                        worker_dashboard_address="127.0.0.1:0")
+                        worker_dashboard_address="127.0.0.1:0", preload=list(PRELOAD))
                 self.client = Client(self.cluster, timeout=START_TIMEOUT_S)
             else:
                 self.client = Client(scheduler, timeout=START_TIMEOUT_S)
