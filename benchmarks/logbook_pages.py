@@ -28,6 +28,7 @@ import http.client
 import os
 import random
 import re
+import shutil
 import signal
 import statistics
 import subprocess
@@ -49,14 +50,18 @@ DISTINCT_PACKS = 10
 GOAL_LIST_MS, GOAL_PAGE_MS = 50.0, 100.0
 
 
-def distinct_packs(lb, packs: int) -> None:
-    """Add ``packs`` packs of real files, each a different set of cycles, and fit them."""
+def distinct_packs(lb, packs: int, folder: Path) -> None:
+    """Add ``packs`` packs of real files, each a different set of cycles (copies changed by
+    trailing newlines, so each pack's files have hashes of their own), and fit them."""
     files = sorted(CELL_C.glob("DischargeCycle*.txt"))
     step = len(files) // EVENTS_PER_PACK
     for k in range(packs):
-        chosen = files[k % step::step][:EVENTS_PER_PACK]
-        lb.add(chosen, pack=f"pack-{k + 1:04d}", refresh=False)
-        lb.fit(f"pack-{k + 1:04d}", bootstrap=0)
+        name = f"pack-{k + 1:04d}"
+        (folder / name).mkdir(parents=True)
+        for f in files[k % step::step][:EVENTS_PER_PACK]:
+            (folder / name / f.name).write_bytes(f.read_bytes() + b"\n" * (k + 1))
+        lb.add(folder / name, pack=name, refresh=False)
+        lb.fit(name, bootstrap=0)
 
 
 def copy_packs(lb, total: int) -> None:
@@ -173,7 +178,7 @@ def main() -> None:
     rng = random.Random(0)
     rows = []
     with Logbook(db) as lb, executor(workers=opts.workers) as ex:
-        distinct_packs(lb, min(DISTINCT_PACKS, sizes[0]))
+        distinct_packs(lb, min(DISTINCT_PACKS, sizes[0]), work / "files")
         for size in sizes:
             copy_packs(lb, size)
             start = time.perf_counter()
@@ -207,9 +212,7 @@ def main() -> None:
           f"{statistics.median(last[5]):.1f} ms")
     print(machine_line(), f"; load average at the end {os.getloadavg()[0]:.2f}")
     if opts.keep is None:
-        for path in work.iterdir():
-            path.unlink()
-        work.rmdir()
+        shutil.rmtree(work)
 
 
 if __name__ == "__main__":
