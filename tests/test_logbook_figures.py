@@ -117,6 +117,13 @@ def test_a_new_figures_version_makes_every_pack_stale_and_pages_say_so(
         assert lb.refresh() == ["A", "B"] and lb.stale() == []
         assert counting == ["A", "B", "A", "B"]
         assert not lb.figures("A", recompute=False).recomputing
+        # a pack whose figures were never computed: its name and events, being recomputed
+        lb.add(cell_c(shared_data, [600, 650]), pack="C", refresh=False)
+        row = next(r for r in lb.packs(recompute=False).rows if r["name"] == "C")
+        assert row["events"] == 2 and row["recomputing"] and row["efc"] is None
+        page = lb.figures("C", recompute=False)
+        assert page.recomputing and page.summary is None and page.health is None
+        assert counting == ["A", "B", "A", "B"]
 
 
 def test_a_pack_whose_figures_cannot_be_made_says_why_once(tmp_path, shared_data, monkeypatch):
