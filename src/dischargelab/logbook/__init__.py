@@ -320,7 +320,7 @@ class Logbook:
         """
         from .figures import PackFigures
 
-        stored = self._stored([name], ("summary", "health", "model"), recompute)[name]
+        stored = self._stored([name], ("pack", "health", "model"), recompute)[name]
         return PackFigures.from_stored(stored)
 
     # ------------------------------------------------------------------ reading
@@ -381,7 +381,7 @@ class Logbook:
                 for s in (pack_summary((*self._pack_data(n), eol)) for n in self.pack_names())])
         from . import store
 
-        found = self._stored(None, ("summary",), recompute)
+        found = self._stored(None, ("row",), recompute)
         counts = {}
         if not all(s.current for s in found.values()):    # a stale row's events are counted
             with self._errors(), self._read() as conn:
@@ -389,8 +389,8 @@ class Logbook:
         rows = []
         for name, stored in found.items():
             row = dict.fromkeys(ROW_KEYS)
-            if stored.figures and stored.figures["summary"]:
-                row.update(stored.figures["summary"]["row"])
+            if stored.figures and stored.figures["row"]:
+                row.update(stored.figures["row"])
             row.update(name=name, recomputing=not stored.current)
             if not stored.current:
                 row["events"] = counts.get(stored.pack_id, 0)
@@ -452,12 +452,12 @@ class Logbook:
         from . import store
         from .figures import make_pack
 
-        stored = self._stored_one(name, ("summary", "health"))
+        stored = self._stored_one(name, ("pack", "health"))
         health = Health.from_dict(stored["health"])
         with self._errors(), self._read() as conn:
             row = store.pack_row(conn, name)
             model = store.latest_model(conn, row["id"])
-        return make_pack(row, stored["summary"]["pack"]["events"], health, model,
+        return make_pack(row, stored["pack"]["events"], health, model,
                          fit=lambda: self._fit(name, health))
 
     def raw(self, sha256: str) -> bytes:

@@ -119,9 +119,11 @@ def pack_figures(job: dict) -> dict:
     Returns
     -------
     dict
-        ``{"name", "version", "summary": {"row", "pack"}, "fleet", "health", "model"}``,
-        each JSON-ready (``health``: ``Health.to_dict()``; ``fleet``: the fleet report's
-        row; ``model``: :func:`model_curves`).
+        ``{"name", "version", "row", "pack", "fleet", "health", "model"}``, each
+        JSON-ready (``row``: the pack list's row; ``pack``: ``Pack.to_dict()``; ``health``:
+        ``Health.to_dict()``; ``fleet``: the fleet report's row; ``model``:
+        :func:`model_curves`). The list's row is kept apart, small, so a list of
+        thousands of packs reads only those.
     """
     from .fleet_report import fleet_row
     from .results import _clean
@@ -130,8 +132,8 @@ def pack_figures(job: dict) -> dict:
     health = build_health(row, events, model, DEFAULT_EOL)
     fleet = fleet_row(health, row)
     pack = make_pack(row, len(events), health, model)
-    summary = {"row": {k: fleet[k] for k in ROW_KEYS}, "pack": pack.to_dict()}
-    return _clean({"name": row["name"], "version": row["version"], "summary": summary,
+    return _clean({"name": row["name"], "version": row["version"],
+                   "row": {k: fleet[k] for k in ROW_KEYS}, "pack": pack.to_dict(),
                    "fleet": fleet, "health": health.to_dict(), "model": model_curves(pack)})
 
 
@@ -160,7 +162,7 @@ class Stored:
     figures: dict | None
 
 
-def read_stored(conn, names=None, columns=("summary",)) -> dict[str, Stored]:
+def read_stored(conn, names=None, columns=("row",)) -> dict[str, Stored]:
     """Stored figures of the packs named (all by default), by name, in name order."""
     p, f = schema.packs, schema.pack_figures
     cols = [getattr(f.c, f"{c}_json") for c in columns]
@@ -170,12 +172,15 @@ def read_stored(conn, names=None, columns=("summary",)) -> dict[str, Stored]:
     if names is not None:
         query = query.where(p.c.name.in_(list(names)))
     key = figures_key()
+    rows = conn.execute(query).all()
+    # each column's JSON texts decoded in one call: a list of thousands of packs is one
+    # json.loads, not thousands
+    decoded = [json.loads("[" + ",".join(r[6 + k] or "null" for r in rows) + "]")
+               for k in range(len(columns))]
     out = {}
-    for r in conn.execute(query):
-        name, pid, version, stored_version, stored_key, error, *values = r
+    for j, (name, pid, version, stored_version, stored_key, error, *_) in enumerate(rows):
         have = stored_version is not None
-        figures = {c: (json.loads(v) if v is not None else None)
-                   for c, v in zip(columns, values)} if have else None
+        figures = {c: decoded[k][j] for k, c in enumerate(columns)} if have else None
         out[name] = Stored(name=name, pack_id=pid, error=error, figures=figures,
                            current=have and stored_version == version and stored_key == key)
     return out
@@ -201,7 +206,7 @@ def store_figures(conn, pack_id: int, version: int, figures: dict | None,
     f = schema.pack_figures
     values = {"pack_id": pack_id, "pack_version": int(version), "figures_version": figures_key(),
               "computed_at": schema.now_iso(), "error": error}
-    for column in ("summary", "fleet", "health", "model"):
+    for column in ("row", "pack", "fleet", "health", "model"):
         value = None if figures is None else figures.get(column)
         values[f"{column}_json"] = None if value is None else json.dumps(value, allow_nan=False)
     insert = _upsert(conn).values(**values)
@@ -241,10 +246,9 @@ class PackFigures:
     @classmethod
     def from_stored(cls, stored: Stored) -> PackFigures:
         got = stored.figures or {}
-        summary = got.get("summary")
-        pack = None
-        if summary:
-            pack = dict(summary["pack"])
+        pack = got.get("pack")
+        if pack:
+            pack = dict(pack)
             ref, cap = pack.get("reference_capacity_Ah"), pack.get("capacity_Ah")
             pack["capacity_fraction"] = cap / ref if cap is not None and ref else None
         return cls(name=stored.name, summary=pack, health=got.get("health"),

@@ -20,8 +20,8 @@ Tables (all values SI, discharge positive; ``*_json`` columns hold JSON text)::
                   curve_json, details_json        -- unique (source_id, idx)
     models        id, pack_id, fitted_at, reference_event_id, capacity_Ah,
                   resistance_ohm, battery_json    -- the pack's fitted battery models
-    pack_figures  pack_id (key), pack_version, figures_version, computed_at, summary_json,
-                  fleet_json, health_json, model_json, error  -- see .figures
+    pack_figures  pack_id (key), pack_version, figures_version, computed_at, row_json,
+                  pack_json, fleet_json, health_json, model_json, error  -- see .figures
 
 Versions (``logbook_meta.schema_version``; a database is migrated forward when
 opened, a newer one is refused). Each step is an Alembic revision shipped in the
@@ -171,7 +171,8 @@ pack_figures = Table(
     Column("pack_version", Integer, nullable=False),
     Column("figures_version", String(60), nullable=False),
     Column("computed_at", String(40), nullable=False),
-    Column("summary_json", Text),
+    Column("row_json", Text),
+    Column("pack_json", Text),
     Column("fleet_json", Text),
     Column("health_json", Text),
     Column("model_json", Text),

@@ -161,11 +161,13 @@ class PackPages:
         ]
 
     async def list_packs(self, request: Request) -> Response:
-        data = await self._call(lambda: self.logbook().packs(recompute=False).to_dict())
-        if any(r.get("recomputing") for r in data["rows"]):
+        # the rows are the stored figures' JSON as read (plain, no NaN): sent as they are
+        rows = await self._call(lambda: self.logbook().packs(recompute=False).rows)
+        data = {"rows": rows}
+        if any(r.get("recomputing") for r in rows):
             self.refresh_soon()
             data["recompute_problem"] = self.refresh_problem
-        return JSONResponse(_clean(data))
+        return JSONResponse(data)
 
     def _pack_detail(self, name: str) -> dict:
         """What is stored about a pack, read only: a GET never computes, fits or writes (a
@@ -191,8 +193,9 @@ class PackPages:
         return out
 
     async def one_pack(self, request: Request) -> Response:
+        # stored figures' JSON and the events' to_dict(): plain already
         data = await self._call(self._pack_detail, request.path_params["name"])
-        return JSONResponse(_clean(data))
+        return JSONResponse(data)
 
     async def missions(self, request: Request) -> Response:
         from ..mission import bundled_missions
