@@ -3,6 +3,7 @@
 import os
 import platform
 from datetime import UTC, datetime
+from pathlib import Path
 
 
 def machine_line() -> str:
@@ -32,3 +33,15 @@ def table(title: str, head: list[str], rows: list[list]) -> None:
     print("  ".join("-" * w for w in widths))
     for r in rows:
         print("  ".join(str(x).ljust(w) for x, w in zip(r, widths)))
+def shared_data() -> Path:
+    """The real data sets: ``$DISCHARGELAB_SHARED_DATA``, else ``shared/data`` beside the
+    checkout or one of its parents (as the tests find them)."""
+    env = os.environ.get("DISCHARGELAB_SHARED_DATA")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve().parents[1]
+    for parent in [here, *here.parents]:
+        candidate = parent / "shared" / "data"
+        if (candidate / "samsung30q_S001").is_dir():
+            return candidate
+    return here.parent / "shared" / "data"

@@ -1,29 +1,28 @@
-"""Fleet-scale ingest: files per second in process and on Dask workers, client memory, cost.
+"""Fleet-scale ingest: the whole `logbook add` command in process and on Dask workers.
 
-The 68 cell C cycle files of ../shared/data/samsung30q_ageing_cellC copied under
-several pack folders (default 9: 612 files), each copy changed by trailing newlines
-so that its SHA-256 differs, are added to fresh SQLite logbooks:
+The 68 cell C cycle files of ../shared/data/samsung30q_ageing_cellC copied under several
+pack folders (default 9: 612 files), each copy changed by trailing newlines so that its
+SHA-256 differs, are added to fresh SQLite logbooks by the command a user types,
 
-1. in process (``--workers 1``, no Dask);
-2. on a local Dask cluster of 2 worker processes (``--workers 2``), and more if asked.
+    dischargelab logbook add PACKS --pack-from parent -r --workers N --db FILE
 
-Each run is its own process (what ``dischargelab logbook add --workers N`` runs), so its
-peak memory (the client: hashing, the scheduler thread, the database writes) is measured
-alone from ``getrusage`` of that process. The events stored are compared with the in-process
-run's. The table gives files per second (wall clock, cluster start included),
-speed-up against one worker, the client's peak RSS, and the costs per file and per
-event that docs/fleet.md extrapolates from.
+run as a subprocess and timed from its start to its exit (imports, the cluster's start,
+listing and hashing, reading, writing, the packs' figures, the cluster's end), for
+``--workers 1`` (in this process, no Dask) and 2 (a local cluster), in turns (1, 2, 1, 2...)
+so that a change of the machine's load falls on both alike. The table gives the median and
+the spread of the runs, the speed-up of the medians, the load average around the runs, and
+whether the stored events and figures equal the in-process run's.
 
-Usage: python benchmarks/fleet.py [--packs N] [--workers 2,...] [--keep DIR] [--no-formats]
-       [--repeats N]
+Usage: python benchmarks/fleet.py [--packs N] [--workers 2,...] [--repeats N] [--keep DIR]
+       [--no-formats]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -32,32 +31,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _machine import machine_line
+from _machine import machine_line, shared_data
 
-ROOT = Path(__file__).resolve().parents[1]
-CELL_C = ROOT.parent / "shared" / "data" / "samsung30q_ageing_cellC"
+CELL_C = shared_data() / "samsung30q_ageing_cellC"
 
-#: One ingest in a child process (what ``logbook add --workers N`` runs): prints, as JSON,
-#: the wall time, the time of each file's completion, and the child's peak RSS and CPU time
-#: (the client alone: Dask workers are other processes).
-CHILD = """
-import json, resource, sys, time
-start = time.perf_counter()
-from dischargelab.fleet import executor
-from dischargelab.logbook import Logbook
-folder, db, workers = sys.argv[1], sys.argv[2], int(sys.argv[3])
-done_at = []
-with Logbook(db) as lb, executor(workers=workers) as ex:
-    ready = time.perf_counter()
-    result = lb.add(folder, pack_from="parent", recursive=True, executor=ex,
-                    progress=lambda done, total, name: done_at.append(time.perf_counter()))
-wall = time.perf_counter() - start
-usage = resource.getrusage(resource.RUSAGE_SELF)
-print(json.dumps({"wall_s": wall, "ready_s": ready - start,
-                  "done_at": [t - start for t in done_at], "added": len(result.added),
-                  "rejected": result.rejected, "peak_rss_MB": usage.ru_maxrss / 1024,
-                  "cpu_s": usage.ru_utime + usage.ru_stime}))
-"""
+#: The command's own process: ``dischargelab`` beside this interpreter.
+COMMAND = [sys.executable, "-c", "from dischargelab.cli import main; main()"]
 
 
 def make_packs(root: Path, packs: int) -> int:
@@ -71,35 +50,42 @@ def make_packs(root: Path, packs: int) -> int:
 
 
 def add(folder: Path, db: Path, workers: int) -> dict:
-    proc = subprocess.run([sys.executable, "-c", CHILD, str(folder), str(db), str(workers)],
+    """One run of the command; its wall time and the load average before and after."""
+    db.unlink(missing_ok=True)
+    load = os.getloadavg()[0]
+    start = time.perf_counter()
+    proc = subprocess.run([*COMMAND, "logbook", "add", str(folder), "--pack-from", "parent",
+                           "-r", "--workers", str(workers), "--db", str(db), "--json"],
                           capture_output=True, text=True, timeout=3600)
+    wall = time.perf_counter() - start
     if proc.returncode:
-        raise SystemExit(f"ingest failed: {proc.stderr[-2000:]}")
-    stats = json.loads(proc.stdout.strip().splitlines()[-1])
-    done = stats["done_at"]
-    # steady state: the middle 80 % of the files (start-up and the last stragglers left out)
-    a, b = len(done) // 10, len(done) - len(done) // 10 - 1
-    stats["steady_files_per_s"] = (b - a) / (done[b] - done[a])
-    return stats
+        raise SystemExit(f"logbook add failed: {proc.stderr[-2000:]}")
+    return {"wall_s": wall, "load": (load, os.getloadavg()[0]), "db": db}
 
 
-def events(db: Path) -> dict:
+def contents(db: Path) -> tuple:
+    """Every stored event and every pack's stored figures (ids and times left out)."""
     from dischargelab.logbook import Logbook
 
-    with Logbook(str(db)) as lb:
-        return {(name, r["source"], r["idx"]): {k: v for k, v in r.items() if k != "id"}
-                for name in lb.pack_names() for r in lb.events(name).to_dict()["events"]}
+    with Logbook(str(db), create=False) as lb:
+        events = {(name, r["source"], r["idx"]): {k: v for k, v in r.items() if k != "id"}
+                  for name in lb.pack_names() for r in lb.events(name).to_dict()["events"]}
+        assert lb.stale() == [], "figures left stale"
+        health = {name: lb.health(name).to_dict() for name in lb.pack_names()}
+    for h in health.values():
+        for e in h["events"]:
+            e.pop("event_id")
+    return events, health
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--packs", type=int, default=9, help="pack folders (68 files each)")
     parser.add_argument("--workers", default="2", help="worker counts to try, e.g. 2,4")
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each worker count")
     parser.add_argument("--keep", type=Path, help="keep the files and databases here")
     parser.add_argument("--no-formats", action="store_true",
                         help="skip the per-format cost of one file")
-    parser.add_argument("--repeats", type=int, default=3,
-                        help="runs per file for the per-format cost (median)")
     opts = parser.parse_args()
     if not CELL_C.is_dir():
         raise SystemExit(f"needs {CELL_C}")
@@ -109,40 +95,36 @@ def main() -> None:
         shutil.rmtree(folder)
     n = make_packs(folder, opts.packs)
     size_MB = sum(p.stat().st_size for p in folder.rglob("*.txt")) / 1e6
-    runs = []
-    for workers in [1] + [int(w) for w in opts.workers.split(",")]:
-        db = work / f"logbook-{workers}.sqlite"
-        db.unlink(missing_ok=True)
-        stats = add(folder, db, workers)
-        stats.update(workers=workers, db=db, db_MB=db.stat().st_size / 1e6)
-        runs.append(stats)
-    reference = events(runs[0]["db"])
-    base = runs[0]
-    n_events = len(reference)
-    print(f"Fleet ingest: {n} files ({size_MB:.0f} MB, {n_events} events) in {opts.packs} "
-          f"pack folders")
-    print("| workers | wall [s] | files/s (whole run) | speed-up | files/s (steady) | speed-up "
-          "| client peak RSS [MB] | client CPU [s] | database [MB] | events identical |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
-    for r in runs:
-        same = "reference" if r is base else ("yes" if events(r["db"]) == reference else "NO")
-        assert r["added"] == n and not r["rejected"], (r["added"], n, r["rejected"][:3])
-        print(f"| {r['workers']} | {r['wall_s']:.1f} | {n / r['wall_s']:.1f} | "
-              f"{base['wall_s'] / r['wall_s']:.2f}x | {r['steady_files_per_s']:.1f} | "
-              f"{r['steady_files_per_s'] / base['steady_files_per_s']:.2f}x | "
-              f"{r['peak_rss_MB']:.0f} | {r['cpu_s']:.1f} | {r['db_MB']:.1f} | {same} |")
-    print("(whole run: from the command's start, imports and cluster start-up included; "
-          "steady: the middle 80 % of the files)")
-    per_file_ms = 1000 * base["wall_s"] / n
-    print(f"\nin process: {per_file_ms:.1f} ms per file, {1000 * base['wall_s'] / n_events:.1f} "
-          f"ms per event (read, summarise, hash, compress, write); database "
-          f"{1000 * base['db_MB'] / n:.0f} kB per file ({base['db_MB'] / size_MB:.2f} of the "
-          f"raw size, the raw file kept compressed)")
+    counts = [1] + [int(w) for w in opts.workers.split(",")]
+    runs: dict[int, list] = {w: [] for w in counts}
+    for _ in range(opts.repeats):
+        for workers in counts:
+            runs[workers].append(add(folder, work / f"logbook-{workers}.sqlite", workers))
+    reference = contents(runs[1][-1]["db"])
+    n_events = len(reference[0])
+    base = statistics.median(r["wall_s"] for r in runs[1])
+    print(f"Fleet ingest, the whole command: {n} files ({size_MB:.0f} MB, {n_events} events) "
+          f"in {opts.packs} pack folders, median of {opts.repeats} runs in turns")
+    print("| workers | wall [s], median | runs [s] | files/s | speed-up | load average "
+          "around the runs | database [MB] | events and figures identical |")
+    print("|---:|---:|---|---:|---:|---|---:|---|")
+    for workers in counts:
+        rs = runs[workers]
+        wall = statistics.median(r["wall_s"] for r in rs)
+        db = rs[-1]["db"]
+        same = "reference" if workers == 1 else ("yes" if contents(db) == reference else "NO")
+        loads = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in (r["load"] for r in rs))
+        walls = ", ".join(f"{r['wall_s']:.1f}" for r in rs)
+        print(f"| {workers} | {wall:.1f} | {walls} | "
+              f"{n / wall:.1f} | {base / wall:.2f}x | {loads} | "
+              f"{db.stat().st_size / 1e6:.1f} | {same} |")
+    print("(from the command's start to its exit: imports, cluster start-up, hashing, reading, "
+          "writing, each pack's figures)")
     print(machine_line(), f"; load average at the end {os.getloadavg()[0]:.2f}")
     if not opts.keep:
         shutil.rmtree(work)
     if not opts.no_formats:
-        per_format_costs(opts.repeats)
+        per_format_costs()
 
 
 #: One shared file of each format the logbook reads (docs/fleet.md extrapolates from them).
@@ -160,7 +142,7 @@ def per_format_costs(repeats: int = 3) -> None:
     """What one file costs a worker (read, split, summarise, compress), median of runs."""
     from dischargelab.logbook.summarise import summarise_source
 
-    data = CELL_C.parent
+    data = shared_data()
     print("\nOne file's task, one core (summarise_source: read, split into events, summarise, "
           "compress), median of", repeats)
     print("| file | format | size [MB] | events | time [ms] | per MB [ms] | kept bytes / size |")

@@ -50,3 +50,23 @@ def shared_data() -> Path:
 def bundled_data() -> Path:
     """Samsung 30Q demo files bundled with the package."""
     return REPO / "src" / "dischargelab" / "data" / "samsung30q"
+
+
+@pytest.fixture(scope="module")
+def pg():
+    """A throwaway PostgreSQL server for one test module (``tests/pg_cluster.py``)."""
+    from pg_cluster import start_cluster, stop_cluster
+
+    cluster = start_cluster()
+    try:
+        yield cluster
+    finally:
+        stop_cluster(cluster)
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def url(request, tmp_path):
+    """A new logbook's location on each backend: a SQLite file, a PostgreSQL database."""
+    if request.param == "sqlite":
+        return str(tmp_path / "logbook.sqlite")
+    return request.getfixturevalue("pg").new_database()

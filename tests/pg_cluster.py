@@ -99,25 +99,40 @@ def start_cluster() -> Cluster:
     run = dict(check=True, capture_output=True, text=True, timeout=TIMEOUT_S)
     subprocess.run(_as_postgres([str(bin_dir / "initdb"), "-D", str(data), "-U", "postgres",
                                  "-A", "trust", "-E", "UTF8", "--no-sync"]), **run)
-    options = (f"-c listen_addresses=127.0.0.1 -p {port} -k {sockets} -c fsync=off "
+    cluster = Cluster(root, port, 0, bin_dir)
+    start_server(cluster)
+    return cluster
+
+
+def start_server(cluster: Cluster) -> None:
+    """Start the cluster's server (again, after :func:`stop_server`) on its port."""
+    data, sockets = cluster.root / "data", cluster.root / "sockets"
+    options = (f"-c listen_addresses=127.0.0.1 -p {cluster.port} -k {sockets} -c fsync=off "
                "-c synchronous_commit=off -c full_page_writes=off")
-    subprocess.run(_as_postgres([str(bin_dir / "pg_ctl"), "-D", str(data), "-o", options,
-                                 "-l", str(root / "server.log"), "-w", "-t", str(TIMEOUT_S),
-                                 "start"]), **run)
-    pid = int((data / "postmaster.pid").read_text().splitlines()[0])
-    return Cluster(root, port, pid, bin_dir)
+    subprocess.run(_as_postgres([str(cluster.bin_dir / "pg_ctl"), "-D", str(data), "-o",
+                                 options, "-l", str(cluster.root / "server.log"), "-w", "-t",
+                                 str(TIMEOUT_S), "start"]),
+                   check=True, capture_output=True, text=True, timeout=TIMEOUT_S)
+    cluster.pid = int((data / "postmaster.pid").read_text().splitlines()[0])
+
+
+def stop_server(cluster: Cluster) -> None:
+    """Stop the server now (fast shutdown: open transactions are rolled back, clients cut
+    off), keep its data, and check its process is gone."""
+    subprocess.run(_as_postgres([str(cluster.bin_dir / "pg_ctl"), "-D",
+                                 str(cluster.root / "data"), "-m", "fast", "-w", "-t",
+                                 str(TIMEOUT_S), "stop"]),
+                   check=True, capture_output=True, text=True, timeout=TIMEOUT_S + 10)
+    deadline = time.monotonic() + 10
+    while _pid_alive(cluster.pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _pid_alive(cluster.pid), f"PostgreSQL server {cluster.pid} still running"
 
 
 def stop_cluster(cluster: Cluster) -> None:
     """Stop the server, check its process is gone, remove its folder."""
     try:
-        subprocess.run(_as_postgres([str(cluster.bin_dir / "pg_ctl"), "-D",
-                                     str(cluster.root / "data"), "-m", "fast", "-w", "-t",
-                                     str(TIMEOUT_S), "stop"]),
-                       check=True, capture_output=True, text=True, timeout=TIMEOUT_S + 10)
-        deadline = time.monotonic() + 10
-        while _pid_alive(cluster.pid) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert not _pid_alive(cluster.pid), f"PostgreSQL server {cluster.pid} still running"
+        if _pid_alive(cluster.pid):
+            stop_server(cluster)
     finally:
         shutil.rmtree(cluster.root, ignore_errors=True)

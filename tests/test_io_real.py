@@ -255,3 +255,52 @@ def test_cell_c_fits_without_flags(shared_data):
     result = dl.fit(shared_data / "samsung30q_ageing_cellC" / "DischargeCycle001.txt",
                     bootstrap=0)
     assert result.rmse_V < 0.03
+
+
+def _cell_c_copy(shared_data, tmp_path, cycle: str, keep_rows: int | None, zero_rows: list,
+                 lead: bool = False) -> Path:
+    """A copy of a cell C file cut after ``keep_rows`` data rows (None: whole), with rows of
+    zeros (the logger's stop or start record) after (or before) the data."""
+    path = shared_data / "samsung30q_ageing_cellC" / f"DischargeCycle{cycle}.txt"
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    start = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 1
+    data = [line for line in lines[start:] if line.strip()]
+    data = data[:keep_rows] if keep_rows else data
+    last_t = float(data[-1].split("\t")[0])
+    zeros = [("\t".join([f"{(last_t + 1 + k) if t is None else t:.6f}"] + ["0.000000"] * 6))
+             + "\n" for k, t in enumerate(zero_rows)]
+    body = zeros + data if lead else data + zeros
+    out = tmp_path / path.name
+    out.write_text("".join(lines[:start] + body), encoding="utf-8")
+    return out
+
+
+@pytest.mark.parametrize("zero_time", [None, 0.0])
+def test_a_logger_stop_row_of_zeros_is_dropped_and_said(shared_data, tmp_path, zero_time):
+    """A test cut short whose logger wrote one last row of zeros (time going on, or 0) reads
+    as the discharge it holds; the row is dropped and the notes say so."""
+    path = _cell_c_copy(shared_data, tmp_path, "300", 320, [zero_time])
+    frame, meta = read_discharge(path)
+    raw = _lvm_columns(path)[:-1]
+    load = raw[:, 1] < -1.0
+    assert len(frame) == int(load.sum())
+    np.testing.assert_allclose(frame["voltage_V"], raw[load, 2], rtol=1e-9)
+    assert meta["dropped"]["logger_stop"] == 1
+    zero_line = 22 + 1 + 320 + 1    # header lines, X_Value, 320 rows, the zero row
+    assert any(f"line {zero_line}, the last of the file" in n and "zeros" in n
+               for n in meta["notes"])
+    assert "logger record of zeros" in meta["summary"]
+
+
+def test_leading_logger_rows_and_a_whole_file_of_zeros(shared_data, tmp_path):
+    path = _cell_c_copy(shared_data, tmp_path, "010", None, [0.0, 0.0], lead=True)
+    # two leading records at t = 0 give a duplicate time only if kept: both are dropped
+    frame, meta = read_discharge(path)
+    assert meta["dropped"]["logger_stop"] == 2 and meta["dropped"]["duplicate_time"] == 0
+    # a zero inside the data is still refused (the wrong column, not a logger record)
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    k = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 100
+    lines[k] = lines[k].split("\t")[0] + "\t0\t0\t0\t0\t0\t0\n"
+    path.write_text("".join(lines), encoding="utf-8")
+    with pytest.raises(DataError, match=r"voltage column holds 0 at line \d+"):
+        read_discharge(path)

@@ -17,8 +17,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pg_cluster import start_cluster, stop_cluster
-
 pytest.importorskip("sqlalchemy")
 
 import dischargelab as dl
@@ -46,32 +44,18 @@ def integrated_Ah(path: Path) -> float:
     return float(np.trapezoid(-raw[load, 1], raw[load, 0]) / 3600.0)
 
 
-@pytest.fixture(scope="module")
-def pg():
-    cluster = start_cluster()
-    try:
-        yield cluster
-    finally:
-        stop_cluster(cluster)
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def url(request, tmp_path):
-    if request.param == "sqlite":
-        return str(tmp_path / "logbook.sqlite")
-    return request.getfixturevalue("pg").new_database()
-
-
 # --------------------------------------------------------------------------- ingest
 
 def test_add_twice_health_and_outlier(url, shared_data):
     files = cell_c_files(shared_data, AROUND_300)
     seen = []
     with Logbook(url) as lb:
-        result = lb.add(files, pack="cell C", progress=lambda d, t, m: seen.append((d, t)))
+        result = lb.add(files, pack="cell C", progress=lambda d, t, m: seen.append((d, t, m)))
         assert sorted(result.added) == sorted(p.name for p in files)
         assert result.events == len(files) and not result.rejected
-        assert seen[-1] == (len(files), len(files))
+        # every file, then the pack's figures recomputed and stored once
+        assert seen[-2][:2] == (len(files), len(files))
+        assert seen[-1] == (1, 1, "figures of cell C") and lb.stale() == []
         again = lb.add(files, pack="cell C")
         assert again.added == [] and again.events == 0
         assert sorted(again.skipped) == sorted(p.name for p in files)
@@ -80,7 +64,9 @@ def test_add_twice_health_and_outlier(url, shared_data):
     data = health.to_dict()
     assert data["pack"] == "cell C"
     assert set(data["events"][0]) == {"source", "start", "kind", "discharged_Ah", "capacity_Ah",
-                                      "capacity_interval95", "resistance_ohm", "efc", "outlier"}
+                                      "capacity_interval95", "resistance_ohm", "efc", "outlier",
+                                      "event_id", "event_kind", "cycle", "full",
+                                      "capacity_method", "resistance_interval95", "notes"}
     assert {e["kind"] for e in data["events"]} == {"full"}
     by_name = {e["source"]: e for e in data["events"]}
     for path in files:
@@ -103,7 +89,9 @@ def test_add_twice_health_and_outlier(url, shared_data):
     assert efc[-1] == pytest.approx(total / caps[0], rel=1e-4)
     assert np.all(np.diff(efc) > 0)
     forecast = data["forecast"]
-    assert set(forecast) == {"threshold_Ah", "eol_efc", "eol_efc_interval95", "band"}
+    assert set(forecast) == {"threshold_Ah", "eol_efc", "eol_efc_interval95", "band", "eol",
+                             "observed", "first_efc", "capacity_trend", "resistance_trend",
+                             "future_band"}
     band = forecast["band"]
     assert len(band["efc"]) == len(band["lo"]) == len(band["hi"]) == len(band["capacity_Ah"])
     assert all(lo <= m <= hi for lo, m, hi in zip(band["lo"], band["capacity_Ah"], band["hi"]))
@@ -401,3 +389,47 @@ def _has(module: str) -> bool:
     import importlib.util
 
     return importlib.util.find_spec(module) is not None
+
+
+@pytest.mark.slow
+def test_every_ageing_file_and_a_test_cut_short_by_the_logger_go_in(tmp_path, shared_data):
+    """All of cell C, and a copy of cycle 340 cut after 320 rows that ends with the
+    logger's row of zeros (as 17 of 1,311 held-out files do): the copy goes in as a partial
+    event, the row dropped and said; its charge counts in EFC; its capacity is left out
+    (too little of the capacity to tell)."""
+    folder = tmp_path / "cell C"
+    folder.mkdir()
+    files = sorted((shared_data / CELL_C).glob("DischargeCycle*.txt"))
+    lines = (shared_data / CELL_C / "DischargeCycle340.txt").read_text(
+        encoding="utf-8").splitlines(keepends=True)
+    start = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 1
+    last_t = float(lines[start + 319].split("\t")[0])
+    cut = lines[:start + 320] + [f"{last_t + 1:.6f}" + "\t0.000000" * 6 + "\n"]
+    (folder / "DischargeCycle345.txt").write_text("".join(cut), encoding="utf-8")
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        result = lb.add([*files, folder], pack="C")
+        assert not result.rejected and len(result.added) == len(files) + 1
+        assert result.notes == [("DischargeCycle345.txt",
+                                 "dropped 1 row at line 344, the last of the file: the logger's "
+                                 "record of zeros (voltage and current 0, not a battery "
+                                 "reading)")]
+        assert any(line.startswith("DischargeCycle345.txt: dropped 1 row") for line in
+                   result.lines())
+        events = lb.health("C").events
+    by_name = {e.source: e for e in events}
+    cut_event = by_name["DischargeCycle345.txt"]
+    assert cut_event.health_kind == "partial" and cut_event.capacity_Ah is None
+    assert any("too little" in note for note in cut_event.notes)
+    raw = np.array([[float(x) for x in line.split("\t")[:2]] for line in cut[start:-1]])
+    load = raw[:, 1] < -1.0
+    charge = float(np.trapezoid(-raw[load, 1], raw[load, 0]) / 3600.0)
+    assert cut_event.discharged_Ah == pytest.approx(charge, rel=1e-3)
+    k = [e.source for e in events].index("DischargeCycle345.txt")
+    before, after = events[k - 1], events[k + 1]     # cycles 340 and 350
+    reference = events[0].capacity_Ah                 # EFC counts in first full discharges
+    # EFC from 340 to 350: cycles 341-344 as their neighbours' mean, the cut one's own charge,
+    # then 346-349 and 350 likewise
+    step = (after.efc - before.efc) * reference
+    expected = (4 * (before.discharged_Ah + charge) / 2 + charge
+                + 4 * (charge + after.discharged_Ah) / 2 + after.discharged_Ah)
+    assert step == pytest.approx(expected, rel=1e-6)

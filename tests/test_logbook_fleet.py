@@ -96,17 +96,21 @@ def test_refits_build_each_packs_job_only_as_the_executor_asks(packs, tmp_path, 
         class Watching(InProcessExecutor):
             def map_unordered(self, func, items, per_task=1):
                 for item, outcome in super().map_unordered(func, items, per_task):
-                    seen.append(len(built))     # jobs built when this one comes back
+                    if func.__name__ == "fit_job":      # not the figures made after them
+                        seen.append(len(built))     # jobs built when this one comes back
                     yield item, outcome
 
         fitted = lb.fit_all(executor=Watching(), bootstrap=0,
-                            progress=lambda done, total, name: calls.append((done, total)))
+                            progress=lambda done, total, name: calls.append((done, total, name)))
+        assert lb.stale() == []     # the new models' figures are stored
     # "no-full" (tried first, nothing to fit), then one job per result: never every
     # pack's file bytes at once (building them all first would read [4, 4, 4])
     assert seen == [2, 3, 4]
     assert sorted(fitted) == ["no-full", "pack-a", "pack-b", "pack-c"]
     assert "no full discharge" in fitted["no-full"]
-    assert calls[-1] == (4, 4) and [d for d, _ in calls] == [1, 2, 3, 4]
+    fits = [(d, t) for d, t, name in calls if not name.startswith("figures of")]
+    assert fits[-1] == (4, 4) and [d for d, _ in fits] == [1, 2, 3, 4]
+    assert [name for *_, name in calls[4:]] == [f"figures of pack-{x}" for x in "abc"]
 
 
 def run_cli(*args):

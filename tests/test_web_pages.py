@@ -124,8 +124,11 @@ def page_rows(browser) -> list[list[str]]:
 
 
 def open_list(browser, server) -> list[list[str]]:
+    """The list's rows once every pack's stored figures are current (the server recomputes
+    stale ones in the background and the page looks again until then)."""
     browser.get(server.base + "/")
-    browser.wait_for("window.__packs && window.__packs.loaded", what="the pack list")
+    browser.wait_for("window.__packs && window.__packs.loaded && "
+                     "!window.__packs.rows.some(r => r.recomputing)", 120, "the pack list")
     return page_rows(browser)
 
 
@@ -222,7 +225,8 @@ def test_uploads_through_the_form_and_the_api_appear_in_the_list(server, browser
     browser.driver.find_element("id", "upload-file").send_keys(str(uploaded))
     browser.driver.find_element("id", "upload-button").click()
     browser.wait_for("window.__packs.rows.some(r => r.name === 'cell C' && r.events === "
-                     f"{len(CYCLES) + 1})", 60, "the uploaded event in the list")
+                     f"{len(CYCLES) + 1} && !r.recomputing)", 120,
+                     "the uploaded event in the list, its figures recomputed")
     assert browser.text("upload-result") == f"{uploaded.name}: added, 1 events"
     with dl.Logbook(str(db)) as lb:
         expected = lb.packs().to_dict()["rows"]

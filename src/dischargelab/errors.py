@@ -39,3 +39,16 @@ def require(module: str, extra: str):
 
 class LogbookError(DischargelabError):
     """The logbook cannot do what was asked (unknown pack, newer database, no connection...)."""
+
+
+class LogbookStorageError(LogbookError):
+    """The logbook's database cannot store or answer: its disk is full, it is read-only, the
+    server went away or another writer holds it too long.
+
+    ``reason`` is one of ``"full"``, ``"read-only"``, ``"unreachable"``, ``"busy"``,
+    ``"io"``. What was stored before is kept: every write is one whole transaction.
+    """
+
+    def __init__(self, message: str, reason: str = ""):
+        super().__init__(message)
+        self.reason = reason

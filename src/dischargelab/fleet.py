@@ -17,7 +17,9 @@ or a scheduler, and the client is the only writer of whatever stores the results
   whose worker dies twice is reported as failed (:class:`WorkerCrash`) instead of
   being retried for ever.
 
-:func:`executor` picks one from the arguments (or ``DISCHARGELAB_SCHEDULER``).
+:func:`executor` picks one from the arguments (or ``DISCHARGELAB_SCHEDULER``);
+``background=True`` starts a Dask one in a thread (:class:`StartingExecutor`), so the
+caller lists and hashes its files while the workers come up.
 
 References
 ----------
@@ -30,6 +32,7 @@ results, pure functions).
 from __future__ import annotations
 
 import os
+import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from itertools import islice
@@ -53,6 +56,11 @@ WORKER_DEATHS_ALLOWED = 1
 
 #: Seconds to wait for a cluster's workers to come up (or connect to a scheduler).
 START_TIMEOUT_S = 60.0
+
+#: Modules a local cluster's workers import as they start (the readers and the logbook's
+#: tasks, with pandas and scipy): a few seconds each worker would otherwise spend on its
+#: first task, spent while the client lists and hashes its files.
+PRELOAD = ("dischargelab.io", "dischargelab.logbook.summarise", "dischargelab.logbook.figures")
 
 
 class FleetError(DischargelabError):
@@ -167,7 +175,7 @@ class DaskExecutor:
                         n_workers=int(workers), threads_per_worker=1, processes=True,
                         host="127.0.0.1", dashboard_address=None, silence_logs=50,
                         scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                        worker_dashboard_address="127.0.0.1:0")
+                        worker_dashboard_address="127.0.0.1:0", preload=list(PRELOAD))
                 self.client = Client(self.cluster, timeout=START_TIMEOUT_S)
             else:
                 self.client = Client(scheduler, timeout=START_TIMEOUT_S)
@@ -287,23 +295,101 @@ class DaskExecutor:
         self.close()
 
 
-def executor(workers: int | None = None, scheduler: str | None = None):
+class StartingExecutor:
+    """A :class:`DaskExecutor` started in a thread: the caller goes on (opens its database,
+    lists and hashes its files) while the cluster comes up; the first use waits for it.
+
+    Parameters
+    ----------
+    on_ready : callable, optional
+        Called with the executor once it is up (from the starting thread).
+    **options
+        As :class:`DaskExecutor`.
+    """
+
+    def __init__(self, on_ready: Callable[[DaskExecutor], None] | None = None, **options):
+        self._ready = threading.Event()
+        self._executor: DaskExecutor | None = None
+        self._error: BaseException | None = None
+
+        def start() -> None:
+            try:
+                self._executor = DaskExecutor(**options)
+                if on_ready is not None:
+                    on_ready(self._executor)
+            except BaseException as exc:  # raised again at the first use, in the caller
+                self._error = exc
+            finally:
+                self._ready.set()
+
+        self._thread = threading.Thread(target=start, name="dischargelab-cluster-start",
+                                        daemon=True)
+        self._thread.start()
+
+    def ready(self) -> DaskExecutor:
+        """The executor once it is up (waits at most :data:`START_TIMEOUT_S` more than Dask
+        itself allows); raises what the start raised."""
+        if not self._ready.wait(timeout=2 * START_TIMEOUT_S):
+            raise FleetError(f"the Dask cluster did not start within {2 * START_TIMEOUT_S:.0f} s")
+        if self._error is not None:
+            raise self._error
+        assert self._executor is not None
+        return self._executor
+
+    @property
+    def workers(self) -> int:
+        return self.ready().workers
+
+    @property
+    def max_in_flight(self) -> int:
+        return self.ready().max_in_flight
+
+    @property
+    def shares_files(self) -> bool:
+        return self.ready().shares_files
+
+    def sees(self, path) -> bool:
+        return self.ready().sees(path)
+
+    def describe(self) -> str:
+        return self.ready().describe()
+
+    def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any],
+                      per_task: int = 1) -> Iterator[tuple[Any, Any]]:
+        return self.ready().map_unordered(func, items, per_task=per_task)
+
+    def close(self) -> None:
+        self._ready.wait(timeout=2 * START_TIMEOUT_S)
+        if self._executor is not None:
+            self._executor.close()
+
+    def __enter__(self) -> StartingExecutor:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def executor(workers: int | None = None, scheduler: str | None = None,
+             background: bool = False, on_ready=None):
     """The executor the arguments ask for.
 
     ``scheduler`` (or the ``DISCHARGELAB_SCHEDULER`` environment variable) uses that
     cluster; ``workers`` > 1 starts a local cluster; otherwise the tasks run in this
-    process and Dask is not imported.
+    process and Dask is not imported. ``background=True`` returns a Dask executor at once
+    and starts it in a thread (:class:`StartingExecutor`, ``on_ready`` called when up).
     """
     scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
     if scheduler and workers not in (None, 1):
         raise FleetError("give either workers or a scheduler address, not both")
     if workers is not None and workers < 1:
         raise FleetError(f"workers must be 1 or more, got {workers}")
-    if scheduler:
-        return DaskExecutor(scheduler=scheduler)
-    if workers and workers > 1:
-        return DaskExecutor(workers=workers)
-    return InProcessExecutor()
+    if not scheduler and not (workers and workers > 1):
+        return InProcessExecutor()
+    options = {"scheduler": scheduler} if scheduler else {"workers": workers}
+    if background:
+        return StartingExecutor(on_ready=on_ready, **options)
+    return DaskExecutor(**options)
 
 
 def run_batch(func: Callable[[Any], Any], items: list) -> list:

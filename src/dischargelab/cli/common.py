@@ -415,14 +415,23 @@ def executor_options(func):
              "[default: 1, in this process].")(func)
 
 
-def open_executor(workers, scheduler):
-    """The executor for ``--workers`` / ``--scheduler``, said on stderr when it is Dask."""
+def open_executor(workers, scheduler, background: bool = False):
+    """The executor for ``--workers`` / ``--scheduler``, said on stderr when it is Dask.
+
+    ``background=True`` starts a Dask cluster in a thread and returns at once (the command
+    goes on with its own work meanwhile); the line is printed when the workers are up.
+    """
     from ..fleet import InProcessExecutor, executor
 
+    def ready(chosen) -> None:
+        err.print(f"running on {chosen.describe()}", markup=False)
+
+    if background:
+        return executor(workers=workers, scheduler=scheduler, background=True, on_ready=ready)
     with err.status("starting the Dask workers", spinner="dots"):
         chosen = executor(workers=workers, scheduler=scheduler)
     if not isinstance(chosen, InProcessExecutor):
-        err.print(f"running on {chosen.describe()}", markup=False)
+        ready(chosen)
     return chosen
 
 

@@ -43,6 +43,24 @@ def open_logbook(db, create: bool = False):
     return Logbook(db, create=create)
 
 
+def refresh_stale(lb, names=None) -> None:
+    """Recompute, with a progress bar, the stored figures that are older than their packs
+    (after an upgrade, an interrupted add); a logbook that cannot be written is read as it
+    is (the figures are then computed in memory)."""
+    from ..errors import LogbookStorageError
+
+    stale = lb.stale(names)
+    if not stale:
+        return
+    bar, progress = progress_bar("recomputing figures")
+    try:
+        with bar:
+            lb.refresh(stale, progress=progress)
+    except LogbookStorageError as exc:
+        if exc.reason not in ("read-only", "full"):
+            raise
+
+
 def _num(value, digits: int = 3, scale: float = 1.0) -> str:
     return "-" if value is None else f"{value * scale:.{digits}f}"
 
@@ -121,18 +139,21 @@ def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
     """
     options = {"columns": columns, "current_A": current_A, "units": units,
                "sign": None if sign == "auto" else sign}
-    with open_logbook(db, create=True) as lb:
-        settings = {"label_capacity_Ah": label_capacity_Ah, "chemistry": chemistry,
-                    "cells": cells}
+    settings = {"label_capacity_Ah": label_capacity_Ah, "chemistry": chemistry, "cells": cells}
+    if any(v is not None for v in settings.values()) and not pack:
+        raise DischargelabError("--capacity, --chemistry and --cells need --pack NAME")
+    bar, progress = progress_bar("adding")
+    # the workers come up while the logbook is opened and the files are listed and hashed
+    with open_executor(workers, scheduler, background=True) as executor, \
+            open_logbook(db, create=True) as lb:
         if any(v is not None for v in settings.values()):
-            if not pack:
-                raise DischargelabError("--capacity, --chemistry and --cells need --pack NAME")
-            lb.set_pack(pack, **settings)
-        bar, progress = progress_bar("adding")
-        with open_executor(workers, scheduler) as executor, bar:
+            lb.set_pack(pack, refresh=False, **settings)   # refreshed with the add
+        with bar:
             result = lb.add(list(paths), pack=pack, pack_from=pack_from, recursive=recursive,
                             executor=executor, progress=progress, keep_raw=keep_raw,
                             **{k: v for k, v in options.items() if v})
+            if pack and pack not in result.changed:
+                lb.refresh([pack], executor=executor, progress=progress)
     if as_json:
         print_json(result.to_dict())
     else:
@@ -156,6 +177,7 @@ def packs_cmd(eol, db, as_json):
       dischargelab logbook packs --db team.sqlite --json
     """
     with open_logbook(db) as lb:
+        refresh_stale(lb)
         result = lb.packs(eol=eol)
     if as_json:
         print_json(result.to_dict())
@@ -193,6 +215,7 @@ def health_cmd(name, eol, plot_path, force, db, as_json):
     """
     guard_outputs([plot_path], [], force, figures=[plot_path])
     with open_logbook(db) as lb:
+        refresh_stale(lb, [name])
         health = lb.health(name, eol=eol)
     if plot_path:
         from ..plot import save

@@ -32,7 +32,10 @@ IMPLAUSIBLE_A = 1000.0
 MIN_PLAUSIBLE_V = 0.5
 
 DROP_REASONS = ("rest", "charge", "relaxation", "other_segments", "short_load", "sentinel",
-                "nan", "duplicate_time", "partial_last_line")
+                "nan", "duplicate_time", "partial_last_line", "logger_stop")
+
+#: What a logger-stop record is, for notes (a test cut short often ends with one).
+LOGGER_STOP = "the logger's record of zeros (voltage and current 0, not a battery reading)"
 
 SIGNS = ("auto", "positive", "negative")
 
@@ -163,6 +166,7 @@ def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto
     if len(frame) == 0:
         raise DataError(f"{path_name}: no row has valid time, voltage"
                         + (" and current" if has_current else ""))
+    frame, lines = _drop_logger_stop(frame, lines, has_current, dropped, notes)
 
     # ---- time must advance
     t = frame["time_s"].to_numpy(dtype=float)
@@ -333,6 +337,37 @@ def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto
     return kept, meta
 
 
+def _drop_logger_stop(frame: pd.DataFrame, lines, has_current: bool, dropped: dict,
+                      notes: list) -> tuple[pd.DataFrame, np.ndarray]:
+    """Drop the records of zeros a logger writes when it starts or stops (first or last rows
+    with voltage <= 0 and no current): a test cut short keeps its discharge.
+
+    A zero inside the data, or a file of nothing but zeros, is left for the voltage check
+    (the wrong column, a temperature file).
+    """
+    v = frame["voltage_V"].to_numpy(dtype=float)
+    zero = v <= 0
+    if has_current:
+        zero &= np.nan_to_num(frame["current_A"].to_numpy(dtype=float), nan=0.0) == 0
+    n = zero.size
+    if not zero.any() or zero.all():
+        return frame, lines
+    lead = int(np.argmin(zero))                 # first row that is a reading
+    trail = int(np.argmin(zero[::-1]))          # rows of zeros at the end
+    if lead == 0 and trail == 0:
+        return frame, lines
+    keep = np.zeros(n, dtype=bool)
+    keep[lead:n - trail] = True
+    for rows, where in ((lines[:lead], "first"), (lines[n - trail:], "last")):
+        if len(rows):
+            at = f"line {int(rows[0])}" if len(rows) == 1 else \
+                f"lines {int(rows[0])}-{int(rows[-1])}"
+            notes.append(f"dropped {_plural(len(rows), 'row')} at {at}, the {where} of the "
+                         f"file: {LOGGER_STOP}")
+    dropped["logger_stop"] = int(lead + trail)
+    return frame[keep].reset_index(drop=True), lines[keep]
+
+
 def _rest_row(frame: pd.DataFrame, k: int, lines, why: str, current_A=None) -> dict:
     current = frame["current_A"].iloc[k] if current_A is None else current_A
     row = {"voltage_V": float(frame["voltage_V"].iloc[k]),
@@ -408,6 +443,9 @@ def summary_sentence(meta: dict) -> str:
         parts.append(f"{_plural(d['duplicate_time'], 'row')} repeating the previous time")
     if d["partial_last_line"]:
         parts.append("an incomplete last line")
+    if d.get("logger_stop"):
+        parts.append(f"{_plural(d['logger_stop'], 'logger record')} of zeros (a start or stop "
+                     "record)")
     if d.get("malformed"):
         parts.append(f"{_plural(d['malformed'], 'malformed line')}")
     text = f"kept {meta['rows_kept']} of {meta['rows_read']} rows"
@@ -460,4 +498,4 @@ def describe(frame: pd.DataFrame, meta: dict) -> str:
 
 
 __all__ = ["prepare", "describe", "summary_sentence", "check_segment_option",
-           "check_current_option", "DROP_REASONS", "SIGNS"]
+           "check_current_option", "DROP_REASONS", "SIGNS", "LOGGER_STOP"]

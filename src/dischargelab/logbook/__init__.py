@@ -22,6 +22,7 @@ summarise, write).
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 from ..errors import DischargelabError, LogbookError
@@ -106,7 +107,7 @@ class Logbook:
     # ------------------------------------------------------------------ writing
     def add(self, paths, pack: str | None = None, pack_from: str | None = None,
             recursive: bool = False, executor=None, progress=None, keep_raw: bool = True,
-            **reader_options):
+            refresh: bool = True, **reader_options):
         """Add files and folders (tests, logger files, flight logs) to a pack.
 
         Parameters
@@ -128,6 +129,9 @@ class Logbook:
             Keep each file's bytes (compressed) in the database, so every figure can be
             recomputed from it. False records only its path and SHA-256: a fleet's
             database stays small, and the files must stay where they are.
+        refresh : bool
+            Recompute and store the figures of the packs that got events, on the same
+            executor (:meth:`refresh`); False leaves them stale for a later refresh.
         **reader_options
             As :func:`dischargelab.read` (``columns``, ``current_A``, ``sign``...).
 
@@ -135,34 +139,54 @@ class Logbook:
         -------
         AddResult
             ``.added``, ``.skipped`` (already in the logbook), ``.rejected``
-            (``(path, one-line reason)``), ``.events``; ``.lines()`` for printing.
+            (``(path, one-line reason)``), ``.events``, ``.changed`` (packs that got
+            events); ``.lines()`` for printing.
+
+        Raises
+        ------
+        LogbookStorageError
+            The database refuses the write (full disk, read-only, server gone): one line;
+            the batches written before are kept whole and a rerun adds only the rest.
         """
         from .ingest import add_files
 
         with self._errors():
-            return add_files(self._engine, paths, pack=pack, pack_from=pack_from,
-                             recursive=recursive, executor=executor, progress=progress,
-                             reader_options=reader_options, keep_raw=keep_raw)
+            result = add_files(self._engine, paths, pack=pack, pack_from=pack_from,
+                               recursive=recursive, executor=executor, progress=progress,
+                               reader_options=reader_options, keep_raw=keep_raw)
+        if refresh and result.changed:
+            self.refresh(sorted(result.changed), executor=executor, progress=progress)
+        return result
 
-    def add_bytes(self, file_name: str, data: bytes, pack: str, **reader_options):
-        """Add one file given as bytes (an upload); returns an AddResult."""
+    def add_bytes(self, file_name: str, data: bytes, pack: str, refresh: bool = True,
+                  **reader_options):
+        """Add one file given as bytes (an upload); returns an AddResult (``refresh`` as
+        :meth:`add`)."""
         from .ingest import add_upload
 
         with self._errors():
-            return add_upload(self._engine, (file_name, data), pack, reader_options)
+            result = add_upload(self._engine, (file_name, data), pack, reader_options)
+        if refresh and result.changed:
+            self.refresh(sorted(result.changed))
+        return result
 
-    def add_upload(self, path, pack: str, **reader_options):
+    def add_upload(self, path, pack: str, refresh: bool = True, **reader_options):
         """Add one uploaded file that the server received to ``path`` (a temporary file
         named as the upload): it is read from there once, stored under its name, and its
-        location is not recorded. Returns an AddResult."""
+        location is not recorded. Returns an AddResult (``refresh`` as :meth:`add`)."""
         from .ingest import add_upload
 
         with self._errors():
-            return add_upload(self._engine, path, pack, reader_options)
+            result = add_upload(self._engine, path, pack, reader_options)
+        if refresh and result.changed:
+            self.refresh(sorted(result.changed))
+        return result
 
     def set_pack(self, name: str, *, label_capacity_Ah: float | None = None,
-                 chemistry: str | None = None, cells: int | None = None) -> None:
-        """Create a pack or store its label capacity [Ah], chemistry and cells in series."""
+                 chemistry: str | None = None, cells: int | None = None,
+                 refresh: bool = True) -> None:
+        """Create a pack or store its label capacity [Ah], chemistry and cells in series
+        (``refresh``: recompute its figures, as :meth:`add`)."""
         from ..ocv import check_chemistry
         from . import schema, store
 
@@ -172,9 +196,144 @@ class Logbook:
             raise LogbookError(f"label_capacity_Ah must be positive, got {label_capacity_Ah!r}")
         if cells is not None and int(cells) < 1:
             raise LogbookError(f"cells must be at least 1, got {cells!r}")
-        with self._errors(), schema.writing(self._engine) as conn:
-            store.set_pack(conn, str(name).strip(), label_capacity_Ah=label_capacity_Ah,
-                           chemistry=chemistry, cells=None if cells is None else int(cells))
+        name = str(name).strip()
+        with self._errors():
+            schema.write(self._engine, lambda conn: store.set_pack(
+                conn, name, label_capacity_Ah=label_capacity_Ah, chemistry=chemistry,
+                cells=None if cells is None else int(cells)))
+        if refresh:
+            self.refresh([name])
+
+    # ------------------------------------------------------------------ stored figures
+    def refresh(self, names=None, executor=None, progress=None) -> list[str]:
+        """Recompute and store the figures of the packs whose stored ones are stale.
+
+        A pack's figures (health, forecast, fleet row, model curves: :mod:`.figures`)
+        are stored with the pack's version; every write raises it. The writing methods
+        refresh what they changed; this does the rest (after an upgrade, or a write made
+        with ``refresh=False``).
+
+        Parameters
+        ----------
+        names : list of str, optional
+            Packs to look at (all by default); those already current are left alone.
+        executor : optional
+            Where the figures are computed (in this process by default).
+        progress : callable, optional
+            ``progress(done, total, message)`` after each pack.
+
+        Returns
+        -------
+        list of str
+            The packs recomputed.
+        """
+        return sorted(self._recompute(self.stale(names), executor, progress, store=True))
+
+    def stale(self, names=None) -> list[str]:
+        """Packs (among ``names``, all by default) whose stored figures are missing or older
+        than their data or this code: what :meth:`refresh` would recompute."""
+        from . import figures
+
+        with self._errors(), self._read() as conn:
+            return figures.stale_names(conn, names)
+
+    def _recompute(self, names: list[str], executor=None, progress=None,
+                   store: bool | None = True) -> dict:
+        """Compute the figures of ``names`` (``{name: figures dict or one-line reason}``) and
+        store them; ``store=None`` stores when the logbook can be written, else keeps them in
+        memory (for reads of a read-only or full logbook)."""
+        from ..errors import LogbookStorageError
+        from ..fleet import InProcessExecutor
+        from . import figures, schema
+
+        out: dict = {}
+        if not names:
+            return out
+        ids: dict = {}
+
+        def jobs():
+            # read as the executor asks for the next: only the jobs in flight are in memory
+            for name in names:
+                with self._errors(), self._read() as conn:
+                    job = figures.read_job(conn, name)
+                ids[name] = (job["row"]["id"], job["row"]["version"])
+                yield job
+
+        executor = executor or InProcessExecutor()
+        failure = None
+        storing = store is not False
+        for done, (job, outcome) in enumerate(executor.map_unordered(figures.pack_figures,
+                                                                     jobs()), 1):
+            name = job["row"]["name"]
+            if isinstance(outcome, DischargelabError):
+                value, error = None, str(outcome).splitlines()[0]
+            elif isinstance(outcome, BaseException):
+                failure = failure or outcome
+                continue
+            else:
+                value, error = outcome, None
+            out[name] = error if value is None else value
+            if storing:
+                try:
+                    with self._errors():
+                        schema.write(self._engine, functools.partial(
+                            figures.store_figures, pack_id=ids[name][0],
+                            version=ids[name][1], figures=value, error=error))
+                except LogbookStorageError as exc:
+                    if store is True or exc.reason not in ("read-only", "full"):
+                        raise
+                    storing = False
+            if progress is not None:
+                progress(done, len(names), f"figures of {name}")
+        if failure is not None:
+            raise failure
+        return out
+
+    def _stored(self, names, columns: tuple, recompute: bool = True) -> dict:
+        """``{name: figures.Stored}`` of the packs named (all for None), stale ones computed
+        first when ``recompute`` (stored when the logbook can be written)."""
+        from . import figures, store
+
+        with self._errors(), self._read() as conn:
+            found = figures.read_stored(conn, names, columns)
+            if names is not None:
+                for name in names:
+                    if name not in found:
+                        store.pack_row(conn, name)     # raises: no such pack
+        stale = [n for n, s in found.items() if not s.current]
+        if recompute and stale:
+            for name, value in self._recompute(stale, store=None).items():
+                error = value if isinstance(value, str) else None
+                found[name] = figures.Stored(
+                    name=name, pack_id=found[name].pack_id, current=True, error=error,
+                    figures=None if error else {c: value[c] for c in columns})
+        return found
+
+    def _stored_one(self, name: str, columns: tuple) -> dict:
+        stored = self._stored([name], columns)[name]
+        if stored.error:
+            raise LogbookError(f"pack {name!r}: its figures cannot be computed: {stored.error}")
+        return stored.figures
+
+    def figures(self, name: str, recompute: bool = True):
+        """What a pack page shows: its summary, health, model curves, all as stored.
+
+        Parameters
+        ----------
+        name : str
+        recompute : bool
+            Recompute stale figures first (the library's reads). False answers from what
+            is stored at once, with ``recomputing`` true when that is older than the pack
+            (or missing): what the pages do, which never compute on a request.
+
+        Returns
+        -------
+        dischargelab.logbook.figures.PackFigures
+        """
+        from .figures import PackFigures
+
+        stored = self._stored([name], ("pack", "health", "model"), recompute)[name]
+        return PackFigures.from_stored(stored)
 
     # ------------------------------------------------------------------ reading
     def _pack_data(self, name: str):
@@ -194,30 +353,62 @@ class Logbook:
         name : str
             The pack.
         eol : float
-            End of life as a share of the reference capacity (0 < eol < 1).
+            End of life as a share of the reference capacity (0 < eol < 1). The default
+            one is read from the stored figures (recomputed first when stale); another
+            is computed now.
         """
+        eol = _check_eol(eol)
+        if eol == DEFAULT_EOL:
+            return Health.from_dict(self._stored_one(name, ("health",))["health"])
         row, events, model = self._pack_data(name)
-        return build_health(row, events, model, _check_eol(eol))
+        return build_health(row, events, model, eol)
 
     def events(self, name: str) -> EventTable:
         """The stored events of a pack (without their curves)."""
-        _, events, _ = self._pack_data(name)
+        from . import store
         from .health import order_events
 
+        with self._errors(), self._read() as conn:
+            row = store.pack_row(conn, name)
+            events = store.pack_events(conn, row["id"], curves=False)
         rows = [{k: e.get(k) for k in EVENT_COLUMNS} for e in order_events(events)]
         return EventTable(pack=name, rows=rows)
 
-    def packs(self, eol: float = DEFAULT_EOL) -> PackTable:
-        """One row per pack: events, EFC, capacity today, resistance, end of life."""
-        from .fleet_report import pack_summary
+    def packs(self, eol: float = DEFAULT_EOL, recompute: bool = True) -> PackTable:
+        """One row per pack: events, EFC, capacity today, resistance, end of life.
 
-        keys = ("name", "events", "efc", "capacity_Ah", "capacity_fraction", "resistance_ohm",
-                "eol_efc", "eol_efc_interval95")
+        ``recompute=False`` answers from the stored figures at once (the pages): a pack
+        whose figures are older than its data has its older row and ``recomputing``
+        true, one with none stored only its name. A pack whose figures cannot be made
+        has ``error``.
+        """
+        from .figures import ROW_KEYS
+
         eol = _check_eol(eol)
+        if eol != DEFAULT_EOL:
+            from .fleet_report import pack_summary
+
+            return PackTable(rows=[
+                {k: s[k] for k in ROW_KEYS} | {"recomputing": False}
+                for s in (pack_summary((*self._pack_data(n), eol)) for n in self.pack_names())])
+        from . import store
+
+        found = self._stored(None, ("row",), recompute)
+        counts = {}
+        if not all(s.current for s in found.values()):    # a stale row's events are counted
+            with self._errors(), self._read() as conn:
+                counts = store.counts(conn)
         rows = []
-        for name in self.pack_names():
-            summary = pack_summary((*self._pack_data(name), eol))
-            rows.append({k: summary[k] for k in keys})
+        for name, stored in found.items():
+            row = dict.fromkeys(ROW_KEYS)
+            if stored.figures and stored.figures["row"]:
+                row.update(stored.figures["row"])
+            row.update(name=name, recomputing=not stored.current)
+            if not stored.current:
+                row["events"] = counts.get(stored.pack_id, 0)
+            if stored.error:
+                row["error"] = stored.error
+            rows.append(row)
         return PackTable(rows=rows)
 
     def fleet(self, eol: float = DEFAULT_EOL, executor=None, progress=None):
@@ -228,10 +419,11 @@ class Logbook:
         eol : float
             End of life as a share of each pack's reference capacity.
         executor : optional
-            Where each pack's figures are made (:func:`dischargelab.fleet.executor`; in
-            this process by default). The client reads the rows and sends them.
+            Where the figures of packs whose stored ones are stale (or of every pack for
+            another ``eol``) are made (:func:`dischargelab.fleet.executor`; in this process
+            by default).
         progress : callable, optional
-            ``progress(done, total, pack name)`` after each pack.
+            ``progress(done, total, pack name)`` after each pack computed.
 
         Returns
         -------
@@ -242,10 +434,19 @@ class Logbook:
         from .fleet_report import FleetReport, pack_summary, retire_order
 
         eol = _check_eol(eol)
+        rows, failed = [], []
+        if eol == DEFAULT_EOL:
+            self.refresh(executor=executor, progress=progress)
+            for name, stored in self._stored(None, ("fleet",)).items():
+                if stored.error:
+                    failed.append((name, stored.error))
+                else:
+                    rows.append(stored.figures["fleet"])
+            return FleetReport(rows=sorted(rows, key=retire_order), eol=eol,
+                               failed=sorted(failed))
         names = self.pack_names()
         jobs = ((*self._pack_data(name), eol) for name in names)
         executor = executor or InProcessExecutor()
-        rows, failed = [], []
         for done, (job, outcome) in enumerate(executor.map_unordered(pack_summary, jobs), 1):
             if isinstance(outcome, DischargelabError):
                 failed.append((job[0]["name"], str(outcome).splitlines()[0]))
@@ -260,17 +461,16 @@ class Logbook:
 
     def pack(self, name: str) -> Pack:
         """A pack with its health today; ``.battery()`` is its model scaled to it."""
-        row, events, model = self._pack_data(name)
-        h = build_health(row, events, model, DEFAULT_EOL)
-        cap = h.capacity_now_Ah
-        if cap is None:
-            caps = [e.capacity_Ah for e in h.events if e.capacity_Ah is not None and not e.outlier]
-            cap = caps[-1] if caps else None
-        return Pack(name=name, label_capacity_Ah=row["label_capacity_Ah"],
-                    reference_capacity_Ah=h.reference_capacity_Ah, chemistry=row["chemistry"],
-                    cells=row["cells"], events=len(events), efc=h.efc_now, capacity_Ah=cap,
-                    resistance_ohm=h.resistance_now_ohm, health=h, _model=model,
-                    _fit=lambda: self._fit(name, h))
+        from . import store
+        from .figures import make_pack
+
+        stored = self._stored_one(name, ("pack", "health"))
+        health = Health.from_dict(stored["health"])
+        with self._errors(), self._read() as conn:
+            row = store.pack_row(conn, name)
+            model = store.latest_model(conn, row["id"])
+        return make_pack(row, stored["pack"]["events"], health, model,
+                         fit=lambda: self._fit(name, health))
 
     def raw(self, sha256: str) -> bytes:
         """The stored bytes of a source file, by its SHA-256."""
@@ -290,7 +490,9 @@ class Logbook:
         """
         from .refit import fit_job
 
-        return self._store_model(fit_job(self._job(name, self.health(name), fit_options)))
+        battery = self._store_model(fit_job(self._job(name, self.health(name), fit_options)))
+        self.refresh([name])
+        return battery
 
     def fit_all(self, executor=None, progress=None, **fit_options) -> dict:
         """Refit every pack from its latest full discharge: ``{name: Battery or reason}``.
@@ -337,6 +539,7 @@ class Logbook:
             else:
                 out[job["pack"]] = self._store_model(outcome)
             report(job["pack"])
+        self.refresh(executor=executor, progress=progress)
         return dict(sorted(out.items()))
 
     def pack_names(self) -> list[str]:
@@ -365,10 +568,13 @@ class Logbook:
         from ..model import Battery
         from . import schema, store
 
-        with self._errors(), schema.writing(self._engine) as conn:
+        def work(conn) -> None:
             row = store.pack_row(conn, model["pack"])
             store.save_model(conn, row["id"], model["battery"], model["event_id"],
                              model["capacity_Ah"], model["resistance_ohm"])
+
+        with self._errors():
+            schema.write(self._engine, work)
         bat = Battery.from_dict(model["battery"])
         extra = dict(bat.extra, logbook_fit={"capacity_Ah": model["capacity_Ah"],
                                              "resistance_ohm": model["resistance_ohm"]})
@@ -380,6 +586,7 @@ class Logbook:
 
         model = fit_job(self._job(name, health, fit_options))
         self._store_model(model)
+        self.refresh([name])
         return model
 
     # ------------------------------------------------------------------ export

@@ -35,7 +35,11 @@ def pack_summary(job: tuple) -> dict:
         band, or None).
     """
     row, events, model, eol = job
-    h = build_health(row, events, model, eol)
+    return fleet_row(build_health(row, events, model, eol), row)
+
+
+def fleet_row(h, row: dict) -> dict:
+    """The fleet report's row of one pack from its health (see :func:`pack_summary`)."""
     ref, cap, f = h.reference_capacity_Ah, h.capacity_now_Ah, h.forecast
     efc = h.efc_now
     left = None

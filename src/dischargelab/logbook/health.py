@@ -92,12 +92,29 @@ class EventHealth:
         return "full" if self.full else "partial"
 
     def to_dict(self) -> dict:
-        """The keys of ``logbook health --json``."""
+        """The keys of ``logbook health --json`` (``kind``: :attr:`health_kind`;
+        ``event_kind``: the stored event's)."""
         return {"source": self.source, "start": self.start, "kind": self.health_kind,
                 "discharged_Ah": self.discharged_Ah, "capacity_Ah": self.capacity_Ah,
                 "capacity_interval95": self.capacity_interval95,
                 "resistance_ohm": self.resistance_ohm, "efc": self.efc,
-                "outlier": self.outlier}
+                "outlier": self.outlier, "event_id": self.event_id,
+                "event_kind": self.kind, "cycle": self.cycle, "full": self.full,
+                "capacity_method": self.capacity_method,
+                "resistance_interval95": self.resistance_interval95, "notes": list(self.notes)}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> EventHealth:
+        """The event :meth:`to_dict` describes."""
+        return cls(event_id=data["event_id"], source=data["source"], start=data["start"],
+                   kind=data["event_kind"], cycle=data["cycle"],
+                   discharged_Ah=data["discharged_Ah"], full=data["full"],
+                   capacity_Ah=data["capacity_Ah"],
+                   capacity_interval95=data["capacity_interval95"],
+                   capacity_method=data["capacity_method"],
+                   resistance_ohm=data["resistance_ohm"],
+                   resistance_interval95=data["resistance_interval95"], efc=data["efc"],
+                   outlier=data["outlier"], notes=list(data["notes"]))
 
 
 def order_events(events: list[dict]) -> list[dict]:

@@ -31,6 +31,7 @@ import numpy as np
 from sqlalchemy import select
 
 from ..errors import DischargelabError, LogbookError
+from ..io.prepare import LOGGER_STOP
 from . import schema
 from .summarise import (
     SourceSummary,
@@ -80,12 +81,19 @@ class AddResult:
         ``(path, one-line reason)`` of files that could not be read.
     events : int
         Events stored.
+    changed : set of str
+        Packs that got events (their figures are recomputed after the add).
+    notes : list of (str, str)
+        ``(file name, note)`` for what a reader dropped from a file that went in (the
+        logger's record of zeros that ends a test cut short).
     """
 
     added: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     rejected: list[tuple[str, str]] = field(default_factory=list)
     events: int = 0
+    changed: set[str] = field(default_factory=set)
+    notes: list[tuple[str, str]] = field(default_factory=list)
 
     def summary(self) -> str:
         """One line: files added, events, files already there, files rejected."""
@@ -97,15 +105,17 @@ class AddResult:
         return text
 
     def lines(self) -> list[str]:
-        """One line per skipped or rejected file, for printing."""
-        out = [f"{name}: already in the logbook" for name in self.skipped]
+        """One line per note, skipped file and rejected file, for printing."""
+        out = [f"{name}: {note}" for name, note in self.notes]
+        out += [f"{name}: already in the logbook" for name in self.skipped]
         out += [f"{Path(path).name}: rejected: {reason}" for path, reason in self.rejected]
         return out
 
     def to_dict(self) -> dict:
         return {"added": list(self.added), "skipped": list(self.skipped),
                 "rejected": [{"path": p, "reason": r} for p, r in self.rejected],
-                "events": int(self.events)}
+                "events": int(self.events),
+                "notes": [{"file": f, "note": n} for f, n in self.notes]}
 
 
 def _is_data_file(path: Path) -> bool:
@@ -153,6 +163,14 @@ def _insert(conn, table):
     return insert(table)
 
 
+def bump_versions(conn, pack_ids_: Iterable[int]) -> None:
+    """Raise the version of the packs a write changed (in id order, so two writers take the
+    rows' locks in the same order); their stored figures are then stale (:mod:`.figures`)."""
+    for pid in sorted(set(pack_ids_)):
+        conn.execute(schema.packs.update().where(schema.packs.c.id == pid)
+                     .values(version=schema.packs.c.version + 1))
+
+
 def known_hashes(conn, hashes: Iterable[str]) -> set[str]:
     """The hashes among ``hashes`` already stored as sources."""
     hashes = list(hashes)
@@ -192,12 +210,22 @@ def event_row(event: dict) -> dict:
 def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
                     result: AddResult) -> None:
     """Store ``(summary, pack, original path)`` items in one transaction (the raw file
-    as the summary carries it, compressed)."""
+    as the summary carries it, compressed).
+
+    The items are written in SHA-256 order, so two writers holding overlapping files take
+    the unique keys' locks in the same order and one waits for the other instead of
+    deadlocking; PostgreSQL aborting the transaction anyway (a deadlock, a serialization
+    failure) runs it again (:func:`~dischargelab.logbook.schema.write`). ``result`` is
+    told only once the transaction is committed.
+    """
     if not batch:
         return
-    with schema.writing(engine) as conn:
-        ids = pack_ids(conn, [pack for _, pack, _ in batch])
-        for summary, pack, path in batch:
+    ordered = sorted(batch, key=lambda item: item[0].sha256)
+
+    def work(conn) -> tuple[list, list, int, set]:
+        ids = pack_ids(conn, [pack for _, pack, _ in ordered])
+        added, skipped, events, changed = [], [], 0, set()
+        for summary, pack, path in ordered:
             if summary.raw_zlib:          # else only the path is recorded (keep_raw=False)
                 conn.execute(_insert(conn, schema.blobs).values(
                     sha256=summary.sha256, compression="zlib", size_bytes=summary.size_bytes,
@@ -210,14 +238,27 @@ def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
             ).on_conflict_do_nothing(index_elements=["sha256"])
                 .returning(schema.sources.c.id)).scalar()
             if source_id is None:  # another writer stored it first
-                result.skipped.append(summary.file_name)
+                skipped.append(summary.file_name)
                 continue
             rows = [dict(event_row(e), source_id=source_id, pack_id=ids[pack])
                     for e in summary.events]
             if rows:
                 conn.execute(schema.events.insert(), rows)
-            result.added.append(summary.file_name)
-            result.events += len(rows)
+            added.append(summary.file_name)
+            events += len(rows)
+            changed.add(pack)
+        bump_versions(conn, [ids[pack] for pack in changed])
+        return added, skipped, events, changed
+
+    added, skipped, events, changed = schema.write(engine, work)
+    result.added += added
+    result.skipped += skipped
+    result.events += events
+    result.changed.update(changed)
+    stored = set(added)
+    result.notes += [(summary.file_name, note) for summary, _, _ in ordered
+                     if summary.file_name in stored
+                     for note in summary.notes if LOGGER_STOP in note]
 
 
 def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, executor=None,
@@ -228,6 +269,7 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
 
     options = check_reader_options(reader_options)
     files, missing = list_files(paths, pack=pack, pack_from=pack_from, recursive=recursive)
+    schema.check_writable(engine)       # a read-only logbook says so before any file is read
     result = AddResult(rejected=list(missing))
     total = len(files)
     hashed: dict[str, tuple[Path, str, str]] = {}

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -86,9 +86,46 @@ class Forecast:
         return _clean({"efc": efc, "capacity_Ah": mean, "lo": lo, "hi": hi})
 
     def to_dict(self) -> dict:
-        return _clean({"threshold_Ah": self.threshold_Ah, "eol_efc": self.eol_efc,
+        """The forecast for pages and JSON (``band``: :meth:`band_points`) with what
+        :meth:`from_dict` needs to rebuild it (the trends' coefficients, the simulated
+        band)."""
+        future = None if self.band is None else {
+            k: np.asarray(v, dtype=float).tolist() for k, v in zip(("efc", "lo", "hi"), self.band)}
+        return _clean({"eol": self.eol, "threshold_Ah": self.threshold_Ah,
+                       "eol_efc": self.eol_efc,
                        "eol_efc_interval95": list(self.eol_efc_interval95),
-                       "band": self.band_points()})
+                       "observed": self.observed, "first_efc": self.first_efc,
+                       "band": self.band_points(),
+                       "capacity_trend": _trend_state(self.capacity),
+                       "resistance_trend": _trend_state(self.resistance),
+                       "future_band": future})
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Forecast:
+        """The forecast :meth:`to_dict` describes."""
+        future = data.get("future_band")
+        band = None if future is None else tuple(
+            np.asarray(future[k], dtype=float) for k in ("efc", "lo", "hi"))
+        return cls(eol=data["eol"], threshold_Ah=data["threshold_Ah"], eol_efc=data["eol_efc"],
+                   eol_efc_interval95=list(data["eol_efc_interval95"]),
+                   capacity=_trend_from(data["capacity_trend"]),
+                   resistance=_trend_from(data.get("resistance_trend")), band=band,
+                   first_efc=data["first_efc"], observed=data["observed"])
+
+
+def _trend_state(trend: Trend | None) -> dict | None:
+    """Every field of a trend (what :func:`_trend_from` rebuilds it from)."""
+    if trend is None:
+        return None
+    return {f.name: np.asarray(getattr(trend, f.name)).tolist() for f in fields(trend)}
+
+
+def _trend_from(state: dict | None) -> Trend | None:
+    if state is None:
+        return None
+    values = {f.name: state[f.name] for f in fields(Trend)}
+    values["covariance"] = np.asarray(values["covariance"], dtype=float)
+    return Trend(**values)
 
 
 @dataclass
@@ -106,8 +143,20 @@ class Health:
     notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return _clean({"pack": self.pack, "events": [e.to_dict() for e in self.events],
+        return _clean({"pack": self.pack, "reference_capacity_Ah": self.reference_capacity_Ah,
+                       "reference": self.reference, "notes": list(self.notes),
+                       "events": [e.to_dict() for e in self.events],
                        "forecast": None if self.forecast is None else self.forecast.to_dict()})
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Health:
+        """The health :meth:`to_dict` describes (how the logbook's stored figures are read)."""
+        forecast = data.get("forecast")
+        return cls(pack=data["pack"], events=[EventHealth.from_dict(e) for e in data["events"]],
+                   reference_capacity_Ah=data.get("reference_capacity_Ah"),
+                   reference=data.get("reference", ""),
+                   forecast=None if forecast is None else Forecast.from_dict(forecast),
+                   notes=list(data.get("notes", [])))
 
     def to_pandas(self):
         """Events with every health column (capacity method, full, cycle, notes...)."""
@@ -122,6 +171,7 @@ class Health:
                        capacity_low_Ah=lo, capacity_high_Ah=hi, resistance_low_ohm=rlo,
                        resistance_high_ohm=rhi, notes="; ".join(e.notes))
             row.pop("capacity_interval95")
+            row.pop("resistance_interval95")
             rows.append(_clean(row))
         return pd.DataFrame(rows)
 

@@ -11,7 +11,7 @@ from sqlalchemy import func, select
 
 from ..errors import LogbookError
 from . import schema
-from .ingest import pack_ids
+from .ingest import bump_versions, pack_ids
 
 
 def pack_row(conn, name: str) -> dict:
@@ -28,18 +28,22 @@ def pack_names(conn) -> list[str]:
     return list(conn.execute(select(schema.packs.c.name).order_by(schema.packs.c.name)).scalars())
 
 
-def pack_events(conn, pack_id: int) -> list[dict]:
-    """The stored events of a pack, with ``source`` (file name) and ``curve`` decoded."""
+def pack_events(conn, pack_id: int, curves: bool = True) -> list[dict]:
+    """The stored events of a pack, with ``source`` (file name), ``curve`` and ``details``
+    decoded (``curves=False``: without the curves and details, for listing)."""
     e, s = schema.events, schema.sources
-    query = (select(e, s.c.file_name.label("source"), s.c.sha256)
+    columns = list(e.c) if curves else [c for c in e.c
+                                        if c.name not in ("curve_json", "details_json")]
+    query = (select(*columns, s.c.file_name.label("source"), s.c.sha256)
              .join(s, s.c.id == e.c.source_id).where(e.c.pack_id == pack_id)
              .order_by(e.c.id))
     out = []
     for row in conn.execute(query).mappings():
         item = dict(row)
-        item["curve"] = json.loads(item.pop("curve_json"))
-        details = item.pop("details_json", None)
-        item["details"] = json.loads(details) if details else {}
+        if curves:
+            item["curve"] = json.loads(item.pop("curve_json"))
+            details = item.pop("details_json", None)
+            item["details"] = json.loads(details) if details else {}
         out.append(item)
     return out
 
@@ -50,6 +54,7 @@ def set_pack(conn, name: str, **settings) -> None:
     values = {k: v for k, v in settings.items() if v is not None}
     if values:
         conn.execute(schema.packs.update().where(schema.packs.c.id == pid).values(**values))
+        bump_versions(conn, [pid])
 
 
 def counts(conn) -> dict[int, int]:
@@ -76,6 +81,7 @@ def save_model(conn, pack_id: int, battery_dict: dict, reference_event_id: int |
         pack_id=pack_id, fitted_at=schema.now_iso(), reference_event_id=reference_event_id,
         capacity_Ah=capacity_Ah, resistance_ohm=resistance_ohm,
         battery_json=json.dumps(battery_dict)))
+    bump_versions(conn, [pack_id])
 
 
 def raw_file(conn, sha256: str) -> bytes:

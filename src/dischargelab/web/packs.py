@@ -4,11 +4,15 @@ Every handler calls the public library (:class:`dischargelab.Logbook`,
 :func:`dischargelab.endurance`, :func:`dischargelab.simulate.curve_family`) in a worker
 thread (:mod:`~dischargelab.web.work`: reads and heavy work in separate bounded pools) and
 returns its ``to_dict()``; nothing here computes a battery quantity. Answers name things
-(packs, files, missions), never a path on the server.
+(packs, files, missions), never a path on the server. The pack list and a pack page read
+the figures the logbook stores (:mod:`dischargelab.logbook.figures`) and never compute
+them: a pack whose stored figures are older than its data is answered as stored with
+``recomputing`` true, and one thread of the server recomputes it in the background.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 import shutil
@@ -29,10 +33,6 @@ from .work import Workers
 #: A pack name: what the logbook's command line accepts, 1-100 characters, no control
 #: characters and no slash.
 _PACK_NAME = re.compile(r"^[^\x00-\x1f\x7f/\\]{1,100}$")
-#: C-rates of the model curves on a pack page.
-CURVE_C_RATES = (0.5, 1.0, 2.0)
-#: Points per model curve sent to the page.
-CURVE_POINTS = 200
 #: What a pack page says when no model is stored.
 NO_MODEL = "no model fitted yet — Refit"
 
@@ -43,15 +43,6 @@ def check_pack_name(name: str) -> str:
         raise RequestRefused(400, "pack name must be 1-100 characters without '/', '\\' or "
                                   "control characters, and not '.' or '..'")
     return name
-
-
-def _thin(values, points: int = CURVE_POINTS) -> list:
-    n = len(values)
-    step = max(1, math.ceil(n / points))
-    idx = list(range(0, n, step))
-    if idx[-1] != n - 1:
-        idx.append(n - 1)
-    return [None if not math.isfinite(float(values[i])) else float(values[i]) for i in idx]
 
 
 _PLAIN = (str, int, bool, type(None))
@@ -84,6 +75,10 @@ def _clean(value):
     return str(value)
 
 
+#: Seconds the server waits at shutdown for the pack being recomputed.
+REFRESH_JOIN_S = 60.0
+
+
 class PackPages:
     """Routes of the logbook API; the logbook is opened at the first request needing it.
 
@@ -107,6 +102,11 @@ class PackPages:
         self._lock = threading.Lock()
         #: Uploads being received or stored now.
         self.uploads = 0
+        self._refresher: threading.Thread | None = None
+        self._refresh_again = False
+        self._stop = threading.Event()
+        #: Why the stale figures cannot be recomputed (a read-only logbook), for the pages.
+        self.refresh_problem: str | None = None
 
     # ------------------------------------------------------------------ logbook
     def logbook(self):
@@ -121,9 +121,48 @@ class PackPages:
             return self._logbook
 
     def close(self) -> None:
+        self._stop.set()
+        refresher = self._refresher
+        if refresher is not None:
+            refresher.join(timeout=REFRESH_JOIN_S)
         lb = self._logbook
         if self._own and lb is not None and hasattr(lb, "close"):
             lb.close()
+
+    # ------------------------------------------------------------------ stale figures
+    def refresh_soon(self) -> None:
+        """Recompute the stale packs' figures in the background (one thread; asked again
+        while it runs, it looks once more when done)."""
+        with self._lock:
+            if self._refresher is not None:
+                self._refresh_again = True
+                return
+            self._refresher = threading.Thread(target=self._refresh_loop, daemon=True,
+                                               name="dischargelab-figures")
+            self._refresher.start()
+
+    def _refresh_loop(self) -> None:
+        from ..errors import LogbookStorageError
+
+        try:
+            while not self._stop.is_set():
+                lb = self.logbook()
+                for name in lb.stale():
+                    if self._stop.is_set():
+                        return
+                    lb.refresh([name])
+                self.refresh_problem = None
+                with self._lock:
+                    if not self._refresh_again:
+                        return
+                    self._refresh_again = False
+        except LogbookStorageError as exc:
+            self.refresh_problem = f"the figures cannot be recomputed: {exc}"
+        except DischargelabError:
+            logging.getLogger(__name__).exception("recomputing the stored figures failed")
+        finally:
+            with self._lock:
+                self._refresher = None
 
     def _known(self, name: str) -> str:
         name = check_pack_name(name)
@@ -156,52 +195,43 @@ class PackPages:
         ]
 
     async def list_packs(self, request: Request) -> Response:
-        data = await self._call(self.workers.read, request,
-                                lambda: self.logbook().packs().to_dict())
-        return JSONResponse(_clean(data))
+        # the rows are the stored figures' JSON as read (plain, no NaN): sent as they are
+        rows = await self._call(self.workers.read, request,
+                                lambda: self.logbook().packs(recompute=False).rows)
+        data = {"rows": rows}
+        if any(r.get("recomputing") for r in rows):
+            self.refresh_soon()
+            data["recompute_problem"] = self.refresh_problem
+        return JSONResponse(data)
 
     def _pack_detail(self, name: str) -> dict:
-        """What is stored about a pack, read only: a GET never fits or writes (a pack
-        without a stored model says so; the refit is ``POST /api/packs/NAME/fit``).
-        Only what the page shows: the summary, the health with its per-event figures,
-        the model's curves."""
+        """What is stored about a pack, read only: a GET never computes, fits or writes (a
+        pack without a stored model says so; the refit is ``POST /api/packs/NAME/fit``)."""
         name = self._known(name)
         lb = self.logbook()
-        pack = lb.pack(name)
-        summary = pack.to_dict()
-        ref, cap = summary.get("reference_capacity_Ah"), summary.get("capacity_Ah")
-        summary["capacity_fraction"] = cap / ref if cap is not None and ref else None
-        health = pack.health if pack.health is not None else lb.health(name)
-        out = {"name": name, "summary": summary, "health": health.to_dict(),
-               "model": None, "model_note": None}
-        if not pack.fitted:
+        figures = lb.figures(name, recompute=False)
+        summary = figures.summary or {"name": name,
+                                      "events": len(lb.events(name).to_dict()["events"])}
+        out = {"name": name, "summary": summary,
+               "health": figures.health, "model": None, "model_note": None,
+               "recomputing": figures.recomputing, "error": figures.error}
+        if figures.recomputing:
+            self.refresh_soon()
+            out["recompute_problem"] = self.refresh_problem
+        model = figures.model
+        if model is None:
             out["model_note"] = NO_MODEL
-            return out
-        try:
-            battery = pack.battery()
-        except DischargelabError as exc:
-            out["model_note"] = str(exc)
-            return out
-        from ..predict import default_cutoff
-        from ..simulate import curve_family
-
-        currents = [c * battery.rated_capacity_Ah for c in CURVE_C_RATES]
-        curves = curve_family(battery, currents, **default_cutoff(battery))
-        out["model"] = {
-            "name": battery.name, "family": battery.model,
-            "cells_series": battery.cells_series, "strings_parallel": battery.strings_parallel,
-            "capacity_Ah": battery.capacity_Ah, "note": battery.extra.get("note"),
-            "curves": [{"c_rate": c, "current_A": sim.to_dict().get("current_A"),
-                        "time_to_cutoff_s": sim.time_to_cutoff_s,
-                        "charge_Ah": _thin(sim.charge_Ah), "voltage_V": _thin(sim.voltage_V)}
-                       for c, sim in zip(CURVE_C_RATES, curves)],
-        }
+        elif "curves" not in model:
+            out["model_note"] = model["note"]
+        else:
+            out["model"] = model
         return out
 
     async def one_pack(self, request: Request) -> Response:
+        # stored figures' JSON and the events' to_dict(): plain already
         data = await self._call(self.workers.read, request, self._pack_detail,
                                 request.path_params["name"])
-        return JSONResponse(_clean(data))
+        return JSONResponse(data)
 
     async def missions(self, request: Request) -> Response:
         from ..mission import bundled_missions
@@ -265,11 +295,14 @@ class PackPages:
             received = await self._receive_upload(request, folder)
             pack = check_pack_name(received.pack)
             result = await self._call(self.workers.work, request,
-                                      lambda: self.logbook().add_upload(received.path, pack))
+                                      lambda: self.logbook().add_upload(received.path, pack,
+                                                                        refresh=False))
         finally:
             self.uploads -= 1
             if folder is not None:
                 shutil.rmtree(folder, ignore_errors=True)
+        if result.changed:
+            self.refresh_soon()     # the figures are recomputed off the request
         if result.rejected:
             return error(422, f"{received.path.name}: {result.rejected[0][1]}")
         return JSONResponse(_clean(result.to_dict()))

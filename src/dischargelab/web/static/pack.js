@@ -8,8 +8,19 @@
   const api = "/api/packs/" + encodeURIComponent(name);
   const COLORS = ["#2563eb", "#059669", "#d97706", "#7c3aed"];
 
+  const RELOAD_MS = 2000;
+  let again = null;
+
   function show(d) {
     window.__pack = {loaded: true, data: d};
+    // figures older than the pack's data are being recomputed by the server: look again
+    clearTimeout(again);
+    if (d.recompute_problem) DL.showMessage(d.recompute_problem, "error");
+    else if (d.error) DL.showMessage(d.error, "error");
+    else if (d.recomputing) {
+      DL.showMessage("the figures of this pack are being recomputed with its latest data …", "info");
+      again = setTimeout(async () => { try { show(await DL.api(api)); } catch (err) { DL.showMessage(err.message, "error"); } }, RELOAD_MS);
+    } else DL.showMessage("");
     document.title = d.name + " · dischargelab";
     $("pack-name").textContent = d.name;
     const s = d.summary || {};

@@ -3,7 +3,9 @@
 
 (function () {
   const $ = id => document.getElementById(id);
+  const RELOAD_MS = 2000;
   let chosen = null;
+  let again = null;
 
   function healthCell(fraction) {
     if (fraction === null || fraction === undefined || !isFinite(fraction)) return DL.el("td", {text: "–"});
@@ -29,8 +31,11 @@
       names.replaceChildren();
       for (const r of rows) {
         const link = DL.el("a", {href: "/packs/" + encodeURIComponent(r.name), text: r.name});
+        const nameCell = [link];
+        if (r.recomputing) nameCell.push(DL.el("span", {class: "muted", text: " recomputing …"}));
+        if (r.error) nameCell.push(DL.el("span", {class: "muted", text: " " + r.error}));
         body.append(DL.el("tr", {"data-pack": r.name}, [
-          DL.el("td", {}, [link]),
+          DL.el("td", {}, nameCell),
           DL.el("td", {class: "num", text: String(r.events)}),
           DL.el("td", {class: "num", text: DL.num(r.efc, 1)}),
           DL.el("td", {class: "num", text: DL.num(r.capacity_Ah, 3)}),
@@ -44,6 +49,10 @@
       $("empty").hidden = rows.length > 0;
       $("count").textContent = rows.length + (rows.length === 1 ? " pack" : " packs");
       window.__packs = {loaded: true, rows: rows};
+      // figures older than their pack's data are being recomputed by the server: look again
+      clearTimeout(again);
+      if (data.recompute_problem) DL.showMessage(data.recompute_problem, "error");
+      else if (rows.some(r => r.recomputing)) again = setTimeout(load, RELOAD_MS);
     } catch (err) {
       DL.showMessage(err.message, "error");
       window.__packs = {loaded: true, error: err.message};
