@@ -299,7 +299,8 @@ def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto
         kept["current_A"] = given
         meta["current_source"] = "given"
 
-    _check_voltage(kept, kept_lines, path_name)
+    if segment != "none":  # every row of a long log is not one discharge
+        _check_voltage(kept, kept_lines, path_name)
 
     offset = float(kept["time_s"].iloc[0])
     kept["time_s"] = kept["time_s"] - offset
