@@ -53,6 +53,9 @@ MIN_IDLE_A = 0.005
 #: Idle threshold: this many times the quietest current of the log ...
 IDLE_QUIET_FACTOR = 3.0
 
+#: ... and this many times the current's sample noise (second differences), ...
+IDLE_NOISE_FACTOR = 5.0
+
 #: ... at most this share of the load level (98th percentile of |current|).
 IDLE_MAX_SHARE = 0.1
 
@@ -114,15 +117,22 @@ class Span:
 
 
 def idle_threshold(current_A) -> float:
-    """Current below which a row is idle [A] (see the module docstring)."""
-    a = np.abs(np.asarray(current_A, dtype=float))
+    """Current below which a row is idle [A] (see the module docstring): the larger of
+    :data:`IDLE_QUIET_FACTOR` times the quietest current (the lowest rolling median of
+    ``|i|``) and :data:`IDLE_NOISE_FACTOR` times the current's sample noise, at least
+    :data:`MIN_IDLE_A`, at most :data:`IDLE_MAX_SHARE` of the load level."""
+    from .estimates import sample_noise
+
+    i = np.asarray(current_A, dtype=float)
+    a = np.abs(i)
     if a.size == 0:
         return MIN_IDLE_A
     level = float(np.percentile(a, 98))
     w = min(QUIET_WINDOW, a.size)
     quiet = float(np.min(np.median(np.lib.stride_tricks.sliding_window_view(a, w), axis=1)))
     top = max(MIN_IDLE_A, IDLE_MAX_SHARE * level)
-    return float(min(max(IDLE_QUIET_FACTOR * quiet, MIN_IDLE_A), top))
+    floor = max(IDLE_QUIET_FACTOR * quiet, IDLE_NOISE_FACTOR * sample_noise(i), MIN_IDLE_A)
+    return float(min(floor, top))
 
 
 def gap_limit(time_s) -> float:
@@ -325,7 +335,8 @@ def rest_reading(time_s, voltage_V, current_A, *, load_end_s: float | None = Non
     dict
         ``time_s`` (its last sample: where the reading is), ``duration_s``, ``samples``,
         ``since_load_s`` (time from the load to the reading, None without a load),
-        ``current_A`` (mean idle current), ``temperature_C``, and the keys of
+        ``current_A`` (idle current at the reading: the mean of the samples whose
+        voltage it reads), ``temperature_C``, and the keys of
         :func:`~dischargelab.logbook.estimates.relaxation` (``voltage_V``,
         ``relaxed_V``, ``left_V``, ``half95_V``, ``method``).
     """
@@ -337,7 +348,7 @@ def rest_reading(time_s, voltage_V, current_A, *, load_end_s: float | None = Non
                      direction if load_end_s is not None else 0, loaded_V=loaded_V)
     out.update(time_s=float(t[-1]), duration_s=float(t[-1] - t[0]), samples=int(t.size),
                since_load_s=None if since is None else float(since[-1]),
-               current_A=float(np.mean(i)), temperature_C=_last_finite(temperature_C))
+               current_A=float(np.mean(i[-3:])), temperature_C=_last_finite(temperature_C))
     return out
 
 
@@ -581,6 +592,13 @@ def log_events(frame, spans: list[Span], *, start_time_of=None, cells: int | Non
         if prev is not None and prev.kind in ("discharge", "charge") and prev.rows:
             rests[k] = rest_of(log, sp.start, sp.stop, load_row=prev.stop - 1,
                                direction=1 if prev.kind == "discharge" else -1)
+            if prev.kind == "charge" and prev.rows >= 2:
+                # what the charge before it ended like: a taper at its highest voltage is
+                # full (health checks that voltage against the pack's full voltage)
+                fig = charge_figures(t[prev.start:prev.stop], log.voltage_V[prev.start:prev.stop],
+                                     log.current_A[prev.start:prev.stop], cells=cells)
+                rests[k].reading["after_charge"] = {"taper": fig["taper"],
+                                                    "max_voltage_V": fig["max_voltage_V"]}
         else:
             rests[k] = rest_of(log, sp.start, sp.stop)
     events = []
@@ -606,9 +624,28 @@ def log_events(frame, spans: list[Span], *, start_time_of=None, cells: int | Non
                                  ambient_C=None if ambient is None else ambient[a:b])
             details.update(event_details(log, a, b, before, after))
             details["resistance_method"] = event.pop("resistance_method")
+            # the charge the load moved, with its first and last steps (from the sample
+            # before it to the one after it: coarse logs lose up to a sample interval each)
+            lo, hi = max(a - 1, 0), min(b + 1, n)
+            if sp.rows >= 2 and (lo < a and spans[k - 1].kind != "gap") \
+                    and (hi > b and k + 1 < len(spans) and spans[k + 1].kind != "gap"):
+                moved = counted_charge(t[lo:hi], log.current_A[lo:hi])[0]
+                if sp.kind == "discharge":
+                    event["discharged_Ah"] = max(moved, 0.0)
+                # its curve from the sample before to the one after (the rests' voltages at
+                # its ends), so that its charge scale is the charge it moved
+                i_b = log.current_A[lo:hi]
+                sign = -1.0 if sp.kind == "charge" else 1.0
+                q = np.concatenate(([0.0], np.cumsum(0.5 * (i_b[1:] + i_b[:-1])
+                                                     * np.diff(t[lo:hi])))) / 3600.0
+                event["curve"] = compact_curve(sign * q, log.voltage_V[lo:hi], sign * i_b,
+                                               int(min(CURVE_POINTS, hi - lo)))
             if sp.kind == "charge":
                 details["charge"] = charge_figures(part.time_s, part.voltage_V, part.current_A,
                                                    cells=cells)
+                if sp.rows >= 2 and lo < a and hi > b:
+                    details["charge"]["charged_Ah"] = max(-counted_charge(
+                        t[lo:hi], log.current_A[lo:hi])[0], 0.0)
         else:
             gap = float(t[sp.start] - t[sp.start - 1]) if sp.kind == "gap" else None
             event = quiet_figures(log.rows(sp.start, sp.stop), sp.kind, gap_s=gap)

@@ -112,6 +112,10 @@ SLOW_C_RATE = 0.5
 #: (the polarisation has built up; the charge drawn by then is corrected for).
 SETTLE_S = 300.0
 
+#: A rest read sooner than :data:`SETTLE_S` after a load is widened by what the load's
+#: polarisation may still hold, fading after this long [s] (:func:`_soon_after`).
+SOON_S = 30.0
+
 #: Capacity estimates whose median sets the EFC scale when the pack has neither a label
 #: capacity nor a full discharge.
 FIRST_ESTIMATES = 5
@@ -120,9 +124,10 @@ FIRST_ESTIMATES = 5
 #: full voltage (its full discharges' rest voltage, else the chemistry's charge voltage).
 FULL_VOLTAGE_MARGIN_CELL_V = 0.03
 
-#: Uncertainty of a loaded end voltage read through the open-circuit voltage, as a share
-#: of the resistive drop added back (polarisation beyond the step resistance).
-LOADED_END_SHARE = 0.5
+#: Standard deviation of a loaded end voltage read through the open-circuit voltage, as a
+#: share of the resistive drop added back (the polarisation built over a flight beyond a
+#: step's drop).
+LOADED_END_SHARE = 1.0
 
 
 @dataclass
@@ -629,20 +634,21 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     """Capacity between the rests around a load (sets ``h``); returns why not, or None."""
     details = e.get("details") or {}
     before, after = details.get("rest_before"), details.get("rest_after")
-    charge = details.get("charge") or {}
-    ends_full = bool(charge.get("taper")) and charge.get("max_voltage_V") is not None and \
-        charge["max_voltage_V"] / n_cells >= ctx.full_cell_V - FULL_VOLTAGE_MARGIN_CELL_V
+    ends_full = _full_after(details.get("charge"), n_cells, ctx)
     if before is None:
         return "no rest before it"
     if after is None and not ends_full:
         return "no rest after it"
     curve = ctx.curve_at(position)
     r = e.get("resistance_ohm")
-    soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
+    if _full_after(before.get("after_charge"), n_cells, ctx):
+        soc_a, sd_a = 1.0, FULL_SOC_SD
+    else:
+        soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
     if ends_full:
         soc_b, sd_b = 1.0, FULL_SOC_SD
     else:
-        soc_b, sd_b = soc_reading(curve, after, n_cells, resistance_ohm=r)
+        soc_b, sd_b = soc_reading(curve, _soon_after(after, e), n_cells, resistance_ohm=r)
     h.soc_start, h.soc_end = soc_a, soc_b
     q = float(details.get("counted_Ah") or 0.0)
     q_sd = float(details.get("counted_sd_Ah") or 0.0)
@@ -660,6 +666,29 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     return None
 
 
+def _full_after(charge: dict | None, n_cells: int, ctx: PackContext) -> bool:
+    """A charge (its figures) that ends full: in a taper at the pack's full voltage."""
+    if not charge or not charge.get("taper") or charge.get("max_voltage_V") is None:
+        return False
+    return charge["max_voltage_V"] / n_cells >= ctx.full_cell_V - FULL_VOLTAGE_MARGIN_CELL_V
+
+
+def _soon_after(reading: dict, e: dict) -> dict:
+    """A rest reading taken soon after a load, its interval widened by the polarisation the
+    load may still hold when the rest was too short to fit its relaxation:
+    :data:`LOADED_END_SHARE` of the resistive drop at the load's mean current, fading as
+    ``sqrt(SOON_S / t)`` after :data:`SOON_S`."""
+    since = reading.get("since_load_s")
+    r = e.get("resistance_ohm")
+    if since is None or r is None or reading.get("method") == "fit":
+        return reading
+    load = abs(float(e.get("mean_current_A") or 0.0))
+    extra = 1.96 * LOADED_END_SHARE * float(r) * load * np.sqrt(SOON_S / max(since, SOON_S))
+    if since >= SETTLE_S:
+        return reading
+    return dict(reading, half95_V=float(np.hypot(reading.get("half95_V") or 0.0, extra)))
+
+
 def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int,
                          position: int) -> str | None:
     """Capacity of a load from its rest before to its loaded end (no rest after, no full
@@ -674,8 +703,11 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
     curve = ctx.curve_at(position)
     soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
     drop = float(r) * float(e.get("end_current_A") or 0.0)
+    # the polarisation left at the end follows the flight's load, not its last sample
+    load = max(abs(float(e.get("end_current_A") or 0.0)), abs(float(e.get("mean_current_A")
+                                                                      or 0.0)))
     end = {"relaxed_V": float(e["end_voltage_V"]) + drop,
-           "half95_V": 1.96 * LOADED_END_SHARE * abs(drop), "current_A": 0.0,
+           "half95_V": 1.96 * LOADED_END_SHARE * float(r) * load, "current_A": 0.0,
            "temperature_C": e.get("temperature_max_C")}
     soc_b, sd_b = soc_reading(curve, end, n_cells)
     h.soc_start, h.soc_end = soc_a, soc_b

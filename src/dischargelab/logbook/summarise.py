@@ -320,10 +320,21 @@ def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = Non
     return event
 
 
+#: A rest beside a flight reads the pack's state when it covers at least this long [s]
+#: (from its first sample to the load, or from the load to its last sample): a flight's
+#: moments at zero throttle are not rests.
+MIN_READING_S = 5.0
+
+#: Rows of a rest beside a flight draw at most this share of the load level (98th
+#: percentile of the current) above the log's quietest current.
+REST_SHARE = 0.05
+
+
 def _rests_around(meta: dict, whole, whole_meta: dict | None):
     """``(whole log, first row, stop row, rest before, rest after)`` of a segment in the whole
-    file read with ``segment="none"``, or None. A rest is the idle rows (below the reader's
-    load threshold) next to the load, up to a gap, another load or a pack swap."""
+    file read with ``segment="none"``, or None. A rest is the rows below the reader's load
+    threshold next to the load, up to a gap, another load or a pack swap; it reads the pack
+    at its last quiet row (see :data:`REST_SHARE`)."""
     from ..io.segment import SOC_JUMP_PCT, VOLTAGE_JUMP_FRACTION
     from .events import gap_limit
 
@@ -341,10 +352,20 @@ def _rests_around(meta: dict, whole, whole_meta: dict | None):
     b = int(np.searchsorted(t, end + 1e-6, side="right"))
     if b - a < 2:
         return None
+    level = float(np.percentile(np.abs(log.current_A), 98))
     threshold = meta.get("load_threshold_A")
     if threshold is None:
-        threshold = 0.2 * float(np.percentile(np.abs(log.current_A), 98))
-    idle = np.abs(log.current_A) < threshold
+        threshold = 0.2 * level
+    # a rest is quiet: at most REST_SHARE of the load level above the quietest current (a
+    # flight controller's draw on the ground, not a spooled-up motor)
+    low = np.abs(log.current_A) < threshold
+    quiet = np.abs(log.current_A) < min(threshold, float(np.min(np.abs(log.current_A)))
+                                         + REST_SHARE * level)
+    # a flight read from arming holds its time on the ground: its rests are outside the load
+    while a < b - 2 and low[a]:
+        a += 1
+    while b > a + 2 and low[b - 1]:
+        b -= 1
     gap = gap_limit(t)
     v = log.voltage_V
     soc = whole["soc_pct"].to_numpy(dtype=float) if "soc_pct" in whole else None
@@ -355,19 +376,24 @@ def _rests_around(meta: dict, whole, whole_meta: dict | None):
             return False
         return soc is None or not (soc[k] - soc[k - 1] >= SOC_JUMP_PCT)
 
+    # the rests: the rows below the load threshold next to the load; each reads the pack
+    # at its last quiet row (a motor spooling up before take-off is counted, not rested on)
     lo = a
-    while lo > 0 and idle[lo - 1] and joined(lo):
+    while lo > 0 and low[lo - 1] and joined(lo):
         lo -= 1
     hi = b
-    while hi < t.size and idle[hi] and joined(hi):
+    while hi < t.size and low[hi] and joined(hi):
         hi += 1
     before = after = None
-    if lo < a:
-        load_row = lo - 1 if lo > 0 and not idle[lo - 1] and joined(lo) else None
-        before = rest_of(log, lo, a, load_row=load_row, direction=1 if load_row is not None
-                         and log.current_A[load_row] > 0 else -1 if load_row is not None else 0)
-    if hi > b and joined(b):
-        after = rest_of(log, b, hi, load_row=b - 1, direction=1)
+    calm = np.flatnonzero(quiet[lo:a]) + lo
+    if calm.size and t[a] - t[lo] >= MIN_READING_S:
+        load_row = lo - 1 if lo > 0 and not low[lo - 1] and joined(lo) else None
+        before = rest_of(log, lo, int(calm[-1]) + 1, load_row=load_row,
+                         direction=0 if load_row is None else
+                         1 if log.current_A[load_row] > 0 else -1)
+    calm = np.flatnonzero(quiet[b:hi]) + b
+    if calm.size and b < t.size and joined(b) and t[calm[-1]] - t[b - 1] >= MIN_READING_S:
+        after = rest_of(log, b, int(calm[-1]) + 1, load_row=b - 1, direction=1)
     return log, a, b, before, after
 
 
