@@ -42,8 +42,8 @@ FAMILY = get_family("ecm")
 #: constant-voltage charge ends at C/30 as a real cell's does (its OCV at full ~4.2 V).
 TOP_RAISE_V = 0.07
 
-#: Time step of the constant-voltage phase [s].
-CV_STEP_S = 10.0
+#: Bound on the steps of one constant-voltage phase.
+MAX_CV_STEPS = 2000
 
 #: Mission per cell: (name, power [W], duration [s]) (CMU eVTOL profile).
 MISSION = (("take-off", 54.0, 75.0), ("cruise", 16.0, 800.0), ("landing", 54.0, 105.0))
@@ -71,6 +71,8 @@ class LifeSpec:
     noise_V: float = 0.001
     noise_A: float = 0.005
     mission_scale: float = 1.0
+    mission_dt_s: float = 2.0
+    cv_step_s: float = 10.0
     seed: int = 0
 
 
@@ -129,7 +131,7 @@ class _Logger:
 
     def rest(self, duration, p, ambient):
         # finer steps first: the fast relaxation is sampled as a logger would see it
-        pieces = [d for d in (10.0, 50.0, 240.0) if d < duration]
+        pieces = [d for d in (20.0, 280.0) if d < duration]
         left = duration - sum(pieces)
         self.go([Step("rest", duration_s=d) for d in (*pieces, left) if d > 0], p, ambient)
 
@@ -157,14 +159,14 @@ class _Logger:
         # constant voltage: each 10 s the current that holds the charge voltage (the
         # terminal voltage is affine in the current at a given state), until C/30
         i_end = cap / 30.0
-        for _ in range(2000):
+        for _ in range(MAX_CV_STEPS):
             a = float(FAMILY.voltage(p, self.state, 0.0)[0])
             b = a - float(FAMILY.voltage(p, self.state, 1.0)[0])
             i = max(min((a - spec.cv_V) / b, 0.0), -i_cc)
             if -i < i_end:
                 break
-            self.go([Step("profile", profile_time_s=(CV_STEP_S,), profile_current_A=(i,))], p,
-                    ambient, max_dt_s=CV_STEP_S)
+            self.go([Step("profile", profile_time_s=(spec.cv_step_s,),
+                          profile_current_A=(i,))], p, ambient, max_dt_s=spec.cv_step_s)
 
     def series(self) -> dict:
         return {k: np.concatenate([s[k] for s in self.parts]) for k in
@@ -199,7 +201,7 @@ def synthetic_life(spec: LifeSpec | None = None) -> Life:
             log.rest(spec.rest_s, p, ambient)
         q0 = log.charge_removed()
         log.go([Step("power", w * spec.mission_scale, duration_s=d, name=n)
-                for n, w, d in MISSION], p, ambient, max_dt_s=2.0)
+                for n, w, d in MISSION], p, ambient, max_dt_s=spec.mission_dt_s)
         efc += (log.charge_removed() - q0) / spec.capacity_Ah
         log.rest(spec.rest_s, p, ambient)
         log.charge(p, ambient)

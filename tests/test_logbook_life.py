@@ -84,3 +84,123 @@ def test_cell_c_partial_discharges_within_3_percent_wherever_they_sit(
     if not dated and added == "after":  # placed after what the pack had, never before cycle 1
         first = next(k for k, h in enumerate(health) if h.full)
         assert all(k > first for k, h in enumerate(health) if not h.full)
+
+
+# --------------------------------------------------------------------------- long logs
+
+@pytest.fixture(scope="module")
+def short_life(tmp_path_factory):
+    """Two cycles of a synthetic cell at 1 Hz as one log: a 1C capacity test, missions,
+    rests and CC-CV charges (the engine; known capacity)."""
+    from synthetic_life import LifeSpec, synthetic_life
+
+    spec = LifeSpec(cycles=2, test_every=10, test_C=1.0, rest_s=600.0, mission_dt_s=10.0,
+                    cv_step_s=60.0)
+    life = synthetic_life(spec)
+    path = tmp_path_factory.mktemp("life") / "bms_log.csv"
+    life.frame.to_csv(path, index=False)
+    return path, life
+
+
+def test_a_long_log_through_the_logbook_gives_its_events_and_their_capacities(short_life,
+                                                                             tmp_path):
+    from dischargelab.logbook import Logbook
+
+    path, life = short_life
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        result = lb.add(path, pack="cell")
+        assert result.added == ["bms_log.csv"]
+        health = lb.health("cell")
+        rows = lb.events("cell").rows
+    kinds = [e.health_kind for e in health.events]
+    # the cell arrives part-charged: a discharge, then charge, test, charge, mission, charge
+    assert [k for k in kinds if k != "rest"] == ["partial", "charge", "full", "charge",
+                                               "partial", "charge", "partial", "charge"]
+    assert all(kinds[k] == "rest" for k in range(1, len(kinds), 2))
+    assert len(rows) == len(kinds) == result.events
+    truth = life.tests[0][2]
+    test = next(e for e in health.events if e.full)
+    assert test.capacity_Ah == pytest.approx(truth, rel=0.005)
+    assert test.capacity_method == "coulomb count"
+    for e in health.events:
+        if e.kind in ("charge", "discharge") and not e.full and e.efc and e.efc > 1:
+            assert e.capacity_method.startswith("rests before and after")
+            lo, hi = e.capacity_interval95
+            assert e.capacity_Ah == pytest.approx(truth, rel=0.03) and lo < truth < hi
+            assert 0 <= e.soc_end <= e.soc_start <= 1 or e.kind == "charge"
+    charges = [e for e in health.events if e.kind == "charge"]
+    assert all(e.charged_Ah > 0 and e.discharged_Ah == 0 for e in charges)
+    efc = [e.efc for e in health.events]
+    assert all(b >= a for a, b in zip(efc, efc[1:]))
+    data = health.to_dict()["events"]
+    assert {e["kind"] for e in data} == {"partial", "full", "charge", "rest"}
+    assert all(e["resistance_ref_ohm"] is None or e["resistance_ref_ohm"] > 0 for e in data)
+
+
+@pytest.mark.slow
+def test_a_capacity_test_inside_a_long_log_is_refitted(short_life, tmp_path):
+    from dischargelab.logbook import Logbook
+
+    path, life = short_life
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.add(path, pack="cell")
+        battery = lb.fit("cell", model="shepherd", bootstrap=0)
+    truth = life.tests[0][2]
+    assert battery.extra["logbook_fit"]["capacity_Ah"] == pytest.approx(truth, rel=0.005)
+    # fitted to the test's own rows: the model empties just past what the test delivered
+    assert truth < battery.capacity_Ah < 1.1 * truth
+
+
+@pytest.mark.slow
+def test_the_cmu_evtol_life_through_the_logbook(shared_data, tmp_path):
+    """A real eVTOL cell's whole life as one CSV (one sample every 167 s): its 13 C/5
+    capacity tests become full discharges with their own capacity; the missions are judged
+    uncountable; the charges, ending full, give the capacity between their rests."""
+    from dischargelab.logbook import Logbook
+
+    path = shared_data / "cmu_evtol" / "VAH27.csv"
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.add(path, pack="VAH27")
+        health = lb.health("VAH27")
+    counts = Counter(e.health_kind for e in health.events)
+    assert counts["full"] == 13 and counts["partial"] == 573
+    assert counts["charge"] >= 585 and counts["rest"] >= 1100
+    fulls = [e.capacity_Ah for e in health.events if e.full]
+    # README: 3.089 -> 2.552 Ah (the tests' delivered charge)
+    assert fulls[0] == pytest.approx(3.089, abs=0.01) and fulls[-1] == pytest.approx(2.552,
+                                                                                     abs=0.01)
+    missions = [e for e in health.events if e.health_kind == "partial"]
+    assert all(any("do not follow the current" in n for n in e.notes) for e in missions
+               if e.capacity_Ah is not None)
+    charges = [e for e in health.events if e.kind == "charge" and e.capacity_Ah is not None
+               and not e.outlier]
+    assert len(charges) > 500
+    # between the 6th and 7th test: the charges' capacities against the tests around them
+    k6, k7 = [k for k, e in enumerate(health.events) if e.full][5:7]
+    block = [e.capacity_Ah for e in health.events[k6:k7] if e in charges]
+    assert np.median(block) == pytest.approx(health.events[k7].capacity_Ah, rel=0.03)
+
+
+def test_every_shared_flight_log_gets_a_resistance_and_a_capacity_or_a_reason(shared_data):
+    logs = [shared_data / "flight_logs" / p for p in
+            ("ardupilot_loganalyzer/mechanical_fail.log", "ina3221_fpv_4s/28.csv",
+             "ina3221_fpv_4s/29.csv", "px4_ulog_rs/esc_status_log.ulg")]
+    logs += sorted((shared_data / "dji_m100_flights").glob("derived_battery_*.csv"))
+    for sid, path in enumerate(logs, 1):
+        health, _, _ = pack_health(as_stored(summarise_source(path), sid),
+                                   cells=6 if "dji" in str(path) else None)
+        assert any(h.resistance_ohm is not None for h in health), path.name
+        for h in health:
+            if h.capacity_Ah is None:
+                assert h.capacity_note and "\n" not in h.capacity_note
+            else:
+                lo, hi = h.capacity_interval95
+                assert lo < h.capacity_Ah < hi
+    # the INA3221 logger's flight with a rest on each side: a capacity, and each cell apart
+    (flight,) = pack_health(as_stored(summarise_source(shared_data / "flight_logs" /
+                                                       "ina3221_fpv_4s" / "29.csv"), 1))[0]
+    assert flight.capacity_method == "rests before and after"
+    assert 1.0 < flight.capacity_Ah < 1.8  # a 1600 mAh pack, used
+    cells = flight.cells
+    assert cells["count"] == 4 and len(cells["resistance_ohm"]) == 4
+    assert 0.5 < cells["weakest_share"] <= 1.0 and cells["rest_spread_V"] < 0.1

@@ -604,7 +604,7 @@ def log_events(frame, spans: list[Span], *, start_time_of=None, cells: int | Non
     events = []
     n = t.size
     for k, sp in enumerate(spans):
-        details: dict = {"rows": [sp.start, sp.stop]}
+        details: dict = {"rows": [sp.start, sp.stop], "long_log": True}
         if sp.steps:
             details["steps"] = list(sp.steps)
         if sp.kind in ("discharge", "charge"):

@@ -310,7 +310,7 @@ def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = Non
             rest = rest_sample(whole_log, before)
             rest["time_s"] -= whole_log.time_s[a]
         after = after_sample(whole_log, after_rest, b)
-        details = event_details(whole_log, a, b, before, after_rest)
+        details = dict(event_details(whole_log, a, b, before, after_rest), rows=[a, b])
     ambient = frame["ambient_temperature_C"].to_numpy(dtype=float) \
         if "ambient_temperature_C" in frame else None
     event = load_figures(log, rest=rest, after=after, ambient_C=ambient)
