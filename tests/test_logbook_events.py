@@ -262,3 +262,14 @@ def test_files_sharing_a_date_or_added_together_undated_follow_their_cycle_numbe
     assert [e["cycle"] for e in order_events(undated)] == [10, 20, 30]
     mixed = [_ev(1, cycle=30), _ev(2), _ev(3, cycle=20)]    # not all numbered: added order
     assert [e["source_id"] for e in order_events(mixed)] == [1, 2, 3]
+
+
+def test_equivalent_full_cycles_count_discharges_or_else_the_charges():
+    from dischargelab.logbook.health import equivalent_full_cycles
+
+    log = [{"kind": "discharge", "discharged_Ah": 1.5}, {"kind": "rest", "discharged_Ah": 0.0},
+           {"kind": "charge", "discharged_Ah": 0.0, "details": {"charge": {"charged_Ah": 1.6}}},
+           {"kind": "discharge", "discharged_Ah": 1.5}]
+    np.testing.assert_allclose(equivalent_full_cycles(log, 3.0), [0.5, 0.5, 0.5, 1.0])
+    charger_only = [e for e in log if e["kind"] != "discharge"]
+    np.testing.assert_allclose(equivalent_full_cycles(charger_only, 3.0), [0.0, 1.6 / 3])

@@ -1,15 +1,28 @@
 """The pure task of the logbook: one source file -> a small summary of its events.
 
-:func:`summarise_source` reads a file with the readers (:mod:`dischargelab.io`),
-splits it into its discharges or flights (the readers' segments) and returns a
-:class:`SourceSummary`: the file's SHA-256, the reader's notes and one small dict
-per event (numbers and a compact charge-voltage curve, never the samples). It never
+:func:`summarise_source` reads a file with the readers (:mod:`dischargelab.io`) and
+returns a :class:`SourceSummary`: the file's SHA-256, the reader's notes and one small
+dict per event (numbers and a compact charge-voltage curve, never the samples). It never
 touches the database and keeps no state, so it can run on any worker.
+
+* A **long log** -- a tester's file with step numbers, or any log whose charges move at
+  least 5 % of what its discharges move (a BMS log, a cell's whole life, a day of
+  flights with the charger) -- is split into discharges, charges, rests and gaps by
+  :func:`dischargelab.logbook.events.split_log`, one event each.
+* Any other file gives one event per discharge or flight (the readers' segments), with
+  the rests on either side read from the whole file.
+
+Every discharge, flight and charge carries ``details`` (stored as JSON): the rest
+readings before and after it (voltage, what is left to relax, idle current,
+temperature), the charge counted between them and how well the samples count it, the
+resistance's method, per-cell figures, its rows in the file read whole and, for a
+charge, what it moved and whether it ended in a constant-voltage taper.
 
 Per event (sign convention: discharge current positive; pack values):
 
-* ``start_time`` (ISO 8601, when the file records a clock time), ``cycle`` (from
-  a file name such as ``DischargeCycle010.txt``, when the file holds one event);
+* ``kind`` (:data:`dischargelab.logbook.events.KINDS`), ``start_time`` (ISO 8601,
+  when the file records a clock time), ``cycle`` (from a file name such as
+  ``DischargeCycle010.txt``, when the file holds one event);
 * ``discharged_Ah`` and ``discharged_Wh`` (trapezoid of I and V*I over time),
   ``duration_s``, mean and peak current;
 * rest voltage before the load and, when the file goes on idle after it, the rest
