@@ -284,8 +284,14 @@ def synthetic_section(folder: Path, lives: int, cycles: int, cache: Path | None)
           "| block mean: max error | events | per-event 95 % covers truth | median per-event "
           "error |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    specs = [LifeSpec(cycles=cycles, test_every=10, sample_hz=1.0, fade_per_efc=2e-3,
-                      knee_efc=15, knee_per_efc2=3e-4, seed=s) for s in range(lives)]
+    # lives apart: the fade law, the season, the depth of the missions
+    kinds = [dict(fade_per_efc=2e-3, knee_efc=15, knee_per_efc2=3e-4),
+             dict(fade_per_efc=1e-3, knee_efc=8, knee_per_efc2=6e-4, ambient_C=12.0,
+                  season_C=8.0),
+             dict(fade_per_efc=3e-3, knee_efc=25, knee_per_efc2=2e-4, ambient_C=32.0,
+                  mission_scale=0.8)]
+    specs = [LifeSpec(cycles=cycles, test_every=10, sample_hz=1.0, seed=s,
+                      **kinds[0 if s < 3 else 1 + s % 2]) for s in range(lives)]
     specs.append(LifeSpec(cycles=max(12, cycles // 3), test_every=6, sample_hz=10.0,
                           fade_per_efc=4e-3, knee_efc=8, knee_per_efc2=6e-4, seed=99))
     all_err, all_cover, all_event = [], [], []

@@ -23,6 +23,7 @@ BENCHMARKS = {
                                 "peak RSS MB"),
     "logbook.py": (["--copies", "20"], "later capacities in band"),
     "fleet.py": (["--packs", "1", "--repeats", "1"], "One file's task"),
+    "health_from_use.py": (["--skip", "cmu", "synthetic", "cellc"], "full-enough flights"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }

@@ -602,60 +602,65 @@ def log_events(frame, spans: list[Span], *, start_time_of=None, cells: int | Non
         else:
             rests[k] = rest_of(log, sp.start, sp.stop)
     events = []
-    n = t.size
     for k, sp in enumerate(spans):
         details: dict = {"rows": [sp.start, sp.stop], "long_log": True}
         if sp.steps:
             details["steps"] = list(sp.steps)
         if sp.kind in ("discharge", "charge"):
-            # one sample of load is seen through the samples either side of it
-            a, b = (sp.start, sp.stop) if sp.rows >= 2 else (max(sp.start - 1, 0),
-                                                            min(sp.stop + 1, n))
-            part = log.rows(a, b)
-            before, after = rests.get(k - 1), rests.get(k + 1)
-            rest = rest_sample(log, before) if sp.rows >= 2 else None
-            if rest is not None:
-                rest["time_s"] -= t[a]
-            rel = LogArrays(part.time_s - t[a], part.voltage_V, part.current_A,
-                            part.temperature_C, part.cells_V)
-            event = load_figures(rel, rest=rest,
-                                 after=after_sample(log, after, b) if sp.rows >= 2 else None,
-                                 points=int(min(CURVE_POINTS, max(b - a, 2))),
-                                 ambient_C=None if ambient is None else ambient[a:b])
-            details.update(event_details(log, a, b, before, after))
-            details["resistance_method"] = event.pop("resistance_method")
-            # the charge the load moved, with its first and last steps (from the sample
-            # before it to the one after it: coarse logs lose up to a sample interval each)
-            lo, hi = max(a - 1, 0), min(b + 1, n)
-            if sp.rows >= 2 and (lo < a and spans[k - 1].kind != "gap") \
-                    and (hi > b and k + 1 < len(spans) and spans[k + 1].kind != "gap"):
-                moved = counted_charge(t[lo:hi], log.current_A[lo:hi])[0]
-                if sp.kind == "discharge":
-                    event["discharged_Ah"] = max(moved, 0.0)
-                # its curve from the sample before to the one after (the rests' voltages at
-                # its ends), so that its charge scale is the charge it moved
-                i_b = log.current_A[lo:hi]
-                sign = -1.0 if sp.kind == "charge" else 1.0
-                q = np.concatenate(([0.0], np.cumsum(0.5 * (i_b[1:] + i_b[:-1])
-                                                     * np.diff(t[lo:hi])))) / 3600.0
-                event["curve"] = compact_curve(sign * q, log.voltage_V[lo:hi], sign * i_b,
-                                               int(min(CURVE_POINTS, hi - lo)))
-            if sp.kind == "charge":
-                details["charge"] = charge_figures(part.time_s, part.voltage_V, part.current_A,
-                                                   cells=cells)
-                if sp.rows >= 2 and lo < a and hi > b:
-                    details["charge"]["charged_Ah"] = max(-counted_charge(
-                        t[lo:hi], log.current_A[lo:hi])[0], 0.0)
+            event = _load_event(log, spans, k, rests, ambient, cells, details)
         else:
             gap = float(t[sp.start] - t[sp.start - 1]) if sp.kind == "gap" else None
             event = quiet_figures(log.rows(sp.start, sp.stop), sp.kind, gap_s=gap)
             if k in rests:
                 details["reading"] = rests[k].reading
-        row = min(sp.start, n - 1)
+        row = min(sp.start, t.size - 1)
         event.update(index=k, kind=sp.kind, cycle=None, cells=cells, details=details,
                      start_time=None if start_time_of is None else start_time_of(float(t[row])))
         events.append(event)
     return events
+
+
+def _load_event(log: LogArrays, spans: list[Span], k: int, rests: dict, ambient,
+                cells: int | None, details: dict) -> dict:
+    """A discharge's or a charge's figures in a long log (``details`` filled in place)."""
+    sp = spans[k]
+    t, n = log.time_s, log.time_s.size
+    # one sample of load is seen through the samples either side of it
+    a, b = (sp.start, sp.stop) if sp.rows >= 2 else (max(sp.start - 1, 0), min(sp.stop + 1, n))
+    part = log.rows(a, b)
+    before, after = rests.get(k - 1), rests.get(k + 1)
+    rest = rest_sample(log, before) if sp.rows >= 2 else None
+    if rest is not None:
+        rest["time_s"] -= t[a]
+    rel = LogArrays(part.time_s - t[a], part.voltage_V, part.current_A, part.temperature_C,
+                    part.cells_V)
+    event = load_figures(rel, rest=rest,
+                         after=after_sample(log, after, b) if sp.rows >= 2 else None,
+                         points=int(min(CURVE_POINTS, max(b - a, 2))),
+                         ambient_C=None if ambient is None else ambient[a:b])
+    details.update(event_details(log, a, b, before, after))
+    details["resistance_method"] = event.pop("resistance_method")
+    if sp.kind == "charge":
+        details["charge"] = charge_figures(part.time_s, part.voltage_V, part.current_A,
+                                           cells=cells)
+    # what the load moved, with its first and last steps: from the sample before it to the
+    # one after it (a coarse log loses up to a sample interval at each end), and its curve
+    # over the same samples (the rests' voltages at its ends), so that the curve's charge
+    # scale is the charge it moved
+    lo, hi = max(a - 1, 0), min(b + 1, n)
+    if sp.rows >= 2 and lo < a and hi > b and spans[k - 1].kind != "gap" \
+            and k + 1 < len(spans) and spans[k + 1].kind != "gap":
+        i_b = log.current_A[lo:hi]
+        sign = -1.0 if sp.kind == "charge" else 1.0
+        q = np.concatenate(([0.0], np.cumsum(0.5 * (i_b[1:] + i_b[:-1])
+                                             * np.diff(t[lo:hi])))) / 3600.0
+        if sp.kind == "charge":
+            details["charge"]["charged_Ah"] = max(-float(q[-1]), 0.0)
+        else:
+            event["discharged_Ah"] = max(float(q[-1]), 0.0)
+        event["curve"] = compact_curve(sign * q, log.voltage_V[lo:hi], sign * i_b,
+                                       int(min(CURVE_POINTS, hi - lo)))
+    return event
 
 
 def _temperatures(temperature_C, rest: dict | None, ambient_C) -> dict:
