@@ -63,10 +63,12 @@ def test_add_twice_health_and_outlier(url, shared_data):
         health = lb.health("cell C")
     data = health.to_dict()
     assert data["pack"] == "cell C"
-    assert set(data["events"][0]) == {"source", "start", "kind", "discharged_Ah", "capacity_Ah",
-                                      "capacity_interval95", "resistance_ohm", "efc", "outlier",
-                                      "event_id", "event_kind", "cycle", "full",
-                                      "capacity_method", "resistance_interval95", "notes"}
+    assert set(data["events"][0]) == {
+        "source", "start", "kind", "discharged_Ah", "capacity_Ah", "capacity_interval95",
+        "resistance_ohm", "efc", "outlier",  # the keys of the first release, kept
+        "event_id", "event_kind", "cycle", "full", "notes",
+        "capacity_method", "capacity_note", "resistance_interval95", "resistance_ref_ohm",
+        "resistance_ref_interval95", "charged_Ah", "soc_start", "soc_end", "cells"}
     assert {e["kind"] for e in data["events"]} == {"full"}
     by_name = {e["source"]: e for e in data["events"]}
     for path in files:

@@ -32,6 +32,7 @@ BENCHMARKS = {
     "web_plot_speed.py": (["--points", "2000", "--repeats", "3"], "next draws, median"),
     "tester_files.py": ([], "tester's counter"),
     "logbook_pages.py": (["--sizes", "2,3", "--requests", "3", "--workers", "1"], "goals at 3"),
+    "health_from_use.py": (["--skip", "cmu", "synthetic", "cellc"], "full-enough flights"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }

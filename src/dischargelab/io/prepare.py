@@ -307,7 +307,8 @@ def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto
         kept["current_A"] = given
         meta["current_source"] = "given"
 
-    if discharge_only:
+    # every row of a long log read whole (segment "none") is not one discharge
+    if discharge_only and segment != "none":
         _check_voltage(kept, kept_lines, path_name)
 
     offset = float(kept["time_s"].iloc[0])

@@ -1,30 +1,54 @@
-"""A pack's health per event: capacity, resistance, equivalent full cycles, outliers.
+"""A pack's health per event: capacity, resistance, equivalent full cycles, cells, outliers.
 
 Works on the stored event summaries (plain dicts, see
-:mod:`dischargelab.logbook.summarise`), never on the database.
+:mod:`dischargelab.logbook.summarise` and :mod:`dischargelab.logbook.events`), never on
+the database.
 
-* **Order.** Events are ordered by start time (when the file records a clock time),
-  then cycle number, then the order they were added.
+* **Order** (:func:`order_events`). Events of a file with a clock time are placed at
+  their time. A file without one is placed by the order in which it was added: after
+  everything the pack held when it came (never before the pack's first event); files
+  without a clock time added one after the other keep that order, or the order of the
+  cycle numbers in their names when they all carry one. Files sharing one clock time
+  are ordered by the cycle number in their names. Within a file, its own order.
 * **Full discharge.** A discharge that reaches the steep end of its voltage curve
   (``reaches_knee``) from a rest voltage at or above :data:`FULL_SOC` of the
-  chemistry's generic open-circuit voltage (or, for a bench discharge without a
-  rest sample, from its start). Its capacity is the charge it delivered
-  (coulomb counting); the 95 % interval covers where between its last two samples
-  the cutoff was crossed (not the current sensor's gain error, which shifts every
-  capacity of the pack alike).
-* **Partial discharges and flights.** The charge drawn divided by the share of the
-  capacity it used, read from the pack's own voltage curve: the nearest full
-  discharge logged before it (else after it), scaled to the event's current and
-  resistance. Each end of the event is placed on that curve: a rest voltage on its
-  open-circuit voltage, a loaded voltage on its loaded voltage. The open-circuit
-  voltage is the reference curve plus the model's voltage drop at its current
-  (the pack's fitted model when it has one, else its measured step resistance
-  times the current). The 95 % interval comes from :data:`VOLTAGE_SD_CELL_V` at each
-  end through the curve's slope there.
-* **Resistance** from the load steps of each event (``step_resistance``).
-* **EFC** = cumulative discharged charge / the reference capacity (the label
-  capacity if given, else the first full discharge). Cycles between two logged
-  cycle numbers are counted with the mean of their neighbours' charge.
+  chemistry's generic open-circuit voltage (or, for a bench discharge without a rest
+  sample, from its start) down to :data:`EMPTY_SOC` or below (its end voltage plus
+  the resistive drop). Its capacity is the charge it delivered (coulomb counting);
+  the 95 % interval covers where between its last two samples the cutoff was crossed
+  (not the current sensor's gain error, which shifts every capacity of the pack alike).
+* **Between two rests** (discharges, flights, missions and charges with a rest on
+  either side). Capacity = charge counted between the two rest readings / the change
+  in state of charge they read through the pack's open-circuit voltage
+  (:func:`dischargelab.logbook.estimates.capacity_between_rests`). The curve is the
+  pack's own, learned from its slow full discharge nearest in its life
+  (:meth:`~dischargelab.logbook.estimates.OcvCurve.from_discharge`, the drop added
+  back measured :data:`SETTLE_S` into the load), else the chemistry's generic curve.
+  A charge that ends in a constant-voltage taper at the pack's full voltage ends
+  full (``FULL_SOC`` of :mod:`.estimates`), as a charger and a fuel gauge define it.
+* **Partial discharges without a rest after them** (a bench discharge stopped under
+  load). The charge drawn divided by the share of the capacity it used, read from the
+  pack's full discharges whose voltage curves over the same charge match it best
+  (:data:`MATCH_REFERENCES`, weighted by the match): the reference with the same
+  stage of life, wherever the event sits in the order. Each end of the event is
+  placed on that curve: a rest voltage on its open-circuit voltage, a loaded voltage
+  on its loaded voltage, scaled to the event's current and resistance (the pack's
+  fitted model when it has one, else its step resistance). The 95 % interval comes
+  from :data:`VOLTAGE_SD_CELL_V` at each end through the curve's slope there.
+* **Flights without a full discharge or a rest after them**: the end read through the
+  open-circuit voltage from the last loaded voltage plus the resistive drop, with the
+  drop's size as its uncertainty (``"loaded end"``).
+* **Resistance** from the load steps of each event, else from how the voltage follows
+  the current (sparse logs), moved to reference conditions
+  (:func:`~dischargelab.logbook.estimates.resistance_at_reference`).
+* **EFC** = cumulative charge moved / the reference capacity (the label capacity if
+  given, else the first full discharge, else the median of the first
+  :data:`FIRST_ESTIMATES` capacity estimates). The charge moved is the discharged
+  charge (discharges, flights, missions, capacity tests), or the charged charge when
+  the pack has only charges logged. Cycles between two logged cycle numbers are
+  counted with the mean of their neighbours' charge.
+* **Cells** (:mod:`.cells`): per-cell figures, the weakest cell's share of the
+  capacity between two rests, and a drift flag over the pack's events.
 * **Outliers.** An over- or undercharged cycle shows as a capacity off the local
   trend: residual from a robust line through the :data:`OUTLIER_NEIGHBOURS` events on
   each side, modified z-score ``0.6745 r / MAD`` above :data:`OUTLIER_Z` (Iglewicz &
@@ -35,33 +59,70 @@ References
 .. [1] B. Iglewicz, D. C. Hoaglin, "How to Detect and Handle Outliers", ASQC (1993).
 .. [2] G. L. Plett, "Battery Management Systems, Vol. 1", Artech House (2015), ch. 2
    (state of charge from a rested voltage; coulomb counting).
+.. [3] Texas Instruments, SLUA364B and SLUA450 (capacity learned from two relaxed
+   open-circuit voltages and the charge passed between them).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 
 import numpy as np
+
+from .estimates import (
+    FULL_SOC_SD,
+    MIN_SWING,
+    OcvCurve,
+    capacity_between_rests,
+    resistance_at_reference,
+    soc_reading,
+)
+from .references import (
+    RELAXED_S,
+    SETTLE_S,
+    VOLTAGE_SD_CELL_V,
+    ReferenceCurve,
+    curve_match,
+    is_slow,
+    learned_curve,
+    matched_capacity,
+    partial_capacity,
+    settled_drop,
+)
 
 #: A discharge starts full when its rest voltage reads at least this state of charge.
 FULL_SOC = 0.9
 
-#: Standard deviation of a voltage placed on the reference curve, per cell [V]:
-#: relaxation left after a rest, temperature and ageing since the reference.
-VOLTAGE_SD_CELL_V = 0.010
-
-#: A rest after the load counts as relaxed after this long [s]; sooner the loaded curve
-#: is used at the last loaded sample.
-RELAXED_S = 60.0
-
-#: Partial events using less than this share of the capacity get no capacity.
-MIN_SHARE = 0.2
+#: ... and ends empty when its end voltage plus the resistive drop reads at most this.
+EMPTY_SOC = 0.05
 
 #: Neighbours on each side for the outlier test's local median.
 OUTLIER_NEIGHBOURS = 3
 
 #: Modified z-score above which a capacity is an outlier.
 OUTLIER_Z = 3.5
+
+#: A rest read sooner than :data:`SETTLE_S` after a load is widened by what the load's
+#: polarisation may still hold, fading after this long [s] (:func:`_soon_after`).
+SOON_S = 30.0
+
+#: Capacity estimates whose median sets the EFC scale when the pack has neither a label
+#: capacity nor a full discharge.
+FIRST_ESTIMATES = 5
+
+#: A charge ends full when its highest voltage per cell is within this of the pack's
+#: full voltage (its full discharges' rest voltage, else the chemistry's charge voltage).
+FULL_VOLTAGE_MARGIN_CELL_V = 0.03
+
+#: Standard deviation of a loaded end voltage read through the open-circuit voltage, as a
+#: share of the resistive drop added back: the polarisation a flight builds beyond a
+#: one-second step's drop can be as large again. A resistance from how the voltage
+#: follows the current over samples seconds apart (``"regression"``) holds most of it:
+#: a quarter (DJI Matrice 100, 19-11-28 flight 1: its last loaded voltage plus that drop
+#: lay within 0.05 V (8 mV per cell) of the rest 100 s after landing).
+LOADED_END_SHARE = 1.0
+LOADED_END_SHARE_REGRESSION = 0.25
 
 
 @dataclass
@@ -78,18 +139,28 @@ class EventHealth:
     capacity_Ah: float | None = None
     capacity_interval95: list | None = None
     capacity_method: str | None = None
+    capacity_note: str | None = None
     resistance_ohm: float | None = None
     resistance_interval95: list | None = None
+    resistance_ref_ohm: float | None = None
+    resistance_ref_interval95: list | None = None
+    charged_Ah: float | None = None
+    soc_start: float | None = None
+    soc_end: float | None = None
+    cells: dict | None = None
     efc: float | None = None
     outlier: bool = False
     notes: list[str] = field(default_factory=list)
 
     @property
     def health_kind(self) -> str:
-        """``"full"`` (a full discharge), ``"partial"`` (a bench discharge) or ``"flight"``."""
+        """``"full"`` (a full discharge), ``"partial"`` (another discharge), ``"flight"``,
+        or the event's own kind (``"charge"``, ``"rest"``, ``"gap"``)."""
         if self.kind == "flight":
             return "flight"
-        return "full" if self.full else "partial"
+        if self.kind == "discharge":
+            return "full" if self.full else "partial"
+        return self.kind
 
     def to_dict(self) -> dict:
         """The keys of ``logbook health --json`` (``kind``: :attr:`health_kind`;
@@ -101,7 +172,12 @@ class EventHealth:
                 "outlier": self.outlier, "event_id": self.event_id,
                 "event_kind": self.kind, "cycle": self.cycle, "full": self.full,
                 "capacity_method": self.capacity_method,
-                "resistance_interval95": self.resistance_interval95, "notes": list(self.notes)}
+                "capacity_note": self.capacity_note,
+                "resistance_interval95": self.resistance_interval95,
+                "resistance_ref_ohm": self.resistance_ref_ohm,
+                "resistance_ref_interval95": self.resistance_ref_interval95,
+                "charged_Ah": self.charged_Ah, "soc_start": self.soc_start,
+                "soc_end": self.soc_end, "cells": self.cells, "notes": list(self.notes)}
 
     @classmethod
     def from_dict(cls, data: dict) -> EventHealth:
@@ -112,17 +188,68 @@ class EventHealth:
                    capacity_Ah=data["capacity_Ah"],
                    capacity_interval95=data["capacity_interval95"],
                    capacity_method=data["capacity_method"],
+                   capacity_note=data.get("capacity_note"),
                    resistance_ohm=data["resistance_ohm"],
-                   resistance_interval95=data["resistance_interval95"], efc=data["efc"],
+                   resistance_interval95=data["resistance_interval95"],
+                   resistance_ref_ohm=data.get("resistance_ref_ohm"),
+                   resistance_ref_interval95=data.get("resistance_ref_interval95"),
+                   charged_Ah=data.get("charged_Ah"), soc_start=data.get("soc_start"),
+                   soc_end=data.get("soc_end"), cells=data.get("cells"), efc=data["efc"],
                    outlier=data["outlier"], notes=list(data["notes"]))
 
 
-def order_events(events: list[dict]) -> list[dict]:
-    """Events by start time, then cycle number, then the order they were added."""
-    return sorted(events, key=lambda e: (e.get("start_time") or "",
-                                         -1 if e.get("cycle") is None else e["cycle"],
-                                         e.get("id") or 0, e.get("idx") or 0))
+# --------------------------------------------------------------------------- order
 
+def _stamp(text) -> datetime | None:
+    """A clock time as a naive UTC datetime (None when missing or unreadable)."""
+    if not text:
+        return None
+    try:
+        stamp = datetime.fromisoformat(str(text))
+    except ValueError:
+        return None
+    if stamp.tzinfo is not None:
+        stamp = stamp.astimezone(UTC).replace(tzinfo=None)
+    return stamp
+
+
+def _source_of(e: dict):
+    return e.get("source_id") if e.get("source_id") is not None else e.get("id") or 0
+
+
+def order_events(events: list[dict]) -> list[dict]:
+    """Events in the pack's life order (see the module docstring)."""
+    by_source: dict = {}
+    for e in events:
+        by_source.setdefault(_source_of(e), []).append(e)
+    horizon = datetime.min
+    keyed = []
+    undated_groups: dict = {}
+    for sid in sorted(by_source):
+        evs = sorted(by_source[sid], key=lambda e: (e.get("idx") or e.get("index") or 0,
+                                                    e.get("id") or 0))
+        stamps = [_stamp(e.get("start_time")) for e in evs]
+        if any(s is not None for s in stamps):
+            last = next(s for s in stamps if s is not None)
+            for e, s in zip(evs, stamps):
+                last = s if s is not None else last
+                keyed.append(((last, 0, -1 if e.get("cycle") is None else e["cycle"], sid,
+                               e.get("idx") or 0), e))
+            horizon = max(horizon, max(s for s in stamps if s is not None))
+        else:
+            undated_groups.setdefault(horizon, []).append((sid, evs))
+    for at, group in undated_groups.items():
+        cycles = [evs[0].get("cycle") for _, evs in group]
+        by_cycle = all(c is not None for c in cycles)
+        for rank, (sid, evs) in enumerate(group):
+            order = cycles[rank] if by_cycle else rank
+            for e in evs:
+                keyed.append(((at, 1, order, sid, e.get("idx") or 0), e))
+    keyed.sort(key=lambda item: item[0])
+    return [e for _, e in keyed]
+
+
+# --------------------------------------------------------------------------- classification
 
 def pack_cells(event: dict, cells: int | None, chemistry: str | None) -> int:
     """Cells in series: the pack's, the log's, else inferred from the highest voltage."""
@@ -132,9 +259,26 @@ def pack_cells(event: dict, cells: int | None, chemistry: str | None) -> int:
         return int(cells)
     if event.get("cells"):
         return int(event["cells"])
-    top = [x for x in (event.get("rest_voltage_V"), max(event["curve"]["voltage_V"] or [0]))
+    curve = (event.get("curve") or {}).get("voltage_V") or [0]
+    top = [x for x in (event.get("rest_voltage_V"), max(curve), event.get("end_voltage_V"))
            if x]
-    return infer_cells(np.array(top), chemistry)
+    return infer_cells(np.array(top or [1.0]), chemistry)
+
+
+def _cell_counts(ordered: list[dict], cells: int | None, chemistry: str | None) -> list[int]:
+    """:func:`pack_cells` of every event; inferred once per source from all its events."""
+    if cells:
+        return [int(cells)] * len(ordered)
+    by_source: dict = {}
+    for e in ordered:
+        if not e.get("cells"):
+            by_source.setdefault(_source_of(e), []).append(e)
+    inferred = {}
+    for sid, evs in by_source.items():
+        top = max((max((e.get("curve") or {}).get("voltage_V") or [0.0]),
+                   e.get("rest_voltage_V") or 0.0, e.get("end_voltage_V") or 0.0) for e in evs)
+        inferred[sid] = pack_cells({"rest_voltage_V": top}, None, chemistry)
+    return [int(e["cells"]) if e.get("cells") else inferred[_source_of(e)] for e in ordered]
 
 
 def starts_full(event: dict, cells: int, chemistry: str | None) -> bool:
@@ -147,6 +291,24 @@ def starts_full(event: dict, cells: int, chemistry: str | None) -> bool:
     return bool(soc_from_rest_voltage(rest / cells, chemistry) >= FULL_SOC)
 
 
+def ends_empty(event: dict, cells: int, chemistry: str | None) -> bool:
+    """Whether a discharge ends empty: its end voltage plus the resistive drop reads at most
+    :data:`EMPTY_SOC` (a mission whose landing makes its voltage fall fast does not)."""
+    from ..ocv import soc_from_rest_voltage
+
+    end = event.get("end_voltage_V")
+    if end is None:
+        return False
+    drop = float(event.get("resistance_ohm") or 0.0) * float(event.get("end_current_A") or 0.0)
+    return bool(soc_from_rest_voltage((end + drop) / cells, chemistry) <= EMPTY_SOC)
+
+
+def is_full(event: dict, cells: int, chemistry: str | None) -> bool:
+    """A full discharge (see the module docstring)."""
+    return (event.get("kind") in ("discharge", "flight") and bool(event.get("reaches_knee"))
+            and starts_full(event, cells, chemistry) and ends_empty(event, cells, chemistry))
+
+
 def full_capacity(event: dict) -> tuple[float, list]:
     """Coulomb-counted capacity [Ah] of a full discharge and its 95 % interval."""
     q = float(event["discharged_Ah"])
@@ -156,102 +318,29 @@ def full_capacity(event: dict) -> tuple[float, list]:
     return q, [q - half, q + half]
 
 
-@dataclass
-class ReferenceCurve:
-    """A full discharge of the pack as the measure of its partial ones.
+# --------------------------------------------------------------------------- EFC, outliers
 
-    ``share`` is the share of the capacity drawn (0 full, 1 empty) at each curve
-    point; ``loaded(current, resistance)`` and ``ocv`` give the voltage there.
-    """
-
-    event: dict
-    capacity_Ah: float
-    model: object | None = None
-
-    def __post_init__(self):
-        curve = self.event["curve"]
-        q = np.asarray(curve["charge_Ah"], dtype=float)
-        self.share = q / q[-1]
-        self.voltage = np.asarray(curve["voltage_V"], dtype=float)
-        self.current = np.asarray(curve["current_A"], dtype=float)
-        self.resistance = float(self.event.get("resistance_ohm") or 0.0)
-        self.drop = self._model_drop(q) if self.model is not None else \
-            self.resistance * self.current
-
-    def _model_drop(self, q: np.ndarray) -> np.ndarray:
-        """The model's voltage drop at the reference current [V], at the same charge."""
-        bat = self.model
-        qm = np.minimum(q, 0.999 * bat.capacity_Ah)
-        with np.errstate(all="ignore"):
-            rest = np.asarray(bat.voltage(np.zeros_like(qm), qm), dtype=float)
-            loaded = np.asarray(bat.voltage(self.current, qm), dtype=float)
-        drop = rest - loaded
-        return np.where(np.isfinite(drop), drop, self.resistance * self.current)
-
-    @property
-    def ocv(self) -> np.ndarray:
-        return self.voltage + self.drop
-
-    def loaded(self, current_A: float, resistance_ohm: float | None) -> np.ndarray:
-        """Voltage at ``current_A`` of a pack whose step resistance is now ``resistance_ohm``."""
-        scale = current_A / np.where(self.current > 0, self.current, np.nan)
-        drop = np.nan_to_num(self.drop * scale, nan=self.resistance * current_A)
-        extra = 0.0 if resistance_ohm is None else (resistance_ohm - self.resistance) * current_A
-        return self.voltage + self.drop - drop - extra
-
-    def place(self, voltage_V: float, curve: np.ndarray, sd_V: float
-              ) -> tuple[float, float] | None:
-        """Share of the capacity drawn where ``curve`` reads ``voltage_V``, and its sd."""
-        falling = np.minimum.accumulate(curve)
-        if not np.isfinite(voltage_V) or voltage_V < falling[-1]:
-            return None
-        if voltage_V >= falling[0]:
-            share = 0.0
-        else:
-            k = int(np.argmax(falling <= voltage_V))
-            a, b = falling[k - 1], falling[k]
-            share = float(self.share[k - 1] + (a - voltage_V) / (a - b)
-                          * (self.share[k] - self.share[k - 1])) if a > b else float(self.share[k])
-        lo = float(np.interp(share - 0.05, self.share, curve))
-        hi = float(np.interp(min(share + 0.05, 1.0), self.share, curve))
-        slope = abs(lo - hi) / (min(share + 0.05, 1.0) - max(share - 0.05, 0.0))
-        return share, (sd_V / slope if slope > 0 else 1.0)
-
-
-def partial_capacity(event: dict, ref: ReferenceCurve, cells: int
-                     ) -> tuple[float | None, list | None, str]:
-    """Capacity [Ah] of a partial discharge or flight from the reference curve."""
-    sd = VOLTAGE_SD_CELL_V * cells
-    r_now = event.get("resistance_ohm")
-    curve = event["curve"]
-    if event.get("rest_voltage_V") is not None:
-        start = ref.place(event["rest_voltage_V"], ref.ocv, sd)
-        how_start = "rest voltage before"
-    else:
-        start = ref.place(curve["voltage_V"][0], ref.loaded(curve["current_A"][0], r_now),
-                          2 * sd)
-        how_start = "first loaded voltage"
-    if event.get("rest_after_V") is not None and (event.get("rest_after_s") or 0) >= RELAXED_S:
-        end = ref.place(event["rest_after_V"], ref.ocv, sd)
-        how_end = "rest voltage after"
-    else:
-        end = ref.place(event["end_voltage_V"], ref.loaded(event["end_current_A"], r_now), sd)
-        how_end = "last loaded voltage"
-    if start is None or end is None:
-        return None, None, "a voltage lies below the reference curve"
-    share = end[0] - start[0]
-    if share < MIN_SHARE:
-        return None, None, f"uses {100 * max(share, 0):.0f} % of the capacity (too little)"
-    cap = float(event["discharged_Ah"]) / share
-    half = 1.96 * cap * float(np.hypot(start[1], end[1])) / share
-    return cap, [cap - half, cap + half], f"reference curve ({how_start}, {how_end})"
+def moved_charge(event: dict, charges: bool) -> float:
+    """Charge an event moved [Ah]: discharged (discharges, flights), or charged when the
+    pack's charges are counted instead (``charges``)."""
+    if charges:
+        return float(((event.get("details") or {}).get("charge") or {}).get("charged_Ah")
+                     or 0.0) if event.get("kind") == "charge" else 0.0
+    if event.get("kind") in ("discharge", "flight"):
+        return float(event.get("discharged_Ah") or 0.0)
+    return 0.0
 
 
 def equivalent_full_cycles(ordered: list[dict], reference_Ah: float) -> np.ndarray:
-    """Cumulative discharged charge / reference capacity after each event [-]."""
+    """Cumulative charge moved / reference capacity after each event [-].
+
+    The discharged charge counts (discharges and flights); when the pack has no discharge
+    logged, the charged charge does.
+    """
+    charges = not any(e.get("kind", "discharge") in ("discharge", "flight") for e in ordered)
     total, out, prev = 0.0, [], None
     for e in ordered:
-        q = float(e["discharged_Ah"])
+        q = moved_charge(dict(e, kind=e.get("kind", "discharge")), charges)
         cycle = e.get("cycle")
         if cycle is not None:
             if prev is None and cycle > 1:
@@ -260,13 +349,37 @@ def equivalent_full_cycles(ordered: list[dict], reference_Ah: float) -> np.ndarr
                 total += (cycle - prev[0] - 1) * 0.5 * (q + prev[1])
         total += q
         out.append(total / reference_Ah)
-        prev = (cycle, q)
+        if q > 0 or cycle is not None:
+            prev = (cycle, q)
     return np.array(out, dtype=float)
 
 
+def theil_sen(x, y) -> tuple[float, float]:
+    """Theil-Sen line through points: the median of the pairwise slopes, and the intercept
+    ``median(y) - slope median(x)`` (Sen 1968; as ``scipy.stats.theilslopes``)."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    a, b = np.triu_indices(x.size, 1)
+    dx = x[b] - x[a]
+    ok = dx != 0
+    slope = _median((y[b] - y[a])[ok] / dx[ok]) if ok.any() else 0.0
+    return slope, _median(y) - slope * _median(x)
+
+
+def _median(values: np.ndarray) -> float:
+    """Median of a small 1-D array (what ``np.median`` gives, without its overhead)."""
+    v = np.sort(values)
+    n = v.size
+    return float(v[n // 2]) if n % 2 else float(0.5 * (v[n // 2 - 1] + v[n // 2]))
+
+
 def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
-                  threshold: float = OUTLIER_Z) -> np.ndarray:
+                  threshold: float = OUTLIER_Z, half95=None) -> np.ndarray:
     """True where a value sits off the local trend of its neighbours (module docstring).
+
+    With ``half95`` (each value's 95 % half-width), a value is an outlier only when its
+    interval does not reach the trend either: a precise estimate slightly off a scattered
+    one's trend is not.
 
     The local trend at each event is the Theil-Sen line (median of pairwise slopes)
     through the :data:`OUTLIER_NEIGHBOURS` nearest events on each side (more on one
@@ -274,8 +387,6 @@ def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
     of their neighbours' lines and the test repeated (at most three passes), so one
     odd cycle does not drag its neighbours out with it.
     """
-    from scipy.stats import theilslopes
-
     x = np.asarray(efc, dtype=float)
     y = np.asarray(values, dtype=float)
     n = y.size
@@ -293,7 +404,7 @@ def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
             lo = min(max(0, pos - neighbours), others.size - 2 * neighbours)
             idx = others[lo:lo + 2 * neighbours]
             if np.ptp(x[idx]) > 0:
-                slope, intercept, *_ = theilslopes(y[idx], x[idx])
+                slope, intercept = theil_sen(x[idx], y[idx])
                 resid[k] = y[k] - (intercept + slope * x[k])
             else:
                 resid[k] = y[k] - np.median(y[idx])
@@ -302,6 +413,8 @@ def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
         if mad <= 0:
             break
         new = 0.6745 * np.abs(resid - centre) / mad > threshold
+        if half95 is not None:
+            new &= np.abs(resid - centre) > np.asarray(half95, dtype=float)
         if np.array_equal(new, flags):
             break
         flags = new
@@ -329,15 +442,13 @@ def value_today(efc, values, events: int = TODAY_EVENTS) -> float | None:
     Robust to one odd event, and local: the fade rate changes over a life, so the
     capacity today is read from the latest events, not from the whole-life trend.
     """
-    from scipy.stats import theilslopes
-
     x = np.asarray(efc, dtype=float)[-events:]
     y = np.asarray(values, dtype=float)[-events:]
     if y.size == 0:
         return None
     if y.size < 3 or np.ptp(x) <= 0:
         return float(np.median(y))
-    slope, intercept, *_ = theilslopes(y, x)
+    slope, intercept = theil_sen(x, y)
     return float(intercept + slope * x[-1])
 
 
@@ -360,6 +471,204 @@ def observed_crossing(efc, values, threshold: float) -> tuple[float, list] | Non
     return at, [float(x[k]), float(x[k + 1])]
 
 
+# --------------------------------------------------------------------------- per event
+
+@dataclass
+class PackContext:
+    """What every event of one pack is read against."""
+
+    cells: int | None
+    chemistry: str | None
+    model: object | None
+    fulls: list[tuple[int, dict, float]]          # (position, event, capacity)
+    curves: list[tuple[int, OcvCurve]]            # (position, learned curve)
+    prior: OcvCurve
+    full_cell_V: float
+
+    def curve_at(self, position: int) -> OcvCurve:
+        """The learned curve nearest in the pack's life (before preferred), else the prior."""
+        if not self.curves:
+            return self.prior
+        before = [c for p, c in self.curves if p <= position]
+        return before[-1] if before else self.curves[0][1]
+
+
+def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, position: int
+                   ) -> str | None:
+    """Capacity between the rests around a load (sets ``h``); returns why not, or None."""
+    details = e.get("details") or {}
+    before, after = details.get("rest_before"), details.get("rest_after")
+    ends_full = _full_after(details.get("charge"), n_cells, ctx)
+    if before is None:
+        return "no rest before it"
+    if after is None and not ends_full:
+        return "no rest after it"
+    curve = ctx.curve_at(position)
+    r = e.get("resistance_ohm")
+    if _full_after(before.get("after_charge"), n_cells, ctx):
+        soc_a, sd_a = 1.0, FULL_SOC_SD
+    else:
+        soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
+    if ends_full:
+        soc_b, sd_b = 1.0, FULL_SOC_SD
+    else:
+        soc_b, sd_b = soc_reading(curve, _soon_after(after, e), n_cells, resistance_ohm=r)
+    h.soc_start, h.soc_end = soc_a, soc_b
+    q = float(details.get("counted_Ah") or 0.0)
+    q_sd = float(details.get("counted_sd_Ah") or 0.0)
+    cap, interval, how = capacity_between_rests(q, q_sd, soc_a, sd_a, soc_b, sd_b)
+    if cap is None:
+        return how
+    sampling = details.get("sampling") or {}
+    h.capacity_Ah, h.capacity_interval95 = cap, interval
+    h.capacity_method = "rests before and after" + (" (charge ends full)" if ends_full else "")
+    if not sampling.get("resolved", True):
+        h.notes.append(f"the samples ({sampling.get('period_s') or 0:.0f} s apart) do not "
+                       f"follow the current: its charge is counted to +-{100 * q_sd / abs(q):.0f}"
+                       " % (1 sd), and the interval widened")
+    h.notes.append(f"state of charge through {curve.source}")
+    return None
+
+
+def _full_after(charge: dict | None, n_cells: int, ctx: PackContext) -> bool:
+    """A charge (its figures) that ends full: in a taper at the pack's full voltage."""
+    if not charge or not charge.get("taper") or charge.get("max_voltage_V") is None:
+        return False
+    return charge["max_voltage_V"] / n_cells >= ctx.full_cell_V - FULL_VOLTAGE_MARGIN_CELL_V
+
+
+def _soon_after(reading: dict, e: dict) -> dict:
+    """A rest reading taken soon after a load, its interval widened by the polarisation the
+    load may still hold when the rest was too short to fit its relaxation:
+    :data:`LOADED_END_SHARE` of the resistive drop at the load's mean current, fading as
+    ``sqrt(SOON_S / t)`` after :data:`SOON_S`."""
+    since = reading.get("since_load_s")
+    r = e.get("resistance_ohm")
+    if since is None or r is None or reading.get("method") == "fit":
+        return reading
+    load = abs(float(e.get("mean_current_A") or 0.0))
+    extra = 1.96 * LOADED_END_SHARE * float(r) * load * np.sqrt(SOON_S / max(since, SOON_S))
+    if since >= SETTLE_S:
+        return reading
+    return dict(reading, half95_V=float(np.hypot(reading.get("half95_V") or 0.0, extra)))
+
+
+def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int,
+                         position: int) -> str | None:
+    """Capacity of a load from its rest before to its loaded end (no rest after, no full
+    discharge of the pack to compare with)."""
+    details = e.get("details") or {}
+    before = details.get("rest_before")
+    if before is None:
+        return "no rest before it (the log starts under load)"
+    r = e.get("resistance_ohm")
+    if r is None:
+        return "no rest after it and no resistance to read its loaded end"
+    curve = ctx.curve_at(position)
+    soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
+    drop = float(r) * float(e.get("end_current_A") or 0.0)
+    # the polarisation left at the end follows the flight's load, not its last sample
+    load = max(abs(float(e.get("end_current_A") or 0.0)), abs(float(e.get("mean_current_A")
+                                                                      or 0.0)))
+    share = LOADED_END_SHARE_REGRESSION if details.get("resistance_method") == "regression" \
+        else LOADED_END_SHARE
+    end = {"relaxed_V": float(e["end_voltage_V"]) + drop,
+           "half95_V": 1.96 * share * float(r) * load, "current_A": 0.0,
+           "temperature_C": e.get("temperature_max_C")}
+    soc_b, sd_b = soc_reading(curve, end, n_cells)
+    h.soc_start, h.soc_end = soc_a, soc_b
+    q = float(details.get("counted_Ah") or e.get("discharged_Ah") or 0.0)
+    cap, interval, how = capacity_between_rests(q, float(details.get("counted_sd_Ah") or 0.0),
+                                                soc_a, sd_a, soc_b, sd_b)
+    if cap is None:
+        return how + " (read from its loaded end: no rest after it)"
+    h.capacity_Ah, h.capacity_interval95 = cap, interval
+    h.capacity_method = "rest before, loaded end"
+    h.notes.append(f"no rest after it: its end is the last loaded voltage plus the resistive "
+                   f"drop ({drop:.2f} V), read through {curve.source}")
+    return None
+
+
+def _capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, position: int) -> None:
+    """The event's capacity by the first method that applies (module docstring)."""
+    if h.kind not in ("discharge", "flight", "charge"):
+        return
+    why = _rest_capacity(e, h, ctx, n_cells, position)
+    if why is None:
+        return
+    if h.kind != "charge" and ctx.fulls and \
+            not ((e.get("details") or {}).get("rest_after") and
+                 (e.get("rest_after_s") or 0) >= RELAXED_S):
+        cap, interval, how = matched_capacity(e, [(f, c) for _, f, c in ctx.fulls], n_cells,
+                                              ctx.model)
+        if cap is not None:
+            h.capacity_Ah, h.capacity_interval95, h.capacity_method = cap, interval, how
+            return
+        why = how
+    elif h.kind != "charge" and not ctx.fulls and "no rest after" in why:
+        why = _loaded_end_capacity(e, h, ctx, n_cells, position) or why
+        if h.capacity_Ah is not None:
+            return
+    h.capacity_note = why
+
+
+def _resistance(e: dict, h: EventHealth, ctx: PackContext) -> None:
+    temp = e.get("temperature_start_C")
+    if temp is None:
+        temp = e.get("ambient_C")
+    r, interval, how = resistance_at_reference(
+        h.resistance_ohm, h.resistance_interval95, temp, soc=h.soc_start, model=ctx.model,
+        current_A=e.get("mean_current_A"))
+    h.resistance_ref_ohm, h.resistance_ref_interval95 = r, interval
+    if r is not None:
+        method = (e.get("details") or {}).get("resistance_method")
+        h.notes.append(f"resistance from {method or 'load steps'}; at reference conditions "
+                       f"{how}")
+
+
+def _cells(e: dict, h: EventHealth, ctx: PackContext, position: int) -> None:
+    from .cells import weakest_share
+
+    figures = (e.get("details") or {}).get("cells")
+    if not figures:
+        return
+    out = dict(figures)
+    details = e.get("details") or {}
+    share, weakest = weakest_share(ctx.curve_at(position), figures,
+                                   float(details.get("counted_Ah") or 0.0),
+                                   float(details.get("counted_sd_Ah") or 0.0))
+    out.update(weakest_share=share, weakest=weakest, drift=False)
+    h.cells = out
+
+
+def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, model
+             ) -> PackContext:
+    fulls = [(k, e, health[k].capacity_Ah) for k, e in enumerate(ordered) if health[k].full]
+    if chemistry is None and fulls:
+        e = fulls[0][1]
+        n = pack_cells(e, cells, chemistry)
+        top = e.get("rest_voltage_V") or e["curve"]["voltage_V"][0]
+        chemistry = infer_chemistry(top / n, float(e["end_voltage_V"]) / n)
+    curves = []
+    first_drop = None
+    for k, e, cap in fulls:
+        if not is_slow(e, cap):
+            continue
+        first_drop = settled_drop(e) if first_drop is None else first_drop
+        n = pack_cells(e, cells, chemistry)
+        curves.append((k, learned_curve(dict(e, source=e.get("source")), cap, n, chemistry,
+                                        resistance_ohm=first_drop)))
+    from ..ocv import CHARGE_CELL_V, check_chemistry
+
+    full_cell = CHARGE_CELL_V[check_chemistry(chemistry)]
+    if fulls:
+        e = fulls[0][1]
+        if e.get("rest_voltage_V"):
+            full_cell = float(e["rest_voltage_V"]) / pack_cells(e, cells, chemistry)
+    return PackContext(cells=cells, chemistry=chemistry, model=model, fulls=fulls,
+                       curves=curves, prior=OcvCurve.prior(chemistry), full_cell_V=full_cell)
+
+
 def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
                 cells: int | None = None, chemistry: str | None = None, model=None
                 ) -> tuple[list[EventHealth], float | None, str]:
@@ -372,62 +681,82 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
     label_capacity_Ah, cells, chemistry
         The pack's label capacity [Ah], cells in series and chemistry, when known.
     model : Battery, optional
-        The pack's fitted model (voltage drop at a current for partial events).
+        The pack's fitted model (voltage drop at a current for partial events, the
+        resistance's state of charge).
 
     Returns
     -------
     (list of EventHealth in order, reference capacity [Ah] or None, how it was chosen)
     """
+    from .cells import drift_flags
+
     ordered = order_events(events)
     out: list[EventHealth] = []
-    refs: list[int] = []
+    counts = _cell_counts(ordered, cells, chemistry)
     for k, e in enumerate(ordered):
-        n_cells = pack_cells(e, cells, chemistry)
-        full = bool(e.get("reaches_knee")) and starts_full(e, n_cells, chemistry)
+        kind = e.get("kind", "discharge")
+        n_cells = counts[k]
+        full = is_full(dict(e, kind=kind), n_cells, chemistry)
+        charge = (e.get("details") or {}).get("charge") or {}
         h = EventHealth(event_id=e.get("id") or k, source=e.get("source", ""),
-                        start=e.get("start_time"), kind=e["kind"], cycle=e.get("cycle"),
-                        discharged_Ah=float(e["discharged_Ah"]), full=full,
-                        resistance_ohm=e.get("resistance_ohm"))
+                        start=e.get("start_time"), kind=kind, cycle=e.get("cycle"),
+                        discharged_Ah=float(e.get("discharged_Ah") or 0.0), full=full,
+                        resistance_ohm=e.get("resistance_ohm"),
+                        charged_Ah=charge.get("charged_Ah"))
         if e.get("resistance_low_ohm") is not None:
             h.resistance_interval95 = [e["resistance_low_ohm"], e["resistance_high_ohm"]]
         if full:
             h.capacity_Ah, h.capacity_interval95 = full_capacity(e)
             h.capacity_method = "coulomb count"
-            refs.append(k)
+            h.soc_start, h.soc_end = 1.0, 0.0
         out.append(h)
+    ctx = _context(ordered, out, cells, chemistry, model)
+    if ctx.chemistry != chemistry:
+        counts = _cell_counts(ordered, cells, ctx.chemistry)
     for k, (e, h) in enumerate(zip(ordered, out)):
-        if h.full:
-            continue
-        if not refs:
-            h.notes.append("no full discharge of this pack to compare with")
-            continue
-        before = [j for j in refs if j < k]
-        j = before[-1] if before else refs[0]
-        ref = ReferenceCurve(ordered[j], out[j].capacity_Ah, model=model)
-        n_cells = pack_cells(e, cells, chemistry)
-        cap, interval, how = partial_capacity(e, ref, n_cells)
-        if cap is None:
-            h.notes.append(how)
-        else:
-            h.capacity_Ah, h.capacity_interval95, h.capacity_method = cap, interval, how
+        n_cells = counts[k]
+        if not h.full:
+            _capacity(e, h, ctx, n_cells, k)
+        if h.resistance_ohm is not None:
+            _resistance(e, h, ctx)
+        _cells(e, h, ctx, k)
+    with_cells = [h for h in out if h.cells is not None]
+    for h, drift in zip(with_cells, drift_flags([h.cells.get("off") for h in with_cells],
+                                                [h.cells.get("rest_spread_V")
+                                                 for h in with_cells])):
+        h.cells["drift"] = drift
+    estimates = [h.capacity_Ah for h in out if h.capacity_Ah is not None]
     if label_capacity_Ah:
         reference, why = float(label_capacity_Ah), "label capacity"
-    elif refs:
-        reference, why = out[refs[0]].capacity_Ah, "first full discharge"
+    elif ctx.fulls:
+        reference, why = ctx.fulls[0][2], "first full discharge"
+    elif estimates:
+        reference = float(np.median(estimates[:FIRST_ESTIMATES]))
+        why = f"median of the first {min(len(estimates), FIRST_ESTIMATES)} capacity estimates"
     else:
-        reference, why = None, "no label capacity and no full discharge"
+        reference, why = None, "no label capacity, full discharge or capacity estimate"
     if reference:
         for h, efc in zip(out, equivalent_full_cycles(ordered, reference)):
             h.efc = float(efc)
-    with_cap = [k for k, h in enumerate(out) if h.capacity_Ah is not None]
-    axis = [out[k].efc if out[k].efc is not None else k for k in with_cap]
-    flags = flag_outliers(axis, [out[k].capacity_Ah for k in with_cap])
-    for k, flag in zip(with_cap, flags):
-        out[k].outlier = bool(flag)
+    # an estimate is compared with the others made the same way
+    groups: dict = {}
+    for k, h in enumerate(out):
+        if h.capacity_Ah is not None:
+            groups.setdefault((h.capacity_method or "").split(" (")[0].split(",")[0],
+                              []).append(k)
+    for with_cap in groups.values():
+        axis = [out[k].efc if out[k].efc is not None else k for k in with_cap]
+        flags = flag_outliers(axis, [out[k].capacity_Ah for k in with_cap],
+                              half95=[0.5 * (out[k].capacity_interval95[1]
+                                             - out[k].capacity_interval95[0])
+                                      for k in with_cap])
+        for k, flag in zip(with_cap, flags):
+            out[k].outlier = bool(flag)
     return out, reference, why
 
 
 __all__ = ["EventHealth", "pack_health", "value_today", "infer_chemistry", "observed_crossing",
-           "order_events", "equivalent_full_cycles", "flag_outliers", "partial_capacity",
-           "full_capacity", "ReferenceCurve", "starts_full", "FULL_SOC", "VOLTAGE_SD_CELL_V",
-           "OUTLIER_Z"]
+           "order_events", "equivalent_full_cycles", "flag_outliers", "theil_sen",
+           "partial_capacity", "matched_capacity", "curve_match", "learned_curve", "full_capacity",
+           "ReferenceCurve", "starts_full", "ends_empty", "is_full", "FULL_SOC", "EMPTY_SOC",
+           "VOLTAGE_SD_CELL_V", "OUTLIER_Z", "MIN_SWING"]

@@ -27,7 +27,8 @@ def build_job(name: str, health, source: dict, data: bytes, row: dict,
     last = latest_full(name, health)
     return {"pack": name, "event_id": last.event_id, "capacity_Ah": last.capacity_Ah,
             "resistance_ohm": last.resistance_ohm, "file_name": source["file_name"],
-            "data": data, "segment": source["segment"], "options": dict(source["options"]),
+            "data": data, "segment": source["segment"], "rows": source.get("rows"),
+            "options": dict(source["options"]),
             "cells": row["cells"], "chemistry": row["chemistry"],
             "fit_options": dict(fit_options)}
 
@@ -39,6 +40,27 @@ def latest_full(name: str, health):
         raise LogbookError(f"pack {name!r} has no full discharge to fit its model to; add "
                            "a discharge from full charge to the cutoff")
     return fulls[-1]
+
+
+def _rows_of(path: Path, rows, options: dict):
+    """One discharge of a long log: its rows of the file read whole, the sample before them
+    as its rest sample when the current there is idle."""
+    from ..discharge import Discharge
+    from ..io import read_discharge
+    from .events import idle_threshold
+
+    frame, meta = read_discharge(path, segment="none", **options)
+    a, b = int(rows[0]), int(rows[1])
+    part = frame.iloc[a:b].reset_index(drop=True)
+    t0 = float(part["time_s"].iloc[0])
+    part["time_s"] = part["time_s"] - t0
+    meta = dict(meta, rest_sample=None, segment=None)
+    i = frame["current_A"].to_numpy(dtype=float)
+    if a > 0 and abs(i[a - 1]) <= idle_threshold(i):
+        meta["rest_sample"] = {"voltage_V": float(frame["voltage_V"].iloc[a - 1]),
+                               "time_s": float(frame["time_s"].iloc[a - 1]) - t0,
+                               "current_A": float(i[a - 1]), "rule": "rest before the event"}
+    return Discharge.from_frame(part, meta, name=path.name)
 
 
 def fit_job(job: dict) -> dict:
@@ -58,7 +80,10 @@ def fit_job(job: dict) -> dict:
     with tempfile.TemporaryDirectory(prefix="dischargelab-") as folder:
         path = Path(folder) / Path(job["file_name"]).name
         path.write_bytes(job["data"])
-        discharge = read(path, segment=job["segment"], **job["options"])
+        if job.get("rows"):
+            discharge = _rows_of(path, job["rows"], job["options"])
+        else:
+            discharge = read(path, segment=job["segment"], **job["options"])
     options = dict(job["fit_options"])
     options.setdefault("cells", job["cells"])
     battery = fit_discharges(discharge, **options).battery

@@ -116,14 +116,21 @@ def path_only_sources(conn) -> list[Path]:
 
 
 def source_of_event(conn, event_id: int) -> dict:
-    """File name, SHA-256, reader options and segment number (from 1) of an event's source."""
+    """File name, SHA-256, reader options and segment number (from 1) of an event's source;
+    for an event of a long log (split into events by the logbook), ``rows``: its first and
+    stop row in the file read whole (``segment="none"``)."""
     e, s = schema.events, schema.sources
-    row = conn.execute(select(s.c.file_name, s.c.sha256, s.c.options_json, e.c.idx)
+    row = conn.execute(select(s.c.file_name, s.c.sha256, s.c.options_json, e.c.idx,
+                              e.c.details_json)
                        .join(e, e.c.source_id == s.c.id).where(e.c.id == event_id)).first()
     if row is None:
         raise LogbookError(f"no event {event_id} in the logbook")
-    return {"file_name": row[0], "sha256": row[1], "options": json.loads(row[2]),
-            "segment": int(row[3]) + 1}
+    details = json.loads(row[4]) if row[4] else {}
+    out = {"file_name": row[0], "sha256": row[1], "options": json.loads(row[2]),
+           "segment": int(row[3]) + 1}
+    if details.get("long_log") and details.get("rows"):
+        out["rows"] = [int(x) for x in details["rows"]]
+    return out
 
 
 __all__ = ["pack_row", "pack_names", "pack_events", "set_pack", "counts", "latest_model",

@@ -1,15 +1,28 @@
 """The pure task of the logbook: one source file -> a small summary of its events.
 
-:func:`summarise_source` reads a file with the readers (:mod:`dischargelab.io`),
-splits it into its discharges or flights (the readers' segments) and returns a
-:class:`SourceSummary`: the file's SHA-256, the reader's notes and one small dict
-per event (numbers and a compact charge-voltage curve, never the samples). It never
+:func:`summarise_source` reads a file with the readers (:mod:`dischargelab.io`) and
+returns a :class:`SourceSummary`: the file's SHA-256, the reader's notes and one small
+dict per event (numbers and a compact charge-voltage curve, never the samples). It never
 touches the database and keeps no state, so it can run on any worker.
+
+* A **long log** -- a tester's file with step numbers, or any log whose charges move at
+  least 5 % of what its discharges move (a BMS log, a cell's whole life, a day of
+  flights with the charger) -- is split into discharges, charges, rests and gaps by
+  :func:`dischargelab.logbook.events.split_log`, one event each.
+* Any other file gives one event per discharge or flight (the readers' segments), with
+  the rests on either side read from the whole file.
+
+Every discharge, flight and charge carries ``details`` (stored as JSON): the rest
+readings before and after it (voltage, what is left to relax, idle current,
+temperature), the charge counted between them and how well the samples count it, the
+resistance's method, per-cell figures, its rows in the file read whole and, for a
+charge, what it moved and whether it ended in a constant-voltage taper.
 
 Per event (sign convention: discharge current positive; pack values):
 
-* ``start_time`` (ISO 8601, when the file records a clock time), ``cycle`` (from
-  a file name such as ``DischargeCycle010.txt``, when the file holds one event);
+* ``kind`` (:data:`dischargelab.logbook.events.KINDS`), ``start_time`` (ISO 8601,
+  when the file records a clock time), ``cycle`` (from a file name such as
+  ``DischargeCycle010.txt``, when the file holds one event);
 * ``discharged_Ah`` and ``discharged_Wh`` (trapezoid of I and V*I over time),
   ``duration_s``, mean and peak current;
 * rest voltage before the load and, when the file goes on idle after it, the rest
@@ -39,30 +52,24 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
+from .estimates import step_resistance
+from .events import (
+    CURVE_POINTS,
+    LogArrays,
+    after_sample,
+    compact_curve,
+    event_details,
+    is_long_log,
+    knee_ratio,
+    load_figures,
+    log_events,
+    rest_of,
+    rest_sample,
+    split_log,
+)
 
 #: zlib level of the kept raw file (6: about a third of a text log's size).
 RAW_ZLIB_LEVEL = 6
-
-#: Points of the compact charge-voltage curve kept per event.
-CURVE_POINTS = 101
-
-#: Load steps used for the resistance: at most this far apart [s] (so the open-circuit
-#: voltage has not moved and the slow polarisation has not built up).
-STEP_MAX_DT_S = 2.0
-
-#: A load step counts when the current changes by at least this share of the event's
-#: mean current (and :data:`STEP_MIN_A`).
-STEP_MIN_FRACTION = 0.2
-
-#: ... and by at least this much [A].
-STEP_MIN_A = 0.2
-
-#: The end of a discharge is at its knee when the voltage falls this many times faster
-#: over the last :data:`KNEE_SPAN` of its charge than over the middle (20-80 %) of it.
-KNEE_RATIO = 4.0
-
-#: Share of the charge over which the end slope is measured.
-KNEE_SPAN = 0.03
 
 #: Reader formats that are flights.
 FLIGHT_FORMATS = ("ardupilot-bin", "ardupilot-text", "ulog", "blackbox", "inflight-csv",
@@ -216,31 +223,57 @@ def _reader(path: Path, options: dict):
 def _summarise_path(path: Path, name: str, data: bytes, options: dict,
                     keep_raw: bool = True) -> SourceSummary:
     read = _reader(path, options)
-    first_frame, first_meta = read()
-    segments = first_meta.get("segments") or []
-    reads = [(first_frame, first_meta)]
-    if len(segments) > 1:
-        reads = [read(segment=s["number"]) for s in segments]
     try:
         whole, whole_meta = read(segment="none")
     except DataError:
         whole, whole_meta = None, None
-    fmt = str(first_meta.get("format", "unknown"))
-    cycle = None
-    match = _CYCLE.search(Path(name).stem)
-    if match and len(reads) == 1:
-        cycle = int(match.group(1))
-    events = []
-    for index, (frame, meta) in enumerate(reads):
-        event = summarise_event(frame, meta, whole, whole_meta)
-        event["index"] = index
-        event["kind"] = "flight" if fmt in FLIGHT_FORMATS else "discharge"
-        event["cycle"] = meta.get("cycle", cycle)  # a tester's step knows its cycle
-        events.append(event)
-    notes = list(dict.fromkeys(n for _, meta in reads for n in meta.get("notes", [])))
+    events = None
+    if whole is not None and str(whole_meta.get("format")) not in FLIGHT_FORMATS \
+            and len(whole) >= 2:
+        events = _long_log_events(whole, whole_meta)
+    if events is not None:
+        fmt = str(whole_meta.get("format", "unknown"))
+        notes = list(whole_meta.get("notes", []))
+    else:
+        first_frame, first_meta = read()
+        segments = first_meta.get("segments") or []
+        reads = [(first_frame, first_meta)]
+        if len(segments) > 1:
+            reads = [read(segment=s["number"]) for s in segments]
+        fmt = str(first_meta.get("format", "unknown"))
+        cycle = None
+        match = _CYCLE.search(Path(name).stem)
+        if match and len(reads) == 1:
+            cycle = int(match.group(1))
+        events = []
+        for index, (frame, meta) in enumerate(reads):
+            event = summarise_event(frame, meta, whole, whole_meta)
+            event["index"] = index
+            event["kind"] = "flight" if fmt in FLIGHT_FORMATS else "discharge"
+            event["cycle"] = meta.get("cycle", cycle)  # a tester's step knows its cycle
+            events.append(event)
+        notes = list(dict.fromkeys(n for _, meta in reads for n in meta.get("notes", [])))
     return SourceSummary(sha256=sha256_bytes(data), file_name=name, size_bytes=len(data),
                          format=fmt, notes=notes, events=events, options=options,
                          raw_zlib=zlib.compress(data, RAW_ZLIB_LEVEL) if keep_raw else b"")
+
+
+def _long_log_events(whole, whole_meta: dict) -> list[dict] | None:
+    """The events of a long log (a tester's steps, or charges among the discharges), or
+    None when the file is read by its discharge segments."""
+    t = whole["time_s"].to_numpy(dtype=float)
+    i = whole["current_A"].to_numpy(dtype=float)
+    steps = whole["step_index"].to_numpy() if "step_index" in whole else None
+    cycles = whole["cycle_index"].to_numpy() if "cycle_index" in whole else None
+    spans = split_log(t, i, step_index=steps, cycle_index=cycles)
+    if not is_long_log(spans, t, i, steps):
+        return None
+    offset = float(whole_meta.get("time_offset_s") or 0.0)
+
+    def start_time_of(time_s: float) -> str | None:
+        return _start_time(dict(whole_meta, time_offset_s=offset + time_s))
+
+    return log_events(whole, spans, start_time_of=start_time_of, cells=whole_meta.get("cells"))
 
 
 def _start_time(meta: dict) -> str | None:
@@ -268,10 +301,6 @@ def _start_time(meta: dict) -> str | None:
     return (stamp + timedelta(seconds=offset)).isoformat(timespec="seconds")
 
 
-def _finite(x) -> float | None:
-    return float(x) if x is not None and np.isfinite(x) else None
-
-
 def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = None) -> dict:
     """The numbers of one discharge or flight (see the module docstring).
 
@@ -280,199 +309,105 @@ def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = Non
     frame, meta : DataFrame, dict
         One segment as :func:`dischargelab.io.read_discharge` returns it.
     whole, whole_meta : DataFrame, dict, optional
-        The same file read with ``segment="none"`` (every row), for the rest after the load.
+        The same file read with ``segment="none"`` (every row), for the rests on either
+        side of the load (and what they read, in ``details``).
     """
-    t = frame["time_s"].to_numpy(dtype=float)
-    v = frame["voltage_V"].to_numpy(dtype=float)
-    i = frame["current_A"].to_numpy(dtype=float)
-    dt = np.diff(t)
-    charge = np.concatenate(([0.0], np.cumsum(0.5 * (i[1:] + i[:-1]) * dt))) / 3600.0
-    energy = float(np.sum(0.5 * (i[1:] * v[1:] + i[:-1] * v[:-1]) * dt)) / 3600.0
-    tail = slice(max(0, t.size - 3), t.size)
+    log = LogArrays.from_frame(frame)
+    around = _rests_around(meta, whole, whole_meta)
     rest = meta.get("rest_sample") or None
-    after = _rest_after(meta, whole, whole_meta)
-    resistance = step_resistance(t, v, i, rest=rest, after=after)
-    event: dict = {
-        "start_time": _start_time(meta),
-        "duration_s": float(t[-1] - t[0]),
-        "discharged_Ah": float(charge[-1]),
-        "discharged_Wh": energy,
-        "mean_current_A": float(charge[-1] * 3600.0 / (t[-1] - t[0])) if t[-1] > t[0]
-        else float(np.mean(i)),
-        "max_current_A": float(np.max(i)),
-        "rest_voltage_V": None if rest is None else float(rest["voltage_V"]),
-        "rest_after_V": None if after is None else after["voltage_V"],
-        "rest_after_s": None if after is None else after["relaxed_s"],
-        "min_voltage_V": float(np.min(v)),
-        "end_voltage_V": float(np.median(v[tail])),
-        "end_current_A": float(np.mean(i[tail])),
-        "resistance_ohm": resistance[0],
-        "resistance_interval95": resistance[1],
-        "reaches_knee": bool(knee_ratio(charge, v) >= KNEE_RATIO),
-        "cells": meta.get("cells"),
-        "samples": int(t.size),
-        "segment": meta.get("segment"),
-    }
-    event.update(_temperatures(frame, rest))
-    event["cell_spread_V"] = _cell_spread(frame)
-    event["curve"] = compact_curve(charge, v, i)
+    after = None
+    details: dict = {}
+    if around is not None:
+        whole_log, a, b, before, after_rest = around
+        if rest is None and before is not None:
+            rest = rest_sample(whole_log, before)
+            rest["time_s"] -= whole_log.time_s[a]
+        after = after_sample(whole_log, after_rest, b)
+        details = dict(event_details(whole_log, a, b, before, after_rest), rows=[a, b])
+    ambient = frame["ambient_temperature_C"].to_numpy(dtype=float) \
+        if "ambient_temperature_C" in frame else None
+    event = load_figures(log, rest=rest, after=after, ambient_C=ambient)
+    details["resistance_method"] = event.pop("resistance_method")
+    event.update(start_time=_start_time(meta), cells=meta.get("cells"),
+                 segment=meta.get("segment"), details=details)
     return event
 
 
-def compact_curve(charge_Ah, voltage_V, current_A, points: int = CURVE_POINTS) -> dict:
-    """Voltage and current at ``points`` evenly spaced charges from 0 to the end [Ah, V, A]."""
-    q = np.maximum.accumulate(np.asarray(charge_Ah, dtype=float))
-    grid = np.linspace(0.0, q[-1], points)
-    keep = np.concatenate(([True], np.diff(q) > 0))
-    qv, vv, iv = q[keep], np.asarray(voltage_V, float)[keep], np.asarray(current_A, float)[keep]
-    return {"charge_Ah": np.round(grid, 6).tolist(),
-            "voltage_V": np.round(np.interp(grid, qv, vv), 5).tolist(),
-            "current_A": np.round(np.interp(grid, qv, iv), 5).tolist()}
+#: A rest beside a flight reads the pack's state when it covers at least this long [s]
+#: (from its first sample to the load, or from the load to its last sample): a flight's
+#: moments at zero throttle are not rests.
+MIN_READING_S = 5.0
+
+#: Rows of a rest beside a flight draw at most this share of the load level (98th
+#: percentile of the current) above the log's quietest current.
+REST_SHARE = 0.05
 
 
-def knee_ratio(charge_Ah, voltage_V) -> float:
-    """How many times faster the voltage falls at the end of a discharge than in its middle.
+def _rests_around(meta: dict, whole, whole_meta: dict | None):
+    """``(whole log, first row, stop row, rest before, rest after)`` of a segment in the whole
+    file read with ``segment="none"``, or None. A rest is the rows below the reader's load
+    threshold next to the load, up to a gap, another load or a pack swap; it reads the pack
+    at its last quiet row (see :data:`REST_SHARE`)."""
+    from ..io.segment import SOC_JUMP_PCT, VOLTAGE_JUMP_FRACTION
+    from .events import gap_limit
 
-    End slope: voltage drop over the last :data:`KNEE_SPAN` of the charge; middle
-    slope: over 20-80 % of it (both per Ah). A discharge to its cutoff ends on the
-    steep end of the voltage curve (ratios of 10 and more); one stopped on the
-    plateau gives about 1. Returns 0 for fewer than 10 samples or no charge.
-    """
-    q = np.maximum.accumulate(np.asarray(charge_Ah, dtype=float))
-    v = np.asarray(voltage_V, dtype=float)
-    total = q[-1] if q.size else 0.0
-    if q.size < 10 or total <= 0:
-        return 0.0
-    at = lambda frac: float(np.interp(frac * total, q, v))  # noqa: E731
-    middle = (at(0.2) - at(0.8)) / (0.6 * total)
-    end = (at(1.0 - KNEE_SPAN) - float(np.median(v[-3:]))) / (KNEE_SPAN * total)
-    if middle <= 0:
-        return float("inf") if end > 0 else 0.0
-    return float(end / middle)
-
-
-def _noise(x: np.ndarray) -> float:
-    """Sample noise from second differences (robust: MAD), same units as ``x``."""
-    if x.size < 5:
-        return 0.0
-    d2 = np.diff(x, 2)
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
-
-
-def step_resistance(time_s, voltage_V, current_A, rest: dict | None = None,
-                    after: dict | None = None) -> tuple[float | None, list | None]:
-    """Pack resistance from the load steps of one event [ohm], with its 95 % interval.
-
-    Every change of current between two samples at most :data:`STEP_MAX_DT_S`
-    apart, by at least :data:`STEP_MIN_FRACTION` of the mean current, gives
-    ``R = -dV/dI``; so do the step from the rest sample before the load to the
-    first loaded sample and the step from the last loaded sample to the rest after
-    it. The resistance is the median of these (the DC resistance over about a
-    second, series resistance plus the fastest polarisation; cf. the pulse
-    resistance of the FreedomCAR Battery Test Manual's hybrid pulse power test, with
-    a shorter pulse).
-
-    95 % interval: from the sample noise of voltage and current (second differences),
-    widened to the spread of the steps when there are three or more (standard error
-    of the median, 1.2533 sd/sqrt(n), sd from the MAD).
-
-    Returns
-    -------
-    (resistance_ohm, [low, high]) or (None, None) when no step qualifies.
-    """
-    t = np.asarray(time_s, dtype=float)
-    v = np.asarray(voltage_V, dtype=float)
-    i = np.asarray(current_A, dtype=float)
-    if t.size < 2:
-        return None, None
-    level = max(STEP_MIN_A, STEP_MIN_FRACTION * abs(float(np.mean(i))))
-    di, dv, dt = np.diff(i), np.diff(v), np.diff(t)
-    sel = (np.abs(di) >= level) & (dt <= STEP_MAX_DT_S)
-    values = list(-dv[sel] / di[sel])
-    steps = list(np.abs(di[sel]))
-    if rest is not None and rest.get("voltage_V") is not None:
-        gap = t[0] - float(rest.get("time_s", t[0]))
-        d_i = i[0] - float(rest.get("current_A") or 0.0)
-        if abs(d_i) >= level and gap <= STEP_MAX_DT_S:
-            values.append((float(rest["voltage_V"]) - v[0]) / d_i)
-            steps.append(abs(d_i))
-    if after is not None and after.get("first_current_A") is not None:
-        d_i = i[-1] - after["first_current_A"]
-        if abs(d_i) >= level and after["first_gap_s"] <= STEP_MAX_DT_S:
-            values.append((after["first_voltage_V"] - v[-1]) / d_i)
-            steps.append(abs(d_i))
-    arr = np.array([x for x in values if np.isfinite(x) and x > 0])
-    if arr.size == 0:
-        return None, None
-    r = float(np.median(arr))
-    sv, si = _noise(v), _noise(i)
-    d_i = float(np.median(steps))
-    half = 1.96 * np.sqrt(2.0 * sv ** 2 + 2.0 * (r * si) ** 2) / d_i / np.sqrt(arr.size)
-    if arr.size >= 3:
-        sd = 1.4826 * float(np.median(np.abs(arr - r)))
-        half = max(half, 1.96 * 1.2533 * sd / np.sqrt(arr.size))
-    return r, [max(0.0, r - half), r + half]
-
-
-def _rest_after(meta: dict, whole, whole_meta: dict | None) -> dict | None:
-    """The idle samples after the load, from the whole file read with ``segment="none"``."""
     if whole is None or whole_meta is None or len(whole) < 2:
         return None
-    offset = float(meta.get("time_offset_s") or 0.0)
-    whole_offset = float(whole_meta.get("time_offset_s") or 0.0)
-    t = whole["time_s"].to_numpy(dtype=float) + whole_offset
-    i = whole["current_A"].to_numpy(dtype=float)
-    v = whole["voltage_V"].to_numpy(dtype=float)
-    threshold = meta.get("load_threshold_A")
-    if threshold is None:
-        threshold = 0.2 * float(np.percentile(np.abs(i), 98))
+    log = LogArrays.from_frame(whole)
+    t = log.time_s + float(whole_meta.get("time_offset_s") or 0.0)
+    start = float(meta.get("time_offset_s") or 0.0)
     segments = meta.get("segments") or []
-    number = meta.get("segment")
-    seg = next((s for s in segments if s.get("number") == number), None)
-    end = offset + (float(seg["duration_s"]) if seg else 0.0)
+    seg = next((s for s in segments if s.get("number") == meta.get("segment")), None)
     if seg is None:
         return None
-    k = int(np.searchsorted(t, end + 1e-9, side="right"))
-    idle = np.abs(i[k:]) < threshold
-    if idle.size == 0 or not idle[0]:
+    end = start + float(seg["duration_s"])
+    a = int(np.searchsorted(t, start - 1e-6, side="left"))
+    b = int(np.searchsorted(t, end + 1e-6, side="right"))
+    if b - a < 2:
         return None
-    stop = idle.size if idle.all() else int(np.argmin(idle))
-    rows = np.arange(k, k + stop)
-    last = rows[-3:] if rows.size >= 3 else rows
-    return {"voltage_V": float(np.median(v[last])),
-            "relaxed_s": float(t[rows[-1]] - end),
-            "first_voltage_V": float(v[rows[0]]), "first_current_A": float(i[rows[0]]),
-            "first_gap_s": float(t[rows[0]] - end)}
+    level = float(np.percentile(np.abs(log.current_A), 98))
+    threshold = meta.get("load_threshold_A")
+    if threshold is None:
+        threshold = 0.2 * level
+    # a rest is quiet: at most REST_SHARE of the load level above the quietest current (a
+    # flight controller's draw on the ground, not a spooled-up motor)
+    low = np.abs(log.current_A) < threshold
+    quiet = np.abs(log.current_A) < min(threshold, float(np.min(np.abs(log.current_A)))
+                                         + REST_SHARE * level)
+    # a flight read from arming holds its time on the ground: its rests are outside the load
+    while a < b - 2 and low[a]:
+        a += 1
+    while b > a + 2 and low[b - 1]:
+        b -= 1
+    gap = gap_limit(t)
+    v = log.voltage_V
+    soc = whole["soc_pct"].to_numpy(dtype=float) if "soc_pct" in whole else None
 
+    def joined(k: int) -> bool:
+        """Rows k-1 and k belong to one stretch (no gap, no pack swap)."""
+        if t[k] - t[k - 1] > gap or v[k] - v[k - 1] > VOLTAGE_JUMP_FRACTION * v[k - 1]:
+            return False
+        return soc is None or not (soc[k] - soc[k - 1] >= SOC_JUMP_PCT)
 
-def _temperatures(frame, rest: dict | None) -> dict:
-    out: dict = {"temperature_start_C": None, "temperature_max_C": None, "ambient_C": None}
-    if "temperature_C" in frame:
-        temp = frame["temperature_C"].to_numpy(dtype=float)
-        temp = temp[np.isfinite(temp)]
-        if temp.size:
-            start = rest.get("temperature_C") if rest else None
-            out["temperature_start_C"] = _finite(start if start is not None else temp[0])
-            out["temperature_max_C"] = float(np.max(temp))
-    if "ambient_temperature_C" in frame:
-        amb = frame["ambient_temperature_C"].to_numpy(dtype=float)
-        amb = amb[np.isfinite(amb)]
-        if amb.size:
-            out["ambient_C"] = float(np.median(amb))
-    return out
-
-
-def _cell_spread(frame) -> float | None:
-    """Largest minus smallest cell voltage [V], median over the last 10 % of the samples."""
-    cells = [c for c in frame.columns if re.fullmatch(r"cell\d+_V", str(c))]
-    if len(cells) < 2:
-        return None
-    values = frame[cells].to_numpy(dtype=float)
-    values = values[np.all(np.isfinite(values), axis=1)]
-    if values.size == 0:
-        return None
-    spread = values.max(axis=1) - values.min(axis=1)
-    return float(np.median(spread[-max(1, spread.size // 10):]))
+    # the rests: the rows below the load threshold next to the load; each reads the pack
+    # at its last quiet row (a motor spooling up before take-off is counted, not rested on)
+    lo = a
+    while lo > 0 and low[lo - 1] and joined(lo):
+        lo -= 1
+    hi = b
+    while hi < t.size and low[hi] and joined(hi):
+        hi += 1
+    before = after = None
+    calm = np.flatnonzero(quiet[lo:a]) + lo
+    if calm.size and t[a] - t[lo] >= MIN_READING_S:
+        load_row = lo - 1 if lo > 0 and not low[lo - 1] and joined(lo) else None
+        before = rest_of(log, lo, int(calm[-1]) + 1, load_row=load_row,
+                         direction=0 if load_row is None else
+                         1 if log.current_A[load_row] > 0 else -1)
+    calm = np.flatnonzero(quiet[b:hi]) + b
+    if calm.size and b < t.size and joined(b) and t[calm[-1]] - t[b - 1] >= MIN_READING_S:
+        after = rest_of(log, b, int(calm[-1]) + 1, load_row=b - 1, direction=1)
+    return log, a, b, before, after
 
 
 __all__ = ["SourceSummary", "summarise_source", "summarise_event", "sha256_file",

@@ -1,0 +1,641 @@
+"""Per-event estimates as a fuel gauge makes them: plain functions of arrays with units.
+
+* **Relaxation.** A rest after a load has not finished relaxing when the log stops
+  (a flight log ends 30-100 s after landing; a cycler rests 10-15 min). What is left
+  follows from the rate at which the voltage still moves at the rest's end
+  (:func:`relaxation`): ``RELAX_TAIL t dV/dt``, between what an RC pair and a diffusion
+  tail leave, and the 95 % interval spans both.
+* **Open-circuit voltage.** :class:`OcvCurve`: the pack's own, learned from a slow
+  full discharge (its loaded voltage plus the resistive drop, state of charge by
+  coulomb counting), else a chemistry's generic curve (:mod:`dischargelab.ocv`).
+  :func:`soc_reading` reads the state of charge of a rest voltage through it, with
+  a standard deviation from the curve, the relaxation left, the idle current's
+  drop and the temperature (the entropic change of the open-circuit voltage).
+* **Counted charge.** :func:`counted_charge` integrates the current (trapezoids)
+  and says how well the samples can count it: between two samples the current may
+  have done anything within the change seen there (at least the event's typical
+  sample-to-sample change), so each interval adds ``dt * max(|di|, typical) /
+  sqrt(12)`` to the standard deviation. A take-off seen by two samples 167 s apart
+  makes a mission uncountable; a charge's smooth current does not.
+* **Capacity between two rests.** :func:`capacity_between_rests`: the charge counted
+  between the two readings divided by the change in state of charge they read.
+  Small swings carry little information, as in a fuel gauge's learning rule
+  (TI's Impedance Track updates its capacity only after enough passed charge):
+  below :data:`MIN_SWING` no estimate, and the interval grows as the swing shrinks.
+* **Resistance at reference conditions.** :func:`resistance_at_reference` moves a
+  resistance measured at the cell's temperature to :data:`REFERENCE_TEMPERATURE_C`
+  (Arrhenius, the prior activation of :mod:`dischargelab.models.thermal`) and,
+  through the pack's model when it has one, to :data:`REFERENCE_SOC`.
+
+References
+----------
+.. [1] Texas Instruments, "Theory and Implementation of Impedance Track Battery
+   Fuel-Gauging Algorithm in bq20zxx Product Family", SLUA364B (2006-2009):
+   chemical capacity ``Qmax = passed charge / |SOC1 - SOC2|`` from two relaxed
+   open-circuit voltages, updated only after enough passed charge; resistance
+   from the voltage under load.
+.. [2] Texas Instruments, "Gauging: Achieving the Successful Learning Cycle",
+   SLUA903 and "Impedance Track Gas Gauge for Novices", SLUA450 (relaxation
+   before an OCV reading, depth of discharge needed for a capacity update).
+.. [3] G. L. Plett, "Battery Management Systems, Vol. 1: Battery Modeling",
+   Artech House (2015), ch. 2 (OCV from a slow discharge corrected for the
+   resistive drop; diffusion relaxation) and Vol. 2 (2016), ch. 3-4 (SOC and
+   capacity estimation, their uncertainty).
+.. [4] V. Pop, H. J. Bergveld, P. H. L. Notten, P. P. L. Regtien, "State-of-the-art
+   of battery state-of-charge determination", Meas. Sci. Technol. 16 (2005)
+   R93-R110 (EMF from relaxation, extrapolated).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Rest samples earlier than this after the load [s] are left out of the relaxation fit
+#: (the fast RC part, which the diffusion tail does not describe).
+RELAX_SKIP_S = 5.0
+
+#: The tail is fitted only to a rest seen at least this long after the load [s] (a few
+#: seconds after a hard flight say little about the minutes of relaxation to come).
+RELAX_FIT_MIN_S = 20.0
+
+#: What is left to relax is ``RELAX_TAIL t dV/dt`` at the rest's end (``t`` since the
+#: load): an RC pair whose time constant is the rest's length leaves ``1 t dV/dt``, a
+#: diffusion tail ``V_inf - c / sqrt(t)`` leaves ``2 t dV/dt`` (the rate test of a fuel
+#: gauge's OCV reading, TI SLUA364B, made a measure). Checked on the 10,000 s rest of the
+#: CMU eVTOL cell VAH27 after a mission: its first 833 s say 18 mV left (+-12 mV); it rose
+#: 17 mV more by 10,000 s.
+RELAX_TAIL = 1.5
+
+#: ... give or take this many ``t dV/dt`` (95 %): a time constant of half the rest to a
+#: tail slower than diffusion.
+RELAX_TAIL_HALF95 = 1.0
+
+#: Without enough rest samples to fit, what is left is taken as this share of the
+#: recovery seen so far (which holds the instant resistive part too), scaled by
+#: ``sqrt(RELAX_PRIOR_T_S / t)``, and twice as uncertain.
+RELAX_PRIOR_SHARE = 0.15
+RELAX_PRIOR_T_S = 60.0
+
+#: Standard deviation of one voltage sample per cell [V] (ADC noise and steps).
+READING_SD_CELL_V = 0.002
+
+#: Entropic temperature coefficient of the open-circuit voltage per cell [V/K]: its
+#: size for NMC and LCO cells (0.1-0.4 mV/K, sign depending on the state of charge),
+#: taken as an uncertainty away from the curve's temperature.
+ENTROPIC_V_PER_K = 0.0003
+
+#: Standard deviation of a generic chemistry curve per cell [V] (real packs differ by
+#: tens of millivolts: :data:`dischargelab.ocv.GENERIC_OCV_V`).
+PRIOR_CURVE_SD_CELL_V = 0.015
+
+#: Standard deviation of a curve learned from the pack's own slow full discharge per
+#: cell [V] (the resistive drop added back is known to about half of itself).
+LEARNED_CURVE_SD_CELL_V = 0.005
+
+#: State of charge after a charge that ends in a constant-voltage taper at the pack's
+#: full voltage, and its standard deviation (full, as the charger defines it).
+FULL_SOC = 1.0
+FULL_SOC_SD = 0.01
+
+#: Smallest change in state of charge that gives a capacity (smaller swings carry too
+#: little information: TI's gauges wait for far more).
+MIN_SWING = 0.1
+
+#: Largest standard deviation of one state-of-charge reading kept [-].
+MAX_SOC_SD = 0.5
+
+#: The counted charge is "resolved" when its standard deviation is at most this share.
+RESOLVED_SHARE = 0.01
+
+#: Reference conditions of ``resistance_ref_ohm``: temperature [degC] and state of charge.
+REFERENCE_TEMPERATURE_C = 25.0
+REFERENCE_SOC = 0.5
+
+#: Relative standard deviation of the Arrhenius coefficient (the prior's, not the pack's).
+BETA_RELATIVE_SD = 0.5
+
+#: Load steps used for the resistance: at most this far apart [s] (so the open-circuit
+#: voltage has not moved and the slow polarisation has not built up).
+STEP_MAX_DT_S = 2.0
+
+#: A load step counts when the current changes by at least this share of the event's
+#: mean current (and :data:`STEP_MIN_A`).
+STEP_MIN_FRACTION = 0.2
+
+#: ... and by at least this much [A].
+STEP_MIN_A = 0.2
+
+#: Grid of a learned curve's states of charge.
+CURVE_GRID = np.linspace(0.0, 1.0, 101)
+
+Z95 = 1.959964
+
+
+# --------------------------------------------------------------------------- relaxation
+
+def relaxation(time_since_s, voltage_V, direction: int, *, loaded_V: float | None = None
+               ) -> dict:
+    """How far a rest has relaxed, and the voltage it relaxes to [V].
+
+    Parameters
+    ----------
+    time_since_s : array_like
+        Time of each rest sample since the load ended [s] (> 0); None entries or an
+        empty array when the rest starts the log.
+    voltage_V : array_like
+        Pack voltage of each rest sample [V].
+    direction : {1, -1, 0}
+        +1 after a discharge (the voltage recovers upwards), -1 after a charge, 0 when
+        no load came before.
+    loaded_V : float, optional
+        Last loaded voltage before the rest [V] (the recovery seen so far, for the
+        prior when the rest has too few samples to fit).
+
+    Returns
+    -------
+    dict
+        ``voltage_V`` (last reading, median of the last up-to-3 samples), ``relaxed_V``
+        (extrapolated), ``left_V`` (signed: what the fitted tail says is left),
+        ``half95_V`` (95 % half-width of ``relaxed_V`` from the extrapolation) and
+        ``method`` (``"fit"``, ``"prior"``, ``"unloaded"`` (no load before: not
+        extrapolated, its last third's wander as the uncertainty) or ``"one sample"``).
+
+    References
+    ----------
+    Pop et al. (2005); Plett (2015), ch. 2.
+    """
+    v = np.asarray(voltage_V, dtype=float)
+    last = float(np.median(v[-3:]))
+    out = {"voltage_V": last, "relaxed_V": last, "left_V": 0.0, "half95_V": 0.0,
+           "method": "one sample"}
+    t = None if time_since_s is None else np.asarray(time_since_s, dtype=float)
+    if direction == 0 or t is None or t.size != v.size:
+        # no load before it: nothing to extrapolate; the rest's own wander is its uncertainty
+        if v.size >= 3:
+            out.update(half95_V=float(np.ptp(v[-max(3, v.size // 3):])), method="unloaded")
+        return out
+    use = t >= RELAX_SKIP_S
+    if use.sum() < 2:
+        use = t > 0
+    tu, vu = t[use], v[use]
+    if tu.size >= 3 and tu[-1] >= 2.0 * tu[0] and tu[-1] >= RELAX_FIT_MIN_S:
+        slope, slope_se, t_mid = _end_slope(tu, vu)
+        if direction * slope < 0:      # still moving the other way (an idle draw): relaxed
+            slope = 0.0
+        # left at the middle of the fitted stretch, less what relaxed from there to the end
+        moved = slope * (float(tu[-1]) - t_mid)
+        left = RELAX_TAIL * t_mid * slope - moved
+        if direction * left < 0:
+            left = 0.0
+        half = RELAX_TAIL_HALF95 * t_mid * abs(slope) + Z95 * RELAX_TAIL * t_mid * slope_se
+        out.update(relaxed_V=last + left, left_V=float(left), half95_V=float(half),
+                   method="fit")
+        return out
+    if loaded_V is not None and t.size and t[-1] > 0:
+        recovery = max(0.0, direction * (last - float(loaded_V)))
+        left = direction * RELAX_PRIOR_SHARE * recovery * np.sqrt(RELAX_PRIOR_T_S
+                                                                  / max(t[-1], 1.0))
+        out.update(relaxed_V=last + left, left_V=float(left), half95_V=2.0 * abs(left),
+                   method="prior")
+    return out
+
+
+def _end_slope(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
+    """Slope of the voltage over the last third of a rest [V/s], its standard error, and
+    the time it holds at (the stretch's mean time) [s] (least squares, >= 3 samples)."""
+    k = max(3, t.size // 3)
+    tt, vv = t[-k:] - t[-k], v[-k:]
+    slope, intercept = np.polyfit(tt, vv, 1)
+    resid = vv - (intercept + slope * tt)
+    var_t = float(np.sum((tt - tt.mean()) ** 2))
+    se = float(np.sqrt(np.sum(resid ** 2) / max(k - 2, 1) / var_t)) if var_t > 0 else 0.0
+    return float(slope), se, float(np.mean(t[-k:]))
+
+
+# --------------------------------------------------------------------------- OCV
+
+@dataclass
+class OcvCurve:
+    """Open-circuit voltage per cell against state of charge.
+
+    Attributes
+    ----------
+    soc : numpy.ndarray
+        State of charge, ascending from 0 (empty) to 1 (full) [-].
+    cell_V : numpy.ndarray
+        Open-circuit voltage per cell there, non-decreasing [V].
+    sd_V : float
+        Standard deviation of the curve itself per cell [V].
+    source : str
+        Where it comes from (for notes).
+    temperature_C : float or None
+        Temperature it was measured at [degC].
+    """
+
+    soc: np.ndarray
+    cell_V: np.ndarray
+    sd_V: float
+    source: str
+    temperature_C: float | None = None
+
+    @classmethod
+    def prior(cls, chemistry: str | None) -> OcvCurve:
+        """The generic curve of a chemistry (:data:`dischargelab.ocv.GENERIC_OCV_V`)."""
+        from ..ocv import GENERIC_OCV_V, OCV_SOC, OCV_SOURCE, check_chemistry
+
+        chem = check_chemistry(chemistry)
+        return cls(soc=OCV_SOC[::-1].astype(float), cell_V=GENERIC_OCV_V[chem][::-1].copy(),
+                   sd_V=PRIOR_CURVE_SD_CELL_V, source=OCV_SOURCE[chem], temperature_C=25.0)
+
+    @classmethod
+    def from_discharge(cls, charge_Ah, voltage_V, current_A, *, cells: int,
+                       resistance_ohm: float, rest_before_V: float | None = None,
+                       temperature_C: float | None = None, source: str = "") -> OcvCurve:
+        """The pack's curve from one slow full discharge.
+
+        ``OCV = (V + R I) / cells`` at ``SOC = 1 - q / q_end`` (Plett 2015, ch. 2),
+        with the rest voltage before the load (when given) at SOC 1, resampled on
+        :data:`CURVE_GRID` and made non-decreasing.
+
+        Parameters
+        ----------
+        charge_Ah, voltage_V, current_A : array_like
+            The discharge's charge drawn [Ah], pack voltage [V] and current [A].
+        cells : int
+            Cells in series.
+        resistance_ohm : float
+            Pack resistance added back at each current [ohm].
+        rest_before_V : float, optional
+            Pack rest voltage before the load [V].
+        """
+        q = np.maximum.accumulate(np.asarray(charge_Ah, dtype=float))
+        ocv = (np.asarray(voltage_V, dtype=float)
+               + resistance_ohm * np.asarray(current_A, dtype=float)) / cells
+        keep = np.concatenate(([True], np.diff(q) > 0))
+        q, ocv = q[keep], ocv[keep]
+        soc = 1.0 - q / q[-1]
+        if rest_before_V is not None:
+            soc = np.concatenate(([1.0], soc[soc < 1.0]))
+            ocv = np.concatenate(([rest_before_V / cells], ocv[-soc.size + 1:]))
+        order = np.argsort(soc)
+        grid_v = np.interp(CURVE_GRID, soc[order], ocv[order])
+        grid_v = np.maximum.accumulate(grid_v)
+        return cls(soc=CURVE_GRID.copy(), cell_V=grid_v, sd_V=LEARNED_CURVE_SD_CELL_V,
+                   source=source or "the pack's slow full discharge",
+                   temperature_C=temperature_C)
+
+    def soc_at(self, cell_V: float) -> float:
+        """State of charge where the curve reads ``cell_V`` [V] (clipped to 0-1)."""
+        return float(np.interp(cell_V, self.cell_V, self.soc))
+
+    def voltage_at(self, soc) -> np.ndarray:
+        """Open-circuit voltage per cell at ``soc`` [V]."""
+        return np.interp(soc, self.soc, self.cell_V)
+
+    def slope(self, soc: float, span: float = 0.05) -> float:
+        """``dOCV/dSOC`` per cell around ``soc`` [V per unit SOC], over +-``span``."""
+        lo, hi = max(0.0, soc - span), min(1.0, soc + span)
+        if hi <= lo:
+            return 0.0
+        return float((self.voltage_at(hi) - self.voltage_at(lo)) / (hi - lo))
+
+
+def soc_reading(curve: OcvCurve, reading: dict, cells: int, *,
+                resistance_ohm: float | None = None) -> tuple[float, float]:
+    """State of charge of a rest reading and its standard deviation [-].
+
+    Parameters
+    ----------
+    curve : OcvCurve
+    reading : dict
+        A rest reading (:func:`dischargelab.logbook.events.rest_reading`): pack
+        ``relaxed_V`` and ``half95_V`` [V], the rest's ``current_A`` (idle draw,
+        discharge positive) and ``temperature_C``.
+    cells : int
+        Cells in series.
+    resistance_ohm : float, optional
+        Pack resistance [ohm]: the idle draw's drop is added back (``V + R I``).
+
+    Returns
+    -------
+    (soc, sd)
+    """
+    r = float(resistance_ohm or 0.0)
+    idle = float(reading.get("current_A") or 0.0)
+    cell_v = (float(reading["relaxed_V"]) + r * idle) / cells
+    var = (curve.sd_V ** 2 + READING_SD_CELL_V ** 2
+           + (float(reading.get("half95_V") or 0.0) / Z95 / cells) ** 2
+           + (0.5 * r * abs(idle) / cells) ** 2)
+    temp = reading.get("temperature_C")
+    if temp is not None and curve.temperature_C is not None:
+        var += (ENTROPIC_V_PER_K * (float(temp) - curve.temperature_C)) ** 2
+    soc = curve.soc_at(cell_v)
+    slope = curve.slope(soc)
+    sd = float(np.sqrt(var)) / slope if slope > 0 else MAX_SOC_SD
+    return soc, float(min(sd, MAX_SOC_SD))
+
+
+# --------------------------------------------------------------------------- charge
+
+def counted_charge(time_s, current_A, *, unresolved: bool = False, idle_A: float = 0.0
+                   ) -> tuple[float, float]:
+    """Charge through the samples [Ah] (discharge positive) and its standard deviation.
+
+    Trapezoids. Each interval adds ``dt * s / sqrt(12)`` [As] to the standard deviation
+    (independent intervals): a step of the current at a time uniform inside an interval
+    is counted to that. ``s`` is the change seen across the interval, at least the
+    typical change; when the samples do not follow the current (``unresolved``), every
+    interval touching a loaded sample (``|i| > idle_A``) may hide a step across the
+    whole range of the load's current, at least :data:`PEAK_FACTOR` times its mean (the
+    samples may have missed every peak). A take-off between two samples 167 s apart:
+    Monte Carlo of the CMU mission at random sample phase errs by 19-29 % (sd) at
+    167-186 s; this rule gives 24-28 %, and covers the missions whose samples missed
+    both take-off and landing (-41 %) within its 95 % interval.
+    """
+    t = np.asarray(time_s, dtype=float)
+    i = np.asarray(current_A, dtype=float)
+    if t.size < 2:
+        return 0.0, 0.0
+    dt = np.diff(t)
+    di = np.abs(np.diff(i))
+    q = float(np.sum(0.5 * (i[1:] + i[:-1]) * dt)) / 3600.0
+    step = np.maximum(di, float(np.median(di)))
+    if unresolved:
+        loaded = np.abs(i) > idle_A
+        touch = loaded[1:] | loaded[:-1]
+        span = 0.0
+        if loaded.any():
+            span = max(float(np.ptp(np.concatenate(([0.0], i[loaded])))),
+                       PEAK_FACTOR * float(np.mean(np.abs(i[loaded]))))
+        step = np.where(touch, np.maximum(step, span), step)
+    sd = float(np.sqrt(np.sum((dt * step) ** 2) / 12.0)) / 3600.0
+    return q, sd
+
+
+#: A flight's or a mission's peaks (take-off, climb) draw up to this many times its mean
+#: current (CMU eVTOL: 54 W take-off and landing, 16 W cruise): what samples that do not
+#: follow the current may have missed.
+PEAK_FACTOR = 3.0
+
+#: The samples follow the current when its typical change between two samples is at most
+#: this share of its range over the event ...
+UNRESOLVED_STEP_SHARE = 0.2
+
+#: ... and, for a discharge, they are at most this far apart [s]: a flight's or a
+#: mission's shortest phases (take-off, landing) last about a minute, and four samples
+#: are needed to see one; samples farther apart can miss a whole phase while the ones
+#: they catch look steady. A charger's current is smooth by design and is judged by its
+#: samples alone.
+RESOLVING_PERIOD_S = 15.0
+
+
+def sampling_figures(time_s, current_A, *, charge: bool = False) -> dict:
+    """How well the samples of one event follow and count its current.
+
+    Parameters
+    ----------
+    time_s, current_A : array_like
+        The event's samples (and one either side) [s, A].
+    charge : bool
+        The event is a charge (judged by its samples alone).
+
+    Returns
+    -------
+    dict
+        ``period_s`` (median sample interval), ``step_share`` (median change between two
+        samples over the current's range), ``resolved`` (the samples follow the current:
+        ``step_share`` at most :data:`UNRESOLVED_STEP_SHARE` and, for a discharge, a
+        period of at most :data:`RESOLVING_PERIOD_S`), ``charge_Ah`` and ``charge_sd_Ah``
+        (:func:`counted_charge`), ``countable`` (the standard deviation is at most
+        :data:`RESOLVED_SHARE` of the charge).
+    """
+    t = np.asarray(time_s, dtype=float)
+    i = np.asarray(current_A, dtype=float)
+    if t.size < 3:
+        return {"period_s": float(np.median(np.diff(t))) if t.size > 1 else None,
+                "step_share": None, "resolved": False, "charge_Ah": 0.0,
+                "charge_sd_Ah": 0.0, "countable": False}
+    span = float(np.ptp(i))
+    share = float(np.median(np.abs(np.diff(i)))) / span if span > 0 else 0.0
+    period = float(np.median(np.diff(t)))
+    resolved = share <= UNRESOLVED_STEP_SHARE and (charge or period <= RESOLVING_PERIOD_S)
+    q, sd = counted_charge(t, i, unresolved=not resolved)
+    return {"period_s": period, "step_share": share,
+            "resolved": bool(resolved), "charge_Ah": q, "charge_sd_Ah": sd,
+            "countable": bool(abs(q) > 0 and sd <= RESOLVED_SHARE * abs(q))}
+
+
+# --------------------------------------------------------------------------- capacity
+
+def capacity_between_rests(charge_Ah: float, charge_sd_Ah: float, soc_start: float,
+                           soc_start_sd: float, soc_end: float, soc_end_sd: float
+                           ) -> tuple[float | None, list | None, str]:
+    """Capacity [Ah] from the charge counted between two rests and their states of charge.
+
+    ``C = Q / (SOC_start - SOC_end)`` (discharge positive: a charge has ``Q < 0`` and a
+    rising state of charge). The 95 % interval is log-normal: the relative errors of
+    the charge and of the swing add in quadrature.
+
+    Returns
+    -------
+    (capacity, [low, high], how) or (None, None, one-line reason).
+
+    References
+    ----------
+    TI SLUA364B (Qmax from two OCV readings and the passed charge).
+    """
+    swing = soc_start - soc_end
+    if charge_Ah == 0 or swing == 0 or np.sign(swing) != np.sign(charge_Ah):
+        return None, None, (f"the charge counted ({charge_Ah:+.3g} Ah) and the change in "
+                            f"state of charge ({100 * swing:+.0f} %) disagree")
+    if abs(swing) < MIN_SWING:
+        return None, None, (f"a swing of {100 * abs(swing):.0f} % of charge is too small "
+                            f"(at least {100 * MIN_SWING:.0f} %)")
+    sd_swing = float(np.hypot(soc_start_sd, soc_end_sd))
+    if abs(swing) - Z95 * sd_swing <= 0.2 * abs(swing):
+        return None, None, (f"the rest voltages read the swing only to +-{100 * Z95 * sd_swing:.0f}"
+                            f" % of charge ({100 * abs(swing):.0f} % swing)")
+    cap = charge_Ah / swing
+    rel = float(np.hypot(charge_sd_Ah / abs(charge_Ah), sd_swing / abs(swing)))
+    return float(cap), [float(cap * np.exp(-Z95 * rel)), float(cap * np.exp(Z95 * rel))], \
+        "rests before and after"
+
+
+# --------------------------------------------------------------------------- resistance
+
+def sample_noise(x) -> float:
+    """Sample noise from second differences (robust: MAD), same units as ``x``."""
+    x = np.asarray(x, dtype=float)
+    if x.size < 5:
+        return 0.0
+    d2 = np.diff(x, 2)
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def step_resistance(time_s, voltage_V, current_A, rest: dict | None = None,
+                    after: dict | None = None) -> tuple[float | None, list | None]:
+    """Pack resistance from the load steps of one event [ohm], with its 95 % interval.
+
+    Every change of current between two samples at most :data:`STEP_MAX_DT_S`
+    apart, by at least :data:`STEP_MIN_FRACTION` of the mean current, gives
+    ``R = -dV/dI``; so do the step from the rest sample before the load to the
+    first loaded sample and the step from the last loaded sample to the rest after
+    it. The resistance is the median of these (the DC resistance over about a
+    second, series resistance plus the fastest polarisation; cf. the pulse
+    resistance of the FreedomCAR Battery Test Manual's hybrid pulse power test, with
+    a shorter pulse).
+
+    95 % interval: from the sample noise of voltage and current (second differences),
+    widened to the spread of the steps when there are three or more (standard error
+    of the median, 1.2533 sd/sqrt(n), sd from the MAD).
+
+    Returns
+    -------
+    (resistance_ohm, [low, high]) or (None, None) when no step qualifies.
+    """
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(voltage_V, dtype=float)
+    i = np.asarray(current_A, dtype=float)
+    if t.size < 2:
+        return None, None
+    level = max(STEP_MIN_A, STEP_MIN_FRACTION * abs(float(np.mean(i))))
+    di, dv, dt = np.diff(i), np.diff(v), np.diff(t)
+    sel = (np.abs(di) >= level) & (dt <= STEP_MAX_DT_S)
+    values = list(-dv[sel] / di[sel])
+    steps = list(np.abs(di[sel]))
+    if rest is not None and rest.get("voltage_V") is not None:
+        gap = t[0] - float(rest.get("time_s", t[0]))
+        d_i = i[0] - float(rest.get("current_A") or 0.0)
+        if abs(d_i) >= level and gap <= STEP_MAX_DT_S:
+            values.append((float(rest["voltage_V"]) - v[0]) / d_i)
+            steps.append(abs(d_i))
+    if after is not None and after.get("first_current_A") is not None:
+        d_i = i[-1] - after["first_current_A"]
+        if abs(d_i) >= level and after["first_gap_s"] <= STEP_MAX_DT_S:
+            values.append((after["first_voltage_V"] - v[-1]) / d_i)
+            steps.append(abs(d_i))
+    arr = np.array([x for x in values if np.isfinite(x) and x > 0])
+    if arr.size == 0:
+        return None, None
+    r = float(np.median(arr))
+    sv, si = sample_noise(v), sample_noise(i)
+    d_i = float(np.median(steps))
+    half = 1.96 * np.sqrt(2.0 * sv ** 2 + 2.0 * (r * si) ** 2) / d_i / np.sqrt(arr.size)
+    if arr.size >= 3:
+        sd = 1.4826 * float(np.median(np.abs(arr - r)))
+        half = max(half, 1.96 * 1.2533 * sd / np.sqrt(arr.size))
+    return r, [max(0.0, r - half), r + half]
+
+
+#: The regression resistance needs at least this many samples ...
+REGRESSION_MIN_SAMPLES = 8
+
+#: ... whose current varies by at least this share of its mean (interquartile range).
+REGRESSION_MIN_SPREAD = 0.1
+
+
+def regression_resistance(time_s, voltage_V, current_A) -> tuple[float | None, list | None]:
+    """Pack resistance [ohm] from how the voltage follows the current through an event.
+
+    For logs too sparse for load steps (a DJI smart battery's record every ~12 s):
+    least squares of ``V = a + b q + c q^2 - R I`` over the event (the open-circuit
+    voltage locally quadratic in the charge drawn ``q``), 95 % interval from the
+    coefficient's standard error. The resistance is that of the sample interval's
+    time scale (series resistance plus the polarisation built in seconds), larger
+    than a one-second step's.
+
+    Returns
+    -------
+    (resistance_ohm, [low, high]) or (None, None): too few samples, too little
+    variation of the current, or a non-positive fit.
+    """
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(voltage_V, dtype=float)
+    i = np.asarray(current_A, dtype=float)
+    if t.size < REGRESSION_MIN_SAMPLES:
+        return None, None
+    mean = float(np.mean(i))
+    if mean <= 0 or np.subtract(*np.percentile(i, [75, 25])) < REGRESSION_MIN_SPREAD * mean:
+        return None, None
+    q = np.concatenate(([0.0], np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t)))) / 3600.0
+    design = np.column_stack([np.ones_like(q), q, q * q, -i])
+    coef, *_ = np.linalg.lstsq(design, v, rcond=None)
+    resid = v - design @ coef
+    dof = t.size - design.shape[1]
+    if dof < 2:
+        return None, None
+    s2 = float(resid @ resid) / dof
+    cov = s2 * np.linalg.pinv(design.T @ design)
+    r, se = float(coef[3]), float(np.sqrt(max(cov[3, 3], 0.0)))
+    if not r > 0 or not np.isfinite(se) or se >= r:
+        return None, None
+    from scipy import stats
+
+    half = float(stats.t.ppf(0.975, dof)) * se
+    return r, [max(0.0, r - half), r + half]
+
+
+def resistance_at_reference(resistance_ohm: float | None, interval95, temperature_C,
+                            *, soc: float | None = None, model=None,
+                            current_A: float | None = None
+                            ) -> tuple[float | None, list | None, str]:
+    """A resistance moved to :data:`REFERENCE_TEMPERATURE_C` and :data:`REFERENCE_SOC`.
+
+    Temperature: ``R_ref = R / f(T)``, ``f`` the Arrhenius factor with the prior
+    coefficient (:data:`dischargelab.models.thermal.BETA_PRIOR_K`), whose
+    :data:`BETA_RELATIVE_SD` widens the interval the farther ``T`` is from the
+    reference. State of charge: through the pack's model (the drop of ``current_A``
+    at the reference state over the drop at ``soc``), when a model is given.
+
+    Returns
+    -------
+    (R_ref [ohm], [low, high], how) or (None, None, reason).
+    """
+    from ..models.base import arrhenius
+    from ..models.thermal import BETA_PRIOR_K
+
+    if resistance_ohm is None:
+        return None, None, "no resistance"
+    lo, hi = interval95 if interval95 else (resistance_ohm, resistance_ohm)
+    how = []
+    factor, rel_sd = 1.0, 0.0
+    if temperature_C is not None and np.isfinite(temperature_C):
+        f = float(arrhenius(temperature_C, BETA_PRIOR_K, REFERENCE_TEMPERATURE_C))
+        factor /= f
+        rel_sd = abs(np.log(f)) * BETA_RELATIVE_SD
+        how.append(f"from {temperature_C:.0f} degC")
+    else:
+        how.append("no temperature logged: not moved in temperature")
+    if model is not None and soc is not None and current_A:
+        ratio = _model_soc_ratio(model, soc, float(current_A))
+        if ratio is not None:
+            factor *= ratio
+            how.append(f"from {100 * soc:.0f} % charge through the model")
+    r = resistance_ohm * factor
+    lo_r, hi_r = lo * factor, hi * factor
+    half_lo = np.hypot(r - lo_r, Z95 * rel_sd * r)
+    half_hi = np.hypot(hi_r - r, Z95 * rel_sd * r)
+    return float(r), [float(max(0.0, r - half_lo)), float(r + half_hi)], "; ".join(how)
+
+
+def _model_soc_ratio(model, soc: float, current_A: float) -> float | None:
+    """Drop of ``current_A`` at the reference state of charge over the drop at ``soc``."""
+    cap = float(model.capacity_Ah)
+    q = np.array([(1.0 - REFERENCE_SOC) * cap, (1.0 - min(max(soc, 0.02), 1.0)) * cap])
+    q = np.minimum(q, 0.98 * cap)
+    with np.errstate(all="ignore"):
+        rest = np.asarray(model.voltage(np.zeros(2), q), dtype=float)
+        loaded = np.asarray(model.voltage(np.full(2, current_A), q), dtype=float)
+    drop = rest - loaded
+    if not np.all(np.isfinite(drop)) or np.any(drop <= 0):
+        return None
+    return float(drop[0] / drop[1])
+
+
+__all__ = ["relaxation", "step_resistance", "sample_noise", "regression_resistance", "OcvCurve",
+           "soc_reading",
+           "counted_charge", "sampling_figures", "capacity_between_rests",
+           "resistance_at_reference", "MIN_SWING",
+           "REFERENCE_TEMPERATURE_C", "REFERENCE_SOC", "FULL_SOC", "FULL_SOC_SD"]

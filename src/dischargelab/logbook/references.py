@@ -1,0 +1,231 @@
+"""A pack's full discharges as the measure of its other events.
+
+* :class:`ReferenceCurve`, :func:`partial_capacity`: a partial discharge's capacity from a
+  full discharge's voltage curve (each end placed on it: a rest voltage on its
+  open-circuit voltage, a loaded voltage on its loaded voltage at the event's current and
+  resistance).
+* :func:`curve_match`, :func:`matched_capacity`: the full discharges whose loaded curves
+  match a partial one best over the charge they share (the same stage of life, wherever
+  the event sits in the order), their estimates weighted by the match.
+* :func:`learned_curve`: the pack's open-circuit voltage from a slow full discharge (the
+  loaded curve plus the settled drop, :func:`settled_drop`).
+
+References
+----------
+.. [1] G. L. Plett, "Battery Management Systems, Vol. 1", Artech House (2015), ch. 2
+   (open-circuit voltage from a slow discharge corrected for the resistive drop).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .estimates import OcvCurve
+
+#: Standard deviation of a voltage placed on the reference curve, per cell [V]:
+#: relaxation left after a rest, temperature and ageing since the reference.
+VOLTAGE_SD_CELL_V = 0.010
+
+#: A rest after the load counts as relaxed after this long [s]; sooner the loaded curve
+#: is used at the last loaded sample.
+RELAXED_S = 60.0
+
+#: Partial events using less than this share of the capacity get no capacity.
+MIN_SHARE = 0.2
+
+#: Full discharges whose curves match a partial one best, used as its references.
+MATCH_REFERENCES = 3
+
+#: A full discharge at this C-rate or slower teaches the pack's open-circuit voltage.
+SLOW_C_RATE = 0.5
+
+#: The resistive drop of a slow discharge is measured this long after its start [s] (the
+#: polarisation has built up): its loaded curve from there on, extrapolated back to the
+#: start, lies that drop below the rest voltage.
+SETTLE_S = 300.0
+
+
+@dataclass
+class ReferenceCurve:
+    """A full discharge of the pack as the measure of its partial ones.
+
+    ``share`` is the share of the capacity drawn (0 full, 1 empty) at each curve
+    point; ``loaded(current, resistance)`` and ``ocv`` give the voltage there.
+    """
+
+    event: dict
+    capacity_Ah: float
+    model: object | None = None
+
+    def __post_init__(self):
+        curve = self.event["curve"]
+        q = np.asarray(curve["charge_Ah"], dtype=float)
+        self.share = q / q[-1]
+        self.voltage = np.asarray(curve["voltage_V"], dtype=float)
+        self.current = np.asarray(curve["current_A"], dtype=float)
+        self.resistance = float(self.event.get("resistance_ohm") or 0.0)
+        self.drop = self._model_drop(q) if self.model is not None else \
+            self.resistance * self.current
+
+    def _model_drop(self, q: np.ndarray) -> np.ndarray:
+        """The model's voltage drop at the reference current [V], at the same charge."""
+        bat = self.model
+        qm = np.minimum(q, 0.999 * bat.capacity_Ah)
+        with np.errstate(all="ignore"):
+            rest = np.asarray(bat.voltage(np.zeros_like(qm), qm), dtype=float)
+            loaded = np.asarray(bat.voltage(self.current, qm), dtype=float)
+        drop = rest - loaded
+        return np.where(np.isfinite(drop), drop, self.resistance * self.current)
+
+    @property
+    def ocv(self) -> np.ndarray:
+        return self.voltage + self.drop
+
+    def loaded(self, current_A: float, resistance_ohm: float | None) -> np.ndarray:
+        """Voltage at ``current_A`` of a pack whose step resistance is now ``resistance_ohm``."""
+        scale = current_A / np.where(self.current > 0, self.current, np.nan)
+        drop = np.nan_to_num(self.drop * scale, nan=self.resistance * current_A)
+        extra = 0.0 if resistance_ohm is None else (resistance_ohm - self.resistance) * current_A
+        return self.voltage + self.drop - drop - extra
+
+    def place(self, voltage_V: float, curve: np.ndarray, sd_V: float
+              ) -> tuple[float, float] | None:
+        """Share of the capacity drawn where ``curve`` reads ``voltage_V``, and its sd."""
+        falling = np.minimum.accumulate(curve)
+        if not np.isfinite(voltage_V) or voltage_V < falling[-1]:
+            return None
+        if voltage_V >= falling[0]:
+            share = 0.0
+        else:
+            k = int(np.argmax(falling <= voltage_V))
+            a, b = falling[k - 1], falling[k]
+            share = float(self.share[k - 1] + (a - voltage_V) / (a - b)
+                          * (self.share[k] - self.share[k - 1])) if a > b else float(self.share[k])
+        lo = float(np.interp(share - 0.05, self.share, curve))
+        hi = float(np.interp(min(share + 0.05, 1.0), self.share, curve))
+        slope = abs(lo - hi) / (min(share + 0.05, 1.0) - max(share - 0.05, 0.0))
+        return share, (sd_V / slope if slope > 0 else 1.0)
+
+
+def partial_capacity(event: dict, ref: ReferenceCurve, cells: int
+                     ) -> tuple[float | None, list | None, str]:
+    """Capacity [Ah] of a partial discharge or flight from the reference curve."""
+    sd = VOLTAGE_SD_CELL_V * cells
+    r_now = event.get("resistance_ohm")
+    curve = event["curve"]
+    if event.get("rest_voltage_V") is not None:
+        start = ref.place(event["rest_voltage_V"], ref.ocv, sd)
+        how_start = "rest voltage before"
+    else:
+        start = ref.place(curve["voltage_V"][0], ref.loaded(curve["current_A"][0], r_now),
+                          2 * sd)
+        how_start = "first loaded voltage"
+    if event.get("rest_after_V") is not None and (event.get("rest_after_s") or 0) >= RELAXED_S:
+        end = ref.place(event["rest_after_V"], ref.ocv, sd)
+        how_end = "rest voltage after"
+    else:
+        end = ref.place(event["end_voltage_V"], ref.loaded(event["end_current_A"], r_now), sd)
+        how_end = "last loaded voltage"
+    if start is None or end is None:
+        return None, None, "a voltage lies below the reference curve"
+    share = end[0] - start[0]
+    if share < MIN_SHARE:
+        return None, None, f"uses {100 * max(share, 0):.0f} % of the capacity (too little)"
+    cap = float(event["discharged_Ah"]) / share
+    half = 1.96 * cap * float(np.hypot(start[1], end[1])) / share
+    return cap, [cap - half, cap + half], f"reference curve ({how_start}, {how_end})"
+
+
+def curve_match(event: dict, reference: dict) -> float:
+    """RMS difference [V] between an event's loaded voltage and a full discharge's over the
+    charge they share (from 5 % of the event's charge on); inf without overlap."""
+    ce, cr = event.get("curve") or {}, reference.get("curve") or {}
+    if not ce.get("charge_Ah") or not cr.get("charge_Ah"):
+        return float("inf")
+    qe, ve = np.asarray(ce["charge_Ah"], float), np.asarray(ce["voltage_V"], float)
+    qr, vr = np.asarray(cr["charge_Ah"], float), np.asarray(cr["voltage_V"], float)
+    use = (qe >= 0.05 * qe[-1]) & (qe <= qr[-1])
+    if use.sum() < 3:
+        return float("inf")
+    return float(np.sqrt(np.mean((ve[use] - np.interp(qe[use], qr, vr)) ** 2)))
+
+
+def matched_capacity(event: dict, refs: list[tuple[dict, float]], cells: int, model=None
+                     ) -> tuple[float | None, list | None, str]:
+    """Capacity of a partial discharge from its best-matching full discharges
+    (:data:`MATCH_REFERENCES`, weighted by ``1 / rms^2`` of :func:`curve_match`)."""
+    scored = sorted(((curve_match(event, e), e, cap) for e, cap in refs),
+                    key=lambda item: item[0])
+    scored = [s for s in scored if np.isfinite(s[0])][:MATCH_REFERENCES] or \
+        [(1.0, e, cap) for e, cap in refs[-1:]]
+    caps, lows, highs, weights, hows = [], [], [], [], []
+    for rms, e, cap in scored:
+        value, interval, how = partial_capacity(event, ReferenceCurve(e, cap, model=model), cells)
+        if value is None:
+            hows.append(how)
+            continue
+        caps.append(value)
+        lows.append(interval[0])
+        highs.append(interval[1])
+        weights.append(1.0 / max(rms, 1e-4) ** 2)
+        hows.append(how)
+    if not caps:
+        return None, None, hows[0] if hows else "no reference curve"
+    w = np.asarray(weights) / np.sum(weights)
+    cap = float(np.sum(w * caps))
+    spread = float(np.sqrt(np.sum(w * (np.asarray(caps) - cap) ** 2)))
+    half = max(float(np.sum(w * (np.asarray(highs) - np.asarray(lows)))) / 2.0, 1.96 * spread)
+    return cap, [cap - half, cap + half], f"{hows[0]}, {len(caps)} matched full discharge(s)"
+
+
+def is_slow(event: dict, capacity_Ah: float) -> bool:
+    """A full discharge slow enough to teach the open-circuit voltage, with a rest before."""
+    mean_i = float(event.get("mean_current_A") or 0.0)
+    return (len((event.get("curve") or {}).get("charge_Ah") or []) >= 10
+            and event.get("rest_voltage_V") is not None
+            and 0 < mean_i <= SLOW_C_RATE * capacity_Ah)
+
+
+def settled_drop(event: dict) -> float:
+    """Resistance [ohm] a slow discharge's load showed once settled: its loaded curve from
+    :data:`SETTLE_S` on, extrapolated back to the start, lies this times the current below
+    the rest voltage (series resistance and polarisation; the open-circuit voltage's own
+    fall left out by the extrapolation)."""
+    curve = event["curve"]
+    q = np.asarray(curve["charge_Ah"], dtype=float)
+    v = np.asarray(curve["voltage_V"], dtype=float)
+    mean_i = float(event["mean_current_A"])
+    q_settle = min(mean_i * SETTLE_S / 3600.0, 0.1 * q[-1])
+    v1, v2 = float(np.interp(q_settle, q, v)), float(np.interp(2 * q_settle, q, v))
+    return max(0.0, float(event["rest_voltage_V"]) - (v1 + (v1 - v2))) / mean_i
+
+
+def learned_curve(event: dict, capacity_Ah: float, cells: int, chemistry: str | None,
+                  resistance_ohm: float | None = None) -> OcvCurve | None:
+    """The pack's open-circuit voltage from one slow full discharge (see the module
+    docstring), or None when it is not slow or has no rest before it.
+
+    ``resistance_ohm`` (default: :func:`settled_drop` of this discharge) is added back at
+    its current. The pack's first slow full discharge gives it for all of them: an aged
+    cell's open-circuit voltage falls faster near full, which the extrapolation from the
+    settled curve then takes for resistance (the CMU eVTOL cells' C/5 tests: 0.08 ohm fresh,
+    0.16 ohm at 17 % fade, while the step resistance grows far less)."""
+    if not is_slow(event, capacity_Ah):
+        return None
+    curve = event["curve"]
+    q = np.asarray(curve["charge_Ah"], dtype=float)
+    v = np.asarray(curve["voltage_V"], dtype=float)
+    i = np.asarray(curve["current_A"], dtype=float)
+    resistance = settled_drop(event) if resistance_ohm is None else resistance_ohm
+    rest = event["rest_voltage_V"]
+    return OcvCurve.from_discharge(q, v, i, cells=cells, resistance_ohm=resistance,
+                                   rest_before_V=float(rest),
+                                   temperature_C=event.get("temperature_start_C"),
+                                   source=f"the pack's slow full discharge ({event.get('source')})")
+
+
+__all__ = ["ReferenceCurve", "partial_capacity", "curve_match", "matched_capacity",
+           "learned_curve", "is_slow", "settled_drop", "VOLTAGE_SD_CELL_V", "RELAXED_S",
+           "MIN_SHARE", "MATCH_REFERENCES", "SLOW_C_RATE", "SETTLE_S"]

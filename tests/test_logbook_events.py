@@ -1,0 +1,275 @@
+"""The plain functions behind a pack's events: splitting a log, rests and their relaxation,
+counting charge, capacity between two rests, the open-circuit voltage, resistance at
+reference conditions, cells apart and the order of a pack's life. Truths are built here."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dischargelab.logbook.cells import cell_figures, drift_flags, weakest_share
+from dischargelab.logbook.estimates import (
+    MIN_SWING,
+    OcvCurve,
+    capacity_between_rests,
+    counted_charge,
+    regression_resistance,
+    relaxation,
+    resistance_at_reference,
+    sampling_figures,
+    soc_reading,
+)
+from dischargelab.logbook.events import charge_figures, split_log
+from dischargelab.logbook.health import order_events
+from dischargelab.ocv import ocv_from_soc
+
+# --------------------------------------------------------------------------- splitting
+
+
+def _log(pieces, dt=1.0, seed=0, noise=0.003):
+    """Concatenated (kind, duration [s], current [A]) pieces, sampled every ``dt``."""
+    rng = np.random.default_rng(seed)
+    t, i = [], []
+    now = 0.0
+    for _, duration, current in pieces:
+        n = int(round(duration / dt))
+        t.append(now + dt * np.arange(n))
+        i.append(np.full(n, float(current)))
+        now += n * dt
+    i = np.concatenate(i)
+    return np.concatenate(t), i + rng.normal(0, noise, i.size)
+
+
+def test_split_log_finds_discharges_charges_rests_and_gaps():
+    pieces = [("rest", 600, 0), ("discharge", 900, 5.0), ("rest", 600, 0),
+              ("charge", 1800, -3.0), ("rest", 600, 0)]
+    t, i = _log(pieces)
+    # a flight's low-throttle moments (20 s idle) belong to it; a regen blip of 3 s too
+    i[800:820] = 0.0
+    i[1000:1003] = -1.0
+    # the logger was off for an hour in the last rest
+    t[-300:] += 3600.0
+    spans = split_log(t, i)
+    assert [s.kind for s in spans] == ["rest", "discharge", "rest", "charge", "rest", "gap",
+                                       "rest"]
+    assert spans[1].start == 600 and spans[1].stop == 1500
+    assert spans[3].start == 2100 and spans[3].stop == 3900
+    gap = spans[5]
+    assert gap.start == gap.stop == t.size - 300
+
+
+def test_split_log_by_tester_steps_joins_a_constant_current_then_voltage_charge():
+    t, i = _log([("rest", 60, 0), ("cc", 300, -2.0), ("cv", 300, -0.5), ("rest", 60, 0),
+                 ("dis", 600, 1.0)], noise=0.0)
+    steps = np.repeat([1, 2, 3, 4, 5], [60, 300, 300, 60, 600])
+    spans = split_log(t, i, step_index=steps)
+    assert [(s.kind, s.steps) for s in spans] == [("rest", (1,)), ("charge", (2, 3)),
+                                                  ("rest", (4,)), ("discharge", (5,))]
+
+
+def test_charge_ending_in_a_voltage_taper_is_full():
+    t = np.arange(0.0, 3000.0, 10.0)
+    current = np.where(t < 2000, -3.0, -3.0 * np.exp(-(t - 2000) / 200))
+    voltage = np.where(t < 2000, 3.7 + 0.5 * t / 2000, 4.2)
+    fig = charge_figures(t, voltage, current)
+    assert fig["taper"] and fig["charged_Ah"] == pytest.approx(
+        (3.0 * 2000 + 3.0 * 200 * (1 - np.exp(-995 / 200))) / 3600, rel=0.01)
+    assert not charge_figures(t[:150], voltage[:150], current[:150])["taper"]
+
+
+# --------------------------------------------------------------------------- relaxation
+
+@pytest.mark.parametrize("shape", ["sqrt", "exp"])
+def test_relaxation_extrapolates_what_is_left_and_covers_it(shape):
+    """A rest seen for 800 s after a load: the voltage it relaxes to lies inside the reading's
+    95 % interval for a diffusion tail (sqrt) and for an RC pair as slow as the rest is long
+    (exponential)."""
+    t = np.arange(20.0, 800.0, 20.0)
+    if shape == "sqrt":
+        v_inf, v = 3.70, 3.70 - 0.9 / np.sqrt(t)
+    else:
+        v_inf, v = 3.70, 3.70 - 0.05 * np.exp(-t / 800.0)
+    r = relaxation(t, v, +1, loaded_V=3.5)
+    assert r["method"] == "fit" and r["left_V"] > 0
+    assert abs(r["relaxed_V"] - v_inf) <= r["half95_V"]
+    assert r["relaxed_V"] > v[-1]
+    # after a charge the voltage falls back: the sign follows
+    down = relaxation(t, 2 * 3.9 - v, -1)
+    assert down["left_V"] < 0 and down["relaxed_V"] < 2 * 3.9 - v[-1]
+
+
+def test_relaxation_of_a_short_rest_uses_a_prior_wider_than_a_fit():
+    r = relaxation(np.array([60.0]), np.array([3.68]), +1, loaded_V=3.55)
+    assert r["method"] == "prior" and 0 < r["left_V"] < 0.13
+    assert r["half95_V"] >= r["left_V"]
+
+
+# --------------------------------------------------------------------------- charge
+
+def test_counted_charge_is_exact_for_steady_samples_and_honest_for_sparse_ones():
+    t = np.arange(0.0, 3601.0, 1.0)
+    q, sd = counted_charge(t, np.full(t.size, 2.0))
+    assert q == pytest.approx(2.0) and sd < 1e-6
+
+    # the CMU mission (take-off 75 s, cruise, landing 105 s) seen every 167 s at a random
+    # phase: the 95 % interval from the samples covers the truth about 95 % of the time
+    def current(x):
+        return np.select([(x >= 0) & (x < 75), (x >= 75) & (x < 875), (x >= 875) & (x < 980)],
+                         [15.0, 4.4, 15.0], 0.0)
+
+    fine = np.arange(-10.0, 1100.0, 0.1)
+    truth = np.trapezoid(current(fine), fine) / 3600
+    rng = np.random.default_rng(4)
+    covered = 0
+    for _ in range(400):
+        ts = np.arange(-300 + rng.uniform(0, 167), 1300, 167.0)
+        sampling = sampling_figures(ts, current(ts))
+        assert not sampling["resolved"]
+        q, sd = counted_charge(ts, current(ts), unresolved=True)
+        covered += abs(q - truth) <= 1.96 * sd
+    assert covered / 400 >= 0.9
+    # the same mission logged at 1 Hz is resolved and counted to well under 1 %
+    ts = np.arange(-300.0, 1300.0, 1.0)
+    sampling = sampling_figures(ts, current(ts))
+    assert sampling["resolved"] and sampling["charge_sd_Ah"] < 0.01 * truth
+
+
+# --------------------------------------------------------------------------- OCV, capacity
+
+def test_open_circuit_voltage_learned_from_a_slow_discharge():
+    soc = np.linspace(1.0, 0.0, 400)
+    q = 3.0 * (1.0 - soc)
+    ocv = ocv_from_soc(soc, "li-ion")
+    current = np.full(soc.size, 0.6)
+    curve = OcvCurve.from_discharge(q, 2 * (ocv - 0.05 * current), current, cells=2,
+                                    resistance_ohm=0.1, rest_before_V=2 * ocv[0])
+    for s in (0.2, 0.45, 0.8):
+        assert curve.voltage_at(s) == pytest.approx(ocv_from_soc(s, "li-ion"), abs=0.002)
+        assert curve.soc_at(float(ocv_from_soc(s, "li-ion"))) == pytest.approx(s, abs=0.01)
+
+
+def test_capacity_between_two_rests_and_small_swings():
+    curve = OcvCurve.prior("li-ion")
+    true_cap = 2.5
+    start = {"relaxed_V": 2 * float(curve.voltage_at(0.9)), "half95_V": 0.004, "current_A": 0.0}
+    end = {"relaxed_V": 2 * float(curve.voltage_at(0.3)), "half95_V": 0.01, "current_A": 0.0}
+    sa, sda = soc_reading(curve, start, 2)
+    sb, sdb = soc_reading(curve, end, 2)
+    cap, (lo, hi), how = capacity_between_rests(0.6 * true_cap, 0.01, sa, sda, sb, sdb)
+    assert cap == pytest.approx(true_cap, rel=0.02) and lo < true_cap < hi
+    # a charge: the charge counted is negative and the state of charge rises
+    cap2, _, _ = capacity_between_rests(-0.6 * true_cap, 0.01, sb, sdb, sa, sda)
+    assert cap2 == pytest.approx(cap)
+    cap3, interval, why = capacity_between_rests(0.05, 0.001, 0.5, 0.01, 0.48, 0.01)
+    assert cap3 is None and interval is None and f"{100 * MIN_SWING:.0f} %" in why
+    assert capacity_between_rests(0.5, 0.01, 0.5, 0.01, 0.6, 0.01)[0] is None  # disagree
+
+
+def test_reading_counts_the_idle_draw_and_the_relaxation_left():
+    curve = OcvCurve.prior("lipo")
+    v = float(curve.voltage_at(0.5))
+    plain, sd_plain = soc_reading(curve, {"relaxed_V": v, "current_A": 0.0}, 1)
+    drawn, sd_drawn = soc_reading(curve, {"relaxed_V": v - 0.05 * 1.0, "current_A": 1.0}, 1,
+                                  resistance_ohm=0.05)
+    assert drawn == pytest.approx(plain, abs=1e-9) and sd_drawn > sd_plain
+    _, sd_left = soc_reading(curve, {"relaxed_V": v, "half95_V": 0.03}, 1)
+    assert sd_left > sd_plain
+
+
+# --------------------------------------------------------------------------- resistance
+
+def test_resistance_at_reference_temperature_undoes_arrhenius():
+    from dischargelab.models.base import arrhenius
+    from dischargelab.models.thermal import BETA_PRIOR_K
+
+    r25 = 0.030
+    cold = r25 * float(arrhenius(5.0, BETA_PRIOR_K))
+    r, (lo, hi), how = resistance_at_reference(cold, [0.95 * cold, 1.05 * cold], 5.0)
+    assert r == pytest.approx(r25, rel=1e-9) and lo < r25 < hi and "5 degC" in how
+    assert resistance_at_reference(r25, None, None)[0] == pytest.approx(r25)
+    wide = resistance_at_reference(cold, [cold, cold], 5.0)[1]
+    assert wide[1] - wide[0] > 0  # the Arrhenius coefficient's own uncertainty
+
+
+def test_regression_resistance_of_a_sparse_log():
+    """Samples 12 s apart of a 50 mOhm pack whose current wanders: no load step is short
+    enough, the regression finds the resistance."""
+    rng = np.random.default_rng(2)
+    t = np.arange(0.0, 900.0, 12.0)
+    current = 15 + 5 * np.sin(t / 40.0) + rng.normal(0, 1.5, t.size)
+    q = np.concatenate(([0.0], np.cumsum(0.5 * (current[1:] + current[:-1]) * np.diff(t))))
+    voltage = 24.0 - 0.6 * q / 3600 - 0.05 * current + rng.normal(0, 0.005, t.size)
+    r, (lo, hi) = regression_resistance(t, voltage, current)
+    assert r == pytest.approx(0.05, rel=0.1) and lo < 0.05 < hi
+    assert regression_resistance(t, voltage, np.full(t.size, 15.0)) == (None, None)
+
+
+# --------------------------------------------------------------------------- cells
+
+def test_a_weak_cell_stands_off_drifts_and_limits_the_pack():
+    """Four cells, one with twice the resistance and 10 % less capacity."""
+    curve = OcvCurve.prior("lipo")
+    t = np.arange(0.0, 150.0, 0.1)
+    current = np.where((t // 20) % 2 == 0, 10.0, 30.0)
+    caps = np.array([1.6, 1.6, 1.6, 1.44])
+    resistance = np.array([0.005, 0.005, 0.005, 0.010])
+    q = np.concatenate(([0.0], np.cumsum(0.5 * (current[1:] + current[:-1])
+                                         * np.diff(t)))) / 3600
+    soc = 1.0 - q[:, None] / caps
+    cells = curve.voltage_at(soc) - current[:, None] * resistance
+    rest_before = {"time_s": np.arange(-60.0, 0.0, 1.0),
+                   "cells_V": np.tile(curve.voltage_at(np.ones(4)), (60, 1)),
+                   "since_load_s": None, "direction": 0}
+    end = curve.voltage_at(soc[-1])
+    rest_after = {"time_s": t[-1] + np.arange(1.0, 400.0, 1.0),
+                  "cells_V": np.tile(end, (399, 1)),
+                  "since_load_s": np.arange(1.0, 400.0, 1.0), "direction": 1}
+    fig = cell_figures(t, current, cells, before=rest_before, after=rest_after)
+    assert fig["count"] == 4 and fig["off"] == [4]
+    assert fig["resistance_ohm"][3] == pytest.approx(0.010, rel=0.05)
+    assert fig["sag_V"][3] == max(fig["sag_V"])
+    share, weakest = weakest_share(curve, fig, float(q[-1]), 0.001)
+    assert weakest == 4 and share == pytest.approx(1.44 / caps.mean(), abs=0.03)
+    assert drift_flags([[], [4], [4], [4]], [0.0, 0.01, 0.02, 0.03]) == [False, False, True,
+                                                                          True]
+    assert drift_flags([[4], [4]], [0.03, 0.01]) == [False, False]  # balanced back
+
+
+# --------------------------------------------------------------------------- order
+
+def _ev(source, idx=0, start=None, cycle=None):
+    return {"id": source * 100 + idx, "source_id": source, "idx": idx, "start_time": start,
+            "cycle": cycle}
+
+
+def test_undated_files_follow_what_the_pack_had_when_they_were_added():
+    dated = [_ev(2, start="2024-05-01T10:00:00", cycle=1),
+             _ev(3, start="2024-05-02T10:00:00", cycle=10),
+             _ev(4, start="2024-05-03T10:00:00", cycle=20)]
+    first_undated = _ev(1, cycle=510)                       # added before everything
+    later_undated = [_ev(5, cycle=30), _ev(6), _ev(6, idx=1)]  # added after the three
+    dated_later = _ev(7, start="2024-05-02T12:00:00")         # dated: at its time
+    got = order_events([*later_undated, dated_later, *dated, first_undated])
+    assert [(e["source_id"], e["idx"]) for e in got] == [
+        (1, 0), (2, 0), (3, 0), (7, 0), (4, 0), (5, 0), (6, 0), (6, 1)]
+
+
+def test_files_sharing_a_date_or_added_together_undated_follow_their_cycle_numbers():
+    same_day = [_ev(k, start="2024-05-01T00:00:00", cycle=c) for k, c in
+                ((1, 30), (2, 10), (3, 20))]
+    assert [e["cycle"] for e in order_events(same_day)] == [10, 20, 30]
+    undated = [_ev(k, cycle=c) for k, c in ((1, 30), (2, 10), (3, 20))]
+    assert [e["cycle"] for e in order_events(undated)] == [10, 20, 30]
+    mixed = [_ev(1, cycle=30), _ev(2), _ev(3, cycle=20)]    # not all numbered: added order
+    assert [e["source_id"] for e in order_events(mixed)] == [1, 2, 3]
+
+
+def test_equivalent_full_cycles_count_discharges_or_else_the_charges():
+    from dischargelab.logbook.health import equivalent_full_cycles
+
+    log = [{"kind": "discharge", "discharged_Ah": 1.5}, {"kind": "rest", "discharged_Ah": 0.0},
+           {"kind": "charge", "discharged_Ah": 0.0, "details": {"charge": {"charged_Ah": 1.6}}},
+           {"kind": "discharge", "discharged_Ah": 1.5}]
+    np.testing.assert_allclose(equivalent_full_cycles(log, 3.0), [0.5, 0.5, 0.5, 1.0])
+    charger_only = [e for e in log if e["kind"] != "discharge"]
+    np.testing.assert_allclose(equivalent_full_cycles(charger_only, 3.0), [0.0, 1.6 / 3])

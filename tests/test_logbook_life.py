@@ -1,0 +1,206 @@
+"""A pack's health from what it already does, on real and synthetic logs: partial discharges
+wherever they sit in the pack's life, long logs through the logbook, flights and cells."""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dischargelab.logbook.health import pack_health
+from dischargelab.logbook.summarise import summarise_source
+
+CELL_C = "samsung30q_ageing_cellC"
+
+#: Full discharges of cell C given to the pack, and the cycles cut at 60 % of their charge.
+FULL_CYCLES = (1, 100, 200, 300, 400, 500, 600, 660)
+CUT_CYCLES = (110, 310, 510)
+
+
+def lvm_cut(path: Path, out: Path, share: float, dated: bool = True) -> float:
+    """Write the file up to ``share`` of its discharge charge (without its clock time when
+    ``dated`` is false); return the full file's discharge charge [Ah] (numpy, raw columns)."""
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    start = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 1
+    data = [line for line in lines[start:] if line.strip()]
+    cols = np.array([[float(x) for x in line.split("\t")[:2]] for line in data])
+    current = np.where(cols[:, 1] < -1.0, -cols[:, 1], 0.0)
+    charge = np.concatenate(([0.0], np.cumsum(0.5 * (current[1:] + current[:-1])
+                                                * np.diff(cols[:, 0])))) / 3600.0
+    stop = int(np.searchsorted(charge, share * charge[-1])) + 1
+    header = [line for line in lines[:start]
+              if dated or not line.startswith(("Date\t", "Time\t"))]
+    out.write_text("".join(header + data[:stop]), encoding="utf-8")
+    return float(charge[-1])
+
+
+def as_stored(summary, source_id: int, name: str | None = None) -> list[dict]:
+    """Summary events as the logbook returns them (ids in the order files were added)."""
+    out = []
+    for e in summary.events:
+        row = dict(e, id=source_id * 1000 + e["index"], source_id=source_id, idx=e["index"],
+                   source=name or summary.file_name)
+        lo, hi = e["resistance_interval95"] or (None, None)
+        row.update(resistance_low_ohm=lo, resistance_high_ohm=hi)
+        out.append(row)
+    return out
+
+
+@pytest.fixture(scope="module")
+def cell_c_fulls(shared_data):
+    return [summarise_source(shared_data / CELL_C / f"DischargeCycle{c:03d}.txt")
+            for c in FULL_CYCLES]
+
+
+@pytest.mark.parametrize("dated", [True, False], ids=["dated", "undated"])
+@pytest.mark.parametrize("added", ["before", "after"])
+@pytest.mark.parametrize("named", [True, False], ids=["cycle-in-name", "renamed"])
+def test_cell_c_partial_discharges_within_3_percent_wherever_they_sit(
+        shared_data, tmp_path, cell_c_fulls, dated, added, named):
+    """Cuts at 60 % of their charge, with or without a clock time, with or without the cycle
+    number in their names, added before or after the full cycles: each within 3 % of the
+    full file's charge, its interval covering it."""
+    cuts, truth = [], {}
+    for k, c in enumerate(CUT_CYCLES):
+        name = f"DischargeCycle{c:03d}.txt" if named else f"partial_{'abc'[k]}.txt"
+        path = tmp_path / name
+        truth[name] = lvm_cut(shared_data / CELL_C / f"DischargeCycle{c:03d}.txt", path, 0.6,
+                              dated)
+        cuts.append(summarise_source(path))
+    order = [*cuts, *cell_c_fulls] if added == "before" else [*cell_c_fulls, *cuts]
+    events = []
+    for sid, summary in enumerate(order, 1):
+        events += as_stored(summary, sid)
+    health, reference, _ = pack_health(events)
+    partial = {h.source: h for h in health if not h.full}
+    assert set(partial) == set(truth)
+    for name, h in partial.items():
+        assert h.capacity_Ah == pytest.approx(truth[name], rel=0.03), name
+        lo, hi = h.capacity_interval95
+        assert lo < truth[name] < hi
+        assert "matched full discharge" in h.capacity_method
+    if not dated and added == "after":  # placed after what the pack had, never before cycle 1
+        first = next(k for k, h in enumerate(health) if h.full)
+        assert all(k > first for k, h in enumerate(health) if not h.full)
+
+
+# --------------------------------------------------------------------------- long logs
+
+@pytest.fixture(scope="module")
+def short_life(tmp_path_factory):
+    """Two cycles of a synthetic cell at 1 Hz as one log: a 1C capacity test, missions,
+    rests and CC-CV charges (the engine; known capacity)."""
+    from synthetic_life import LifeSpec, synthetic_life
+
+    spec = LifeSpec(cycles=2, test_every=10, test_C=1.0, rest_s=600.0, mission_dt_s=10.0,
+                    cv_step_s=60.0)
+    life = synthetic_life(spec)
+    path = tmp_path_factory.mktemp("life") / "bms_log.csv"
+    life.frame.to_csv(path, index=False)
+    return path, life
+
+
+def test_a_long_log_through_the_logbook_gives_its_events_and_their_capacities(short_life,
+                                                                             tmp_path):
+    from dischargelab.logbook import Logbook
+
+    path, life = short_life
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        result = lb.add(path, pack="cell")
+        assert result.added == ["bms_log.csv"]
+        health = lb.health("cell")
+        rows = lb.events("cell").rows
+    kinds = [e.health_kind for e in health.events]
+    # the cell arrives part-charged: a discharge, then charge, test, charge, mission, charge
+    assert [k for k in kinds if k != "rest"] == ["partial", "charge", "full", "charge",
+                                               "partial", "charge", "partial", "charge"]
+    assert all(kinds[k] == "rest" for k in range(1, len(kinds), 2))
+    assert len(rows) == len(kinds) == result.events
+    truth = life.tests[0][2]
+    test = next(e for e in health.events if e.full)
+    assert test.capacity_Ah == pytest.approx(truth, rel=0.005)
+    assert test.capacity_method == "coulomb count"
+    for e in health.events:
+        if e.kind in ("charge", "discharge") and not e.full and e.efc and e.efc > 1:
+            assert e.capacity_method.startswith("rests before and after")
+            lo, hi = e.capacity_interval95
+            assert e.capacity_Ah == pytest.approx(truth, rel=0.03) and lo < truth < hi
+            assert 0 <= e.soc_end <= e.soc_start <= 1 or e.kind == "charge"
+    charges = [e for e in health.events if e.kind == "charge"]
+    assert all(e.charged_Ah > 0 and e.discharged_Ah == 0 for e in charges)
+    efc = [e.efc for e in health.events]
+    assert all(b >= a for a, b in zip(efc, efc[1:]))
+    data = health.to_dict()["events"]
+    assert {e["kind"] for e in data} == {"partial", "full", "charge", "rest"}
+    assert all(e["resistance_ref_ohm"] is None or e["resistance_ref_ohm"] > 0 for e in data)
+
+
+@pytest.mark.slow
+def test_a_capacity_test_inside_a_long_log_is_refitted(short_life, tmp_path):
+    from dischargelab.logbook import Logbook
+
+    path, life = short_life
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.add(path, pack="cell")
+        battery = lb.fit("cell", model="shepherd", bootstrap=0)
+    truth = life.tests[0][2]
+    assert battery.extra["logbook_fit"]["capacity_Ah"] == pytest.approx(truth, rel=0.005)
+    # fitted to the test's own rows: the model empties just past what the test delivered
+    assert truth < battery.capacity_Ah < 1.1 * truth
+
+
+@pytest.mark.slow
+def test_the_cmu_evtol_life_through_the_logbook(shared_data, tmp_path):
+    """A real eVTOL cell's whole life as one CSV (one sample every 167 s): its 13 C/5
+    capacity tests become full discharges with their own capacity; the missions are judged
+    uncountable; the charges, ending full, give the capacity between their rests."""
+    from dischargelab.logbook import Logbook
+
+    path = shared_data / "cmu_evtol" / "VAH27.csv"
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.add(path, pack="VAH27")
+        health = lb.health("VAH27")
+    counts = Counter(e.health_kind for e in health.events)
+    assert counts["full"] == 13 and counts["partial"] == 573
+    assert counts["charge"] >= 585 and counts["rest"] >= 1100
+    fulls = [e.capacity_Ah for e in health.events if e.full]
+    # README: 3.089 -> 2.552 Ah (the tests' delivered charge)
+    assert fulls[0] == pytest.approx(3.089, abs=0.01) and fulls[-1] == pytest.approx(2.552,
+                                                                                     abs=0.01)
+    missions = [e for e in health.events if e.health_kind == "partial"]
+    assert all(any("do not follow the current" in n for n in e.notes) for e in missions
+               if e.capacity_Ah is not None)
+    charges = [e for e in health.events if e.kind == "charge" and e.capacity_Ah is not None
+               and not e.outlier]
+    assert len(charges) > 500
+    # between the 6th and 7th test: the charges' capacities against the tests around them
+    k6, k7 = [k for k, e in enumerate(health.events) if e.full][5:7]
+    block = [e.capacity_Ah for e in health.events[k6:k7] if e in charges]
+    assert np.median(block) == pytest.approx(health.events[k7].capacity_Ah, rel=0.03)
+
+
+def test_every_shared_flight_log_gets_a_resistance_and_a_capacity_or_a_reason(shared_data):
+    logs = [shared_data / "flight_logs" / p for p in
+            ("ardupilot_loganalyzer/mechanical_fail.log", "ina3221_fpv_4s/28.csv",
+             "ina3221_fpv_4s/29.csv", "px4_ulog_rs/esc_status_log.ulg")]
+    logs += sorted((shared_data / "dji_m100_flights").glob("derived_battery_*.csv"))
+    for sid, path in enumerate(logs, 1):
+        health, _, _ = pack_health(as_stored(summarise_source(path), sid),
+                                   cells=6 if "dji" in str(path) else None)
+        assert any(h.resistance_ohm is not None for h in health), path.name
+        for h in health:
+            if h.capacity_Ah is None:
+                assert h.capacity_note and "\n" not in h.capacity_note
+            else:
+                lo, hi = h.capacity_interval95
+                assert lo < h.capacity_Ah < hi
+    # the INA3221 logger's flight with a rest on each side: a capacity, and each cell apart
+    (flight,) = pack_health(as_stored(summarise_source(shared_data / "flight_logs" /
+                                                       "ina3221_fpv_4s" / "29.csv"), 1))[0]
+    assert flight.capacity_method == "rests before and after"
+    assert 1.0 < flight.capacity_Ah < 1.8  # a 1600 mAh pack, used
+    cells = flight.cells
+    assert cells["count"] == 4 and len(cells["resistance_ohm"]) == 4
+    assert 0.5 < cells["weakest_share"] <= 1.0 and cells["rest_spread_V"] < 0.1
