@@ -202,8 +202,8 @@ class Logbook:
         """One row per pack: events, EFC, capacity today, resistance, end of life."""
         from .fleet_report import pack_summary
 
-        keys = ("name", "events", "efc", "capacity_Ah", "capacity_fraction", "resistance_ohm",
-                "eol_efc", "eol_efc_interval95")
+        keys = ("name", "events", "efc", "capacity_Ah", "capacity_interval95",
+                "capacity_fraction", "resistance_ohm", "eol_efc", "eol_efc_interval95")
         eol = _check_eol(eol)
         rows = []
         for name in self.pack_names():
@@ -250,7 +250,7 @@ class Logbook:
                            failed=sorted(failed))
 
     def pack(self, name: str) -> Pack:
-        """A pack with its health today; ``.battery()`` is its model scaled to it."""
+        """A pack with its health today; ``.battery()`` is its model at that health."""
         row, events, model = self._pack_data(name)
         h = build_health(row, events, model, DEFAULT_EOL)
         cap = h.capacity_now_Ah
@@ -260,8 +260,9 @@ class Logbook:
         return Pack(name=name, label_capacity_Ah=row["label_capacity_Ah"],
                     reference_capacity_Ah=h.reference_capacity_Ah, chemistry=row["chemistry"],
                     cells=row["cells"], events=len(events), efc=h.efc_now, capacity_Ah=cap,
+                    capacity_interval95=h.capacity_now_interval95,
                     resistance_ohm=h.resistance_now_ohm, health=h, _model=model,
-                    _fit=lambda: self._fit(name, h))
+                    _fit=lambda: self._fit(name, h), _seen=_seen_in(events, row))
 
     def raw(self, sha256: str) -> bytes:
         """The stored bytes of a source file, by its SHA-256."""
@@ -422,6 +423,22 @@ class Logbook:
 
 
 
+
+
+def _seen_in(events: list[dict], row: dict) -> dict:
+    """Cells in series and chemistry as the events show them (for a pack whose settings
+    do not say): cells from the latest event, chemistry from the highest rest voltage
+    per cell (LiFePO4 below 3.75 V when full, else LiPo)."""
+    from ..thermalprior import chemistry_from_full_voltage
+    from .health import order_events, pack_cells
+
+    if not events:
+        return {}
+    ordered = order_events(events)
+    cells = pack_cells(ordered[-1], row["cells"], row["chemistry"])
+    rests = [e.get("rest_voltage_V") for e in ordered if e.get("rest_voltage_V")]
+    chemistry = chemistry_from_full_voltage(max(rests) / cells) if rests else None
+    return {"cells": cells, "chemistry": chemistry}
 
 
 def _check_eol(eol) -> float:
