@@ -129,7 +129,9 @@ class PackPages:
 
     def _pack_detail(self, name: str) -> dict:
         """What is stored about a pack, read only: a GET never fits or writes (a pack
-        without a stored model says so; the refit is ``POST /api/packs/NAME/fit``)."""
+        with a full discharge but no stored model says so; the refit is ``POST
+        /api/packs/NAME/fit``). A pack that only flies shows its chemistry's prior at
+        today's capacity and resistance (built, not fitted: no write)."""
         name = self._known(name)
         lb = self.logbook()
         pack = lb.pack(name)
@@ -139,7 +141,7 @@ class PackPages:
         health = pack.health if pack.health is not None else lb.health(name)
         out = {"name": name, "summary": summary, "health": health.to_dict(),
                "events": lb.events(name).to_dict(), "model": None, "model_note": None}
-        if not pack.fitted:
+        if not pack.fitted and pack.has_full_discharge:
             out["model_note"] = NO_MODEL
             return out
         try:
@@ -182,7 +184,7 @@ class PackPages:
             raise RequestRefused(400, f"unknown mission {mission!r}; choose one of "
                                       f"{', '.join(sorted(bundled_missions()))}")
         pack = self.logbook().pack(name)
-        if not pack.fitted:      # flying would fit and store one: only the refit writes
+        if not pack.fitted and pack.has_full_discharge:  # flying would fit and store one
             raise RequestRefused(409, f"pack {name!r} has no fitted model yet; refit it first "
                                       f"(Refit, or POST /api/packs/{name}/fit)")
         return dl.endurance(pack, mission).to_dict()
