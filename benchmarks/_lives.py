@@ -74,6 +74,10 @@ class Life:
         """True capacity [Ah] at ``efc``."""
         return self.q0_Ah * relative_capacity(np.asarray(efc, dtype=float), **self.params)
 
+    def crossing(self, threshold_Ah: float) -> float:
+        """EFC where the true capacity first reaches ``threshold_Ah``."""
+        return _crossing(self.params, threshold_Ah / self.q0_Ah, 4 * self.eol_efc)
+
     def upto(self, efc: float):
         """The estimates logged up to ``efc`` (efc, capacity, low95, high95)."""
         k = self.efc <= efc

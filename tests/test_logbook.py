@@ -228,7 +228,8 @@ def test_newer_database_is_refused_with_one_line(url):
     Logbook(url).close()
     _execute(url, [f"UPDATE logbook_meta SET value = '{SCHEMA_VERSION + 7}' "
                    "WHERE key = 'schema_version'"])
-    with pytest.raises(LogbookError, match=rf"schema version {SCHEMA_VERSION + 7}, newer than .*upgrade") as err:
+    with pytest.raises(LogbookError, match=rf"schema version {SCHEMA_VERSION + 7}, newer "
+                                           r"than .*upgrade") as err:
         Logbook(url)
     assert "\n" not in str(err.value)
 

@@ -1,41 +1,43 @@
 """End of life: a capacity trend that may bend, and a finite, calibrated 95 % interval.
 
-**The trend seen so far.** The logarithm of the capacity (so that no band ever goes
-below zero) against equivalent full cycles ``x`` (EFC) is fitted with four families,
-each linear in its coefficients once its shape parameters are fixed on a grid
-(``X = x / x_now``, ``x_now`` the last estimate's EFC):
+**The trend seen so far.** The capacity estimates (outliers left out) against
+equivalent full cycles ``x`` (EFC) are fitted with four families, each linear in its
+coefficients once its shape parameters are fixed on a grid (``X = x / x_now``,
+``x_now`` the last estimate's EFC, capacities as shares of their median):
 
 * ``line``: ``a - b X`` (fade proportional to charge throughput, Wang et al. 2014);
 * ``early``: ``a - b X - A (1 - exp(-X / tau))``, the fast early fade while the SEI
   forms (or an early rise, ``A < 0``), then a line;
 * ``knee``: ``a - b X - c w softplus((X - k) / w)`` with ``c >= 0``: two lines joined
-  smoothly at the knee ``k`` (the Bacon-Watts shape used to find knees, Fermin-Cueto
+  smoothly; they meet at the knee ``k`` (the Bacon-Watts knee point, Fermin-Cueto
   et al. 2020);
 * ``early+knee``: both.
 
-Each grid point is weighted by its evidence (the Bayesian information criterion of
-the weighted least-squares fit, whose error variance is each estimate's own from its
-interval plus a fitted nugget, times a prior shared evenly within a family). The
-estimates' lag-1 autocorrelation ``rho`` tempers the likelihood and widens the
+Each grid point is weighted by its evidence (Schwarz's criterion of the weighted
+least-squares fit, whose error variance is each estimate's own from its interval plus
+a fitted nugget, times a prior shared evenly within a family, :data:`FAMILY_PRIOR`).
+The residuals' lag-1 autocorrelation ``rho`` tempers the likelihood and widens the
 coefficients' covariance by ``(1 + rho) / (1 - rho)`` (fewer independent estimates
-than logged). A bend is *chosen* when the bent families hold more than half of the
-evidence; :attr:`FadeFit.bend_odds` is the Bayes factor against the straight line.
+than logged). The trend *bends* when the other families hold more of the evidence
+than the line; :attr:`FadeFit.bend_odds` is their Bayes factor against it.
 
 **The future.** :data:`PATHS` simulated futures start from the trend at the last
-estimate (a grid point drawn by its weight, coefficients from their covariance):
-log-capacity falls at the trend's rate there, and the rate
+estimate (a grid point drawn by its weight, coefficients from their covariance). The
+logarithm of the capacity falls (so that no future goes below zero) at the trend's
+relative rate there, and that rate
 
 * wanders as ``exp(SIGMA_RATE B(ln(x / x_now)))``, ``B`` a Brownian motion (fade
   rates drift as the mechanisms shift; a power law ``x^p`` is a straight line in
   these coordinates), and
-* for a trend without a knee yet, meets one with probability
-  :data:`KNEE_PROBABILITY` (conditioned on none before today): onset at a capacity
-  between :data:`KNEE_ONSET` of the reference, the rate then multiplied by a factor
-  drawn log-uniformly from :data:`KNEE_FACTOR` (Attia et al. 2022 review knees
-  forming between 97 % and 80 % of the capacity, after which the fade is several
-  times faster; Severson et al. 2019).
+* meets a knee with probability :data:`KNEE_PROBABILITY`, conditioned on none having
+  started above today's capacity: onset at a capacity drawn evenly between
+  :data:`KNEE_ONSET` of the reference, after which the rate is multiplied by a
+  factor drawn log-uniformly from :data:`KNEE_FACTOR`. Knees are the rule for
+  lithium-ion cells cycled to their end of life, and mark the turn to the fast fade
+  that ends it (Attia et al. 2022; Diao et al. 2019), whose rate is several times the
+  one before (Severson et al. 2019).
 
-The end of life is where a future first reaches the threshold: median, and the
+The end of life is where a future first reaches the threshold: the median, and the
 2.5 and 97.5 percentiles as the 95 % interval; the band is the futures' percentiles.
 The constants were chosen on seeded synthetic lives with and without knees
 (``benchmarks/forecast.py`` prints the coverage), never on a measured cell.
@@ -54,6 +56,8 @@ References
    oxide positives: Part 1, aging mechanisms and life estimation", J. Power Sources
    269 (2014) 937-948.
 .. [5] G. Schwarz, "Estimating the dimension of a model", Ann. Stat. 6 (1978) 461-464.
+.. [6] W. Diao, S. Saxena, B. Han, M. Pecht, "Algorithm to determine the knee point on
+   capacity fade curves of lithium-ion cells", Energies 12 (2019) 2910.
 """
 
 from __future__ import annotations
@@ -431,6 +435,23 @@ def forecast_eol(fit: FadeFit, reference_Ah: float, threshold_Ah: float, *,
                        median=band[1], high=band[2], crossed=float(crossed.mean()))
 
 
-__all__ = ["FadeFit", "EolForecast", "fit_fade", "forecast_eol", "simulate", "PATHS",
+def forecast_capacity(efc, capacity_Ah, low95, high95, reference_Ah: float,
+                      threshold_Ah: float, weights=None, seed: int = 0):
+    """:func:`fit_fade` then :func:`forecast_eol`: what a pack's health does with its
+    capacity estimates (outliers left out) [EFC], [Ah].
+
+    Returns
+    -------
+    (FadeFit, EolForecast) or None
+        None when the estimates cannot carry a trend (:func:`fit_fade`).
+    """
+    fit = fit_fade(efc, capacity_Ah, low95, high95, weights=weights)
+    if fit is None:
+        return None
+    return fit, forecast_eol(fit, reference_Ah, threshold_Ah, seed=seed)
+
+
+__all__ = ["FadeFit", "EolForecast", "fit_fade", "forecast_eol", "forecast_capacity",
+           "simulate", "PATHS",
            "HORIZON_FACTOR", "KNEE_PROBABILITY", "KNEE_ONSET", "KNEE_FACTOR", "SIGMA_RATE",
            "FAMILY_PRIOR"]

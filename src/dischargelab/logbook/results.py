@@ -562,7 +562,7 @@ def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eo
               notes: list[str]) -> Forecast | None:
     """End of life from the capacity estimates (:mod:`.forecast`), or where the logged
     capacities already fell through it."""
-    from .forecast import fit_fade, forecast_eol
+    from .forecast import forecast_capacity
     from .health import observed_crossing
 
     efc = np.array([e.efc for e in with_cap])
@@ -571,11 +571,11 @@ def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eo
           for e in with_cap]
     hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1]
           for e in with_cap]
-    fit = fit_fade(efc, cap, lo, hi, weights=trend.weights)
-    if fit is None:
-        return None
     threshold = eol * reference
-    ahead = forecast_eol(fit, reference, threshold)
+    made = forecast_capacity(efc, cap, lo, hi, reference, threshold, weights=trend.weights)
+    if made is None:
+        return None
+    fit, ahead = made
     central, interval = ahead.eol_efc, list(ahead.interval95)
     seen = observed_crossing(efc, cap, threshold)
     if seen is not None:

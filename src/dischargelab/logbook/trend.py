@@ -123,27 +123,29 @@ class Smoothed:
         return m, [m - Z95 * s, m + Z95 * s]
 
     def to_dict(self, points: int | None = None) -> dict:
-        """``{"efc", "value", "lo", "hi"}`` lists (the 95 % band), thinned to ``points``."""
+        """``{"efc", "value", "sd", "lo", "hi"}`` lists (value, its standard deviation and
+        the 95 % band), thinned to ``points``, with ``drift``, ``nugget`` and ``estimates``."""
         idx = np.arange(self.efc.size)
         if points is not None and self.efc.size > points:
             idx = np.unique(np.linspace(0, self.efc.size - 1, points).round().astype(int))
         lo = self.level - Z95 * self.level_sd
         hi = self.level + Z95 * self.level_sd
         return {"efc": self.efc[idx].tolist(), "value": self.level[idx].tolist(),
-                "lo": lo[idx].tolist(), "hi": hi[idx].tolist(), "drift": self.drift,
+                "sd": self.level_sd[idx].tolist(), "lo": lo[idx].tolist(),
+                "hi": hi[idx].tolist(), "drift": self.drift,
                 "nugget": self.nugget, "estimates": self.n}
 
     @classmethod
     def from_dict(cls, d: dict) -> Smoothed:
-        """The band of :meth:`to_dict` back (its rate and last covariance are not kept:
-        extrapolating a stored band carries its last level and spread)."""
+        """The band of :meth:`to_dict` back (its rate is not kept: carried past its last
+        point, a stored band keeps its last level and spread)."""
         efc = np.asarray(d["efc"], dtype=float)
         level = np.asarray(d["value"], dtype=float)
-        sd = (np.asarray(d["hi"], dtype=float) - np.asarray(d["lo"], dtype=float)) / (2 * Z95)
+        sd = np.asarray(d["sd"], dtype=float)
         var = float(sd[-1] ** 2) if sd.size else 0.0
         return cls(efc=efc, level=level, level_sd=sd, rate=np.zeros_like(efc),
                    rate_sd=np.zeros_like(efc), last_cov=np.array([[var, 0.0], [0.0, 0.0]]),
-                   drift=0.0, nugget=float(d.get("nugget") or 0.0),
+                   drift=float(d.get("drift") or 0.0), nugget=float(d.get("nugget") or 0.0),
                    weights=np.ones(0), influence=np.ones(0), n=int(d.get("estimates") or 0))
 
 
