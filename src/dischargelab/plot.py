@@ -443,7 +443,7 @@ KIND_STYLE = {"full": ("o", "C0", "capacity test (full discharge)"),
               "charge": ("v", "C5", "charge")}
 
 
-def _cell_figures(event: dict) -> tuple[float | None, float | None]:
+def cell_figures(event: dict) -> tuple[float | None, float | None]:
     """Rest-voltage spread [V] and weakest cell's share of the capacity of an event's
     per-cell figures (``cells``), when it has them."""
     cells = event.get("cells")
@@ -478,7 +478,8 @@ def plot_health(health, axes=None):
     """
     plt = pyplot()
     rows = [(e, e.to_dict()) for e in health.events if e.efc is not None]
-    with_cells = [(d["efc"], *_cell_figures(d)) for _, d in rows if any(_cell_figures(d))]
+    with_cells = [(d["efc"], *cell_figures(d)) for _, d in rows
+                  if any(v is not None for v in cell_figures(d))]
     if axes is None:
         n = 3 if with_cells else 2
         fig, axes = plt.subplots(n, 1, figsize=(9, 8.5 if n == 3 else 7.5), sharex=True,

@@ -209,10 +209,14 @@ def health_cmd(name, eol, plot_path, force, db, as_json):
     if as_json:
         print_json(health.to_dict())
         return
-    out.print(table(f"Health of {name}", ["source", "start", "kind", "discharged [Ah]",
-                                          "capacity [Ah]", "95 % interval", "R [mOhm]",
-                                          "R ref [mOhm]", "EFC", "note"],
-                    [_health_row(e) for e in health.events]))
+    rows = [_health_row(e) for e in health.events]
+    head = ["source", "start", "kind", "discharged [Ah]", "capacity [Ah]", "95 % interval",
+            "R [mOhm]", "R ref [mOhm]", "EFC", "note"]
+    if any(r[-1] for r in rows):
+        head.append("cells")
+    else:
+        rows = [r[:-1] for r in rows]
+    out.print(table(f"Health of {name}", head, rows))
     for line in health_lines(health, name):
         out.print(line, markup=False)
     if plot_path:
@@ -225,7 +229,22 @@ def _health_row(e) -> list:
     return [e.source, (e.start or "-").replace("T", " "), d.get("kind") or "-",
             _num(e.discharged_Ah), _num(e.capacity_Ah), _interval(e.capacity_interval95, 3),
             _num(e.resistance_ohm, 1, 1000), _num(d.get("resistance_ref_ohm"), 1, 1000),
-            _num(e.efc, 1), note]
+            _num(e.efc, 1), note, _cells(d.get("cells"))]
+
+
+def _cells(cells) -> str:
+    """An event's per-cell figures in a few words: rest spread, weakest cell, drift."""
+    if not isinstance(cells, dict):
+        return ""
+    from ..plot import cell_figures
+
+    spread, share = cell_figures({"cells": cells})
+    parts = [] if spread is None else [f"spread {1000 * spread:.0f} mV"]
+    if share is not None:
+        parts.append(f"weakest {100 * share:.0f} %")
+    if cells.get("drift"):
+        parts.append("a cell drifts")
+    return ", ".join(parts)
 
 
 def _from(sources) -> str:

@@ -479,7 +479,8 @@ def build_health(row: dict, events: list[dict], model: dict | None, eol: float) 
     capacity_trend = _trend(with_cap, [e.capacity_Ah for e in with_cap],
                             [e.capacity_interval95 for e in with_cap])
     r_values, r_intervals, basis, with_r = _resistances(per_event)
-    resistance_trend = _trend(with_r, r_values, r_intervals)
+    resistance_trend = _trend(with_r, r_values, r_intervals,
+                              nugget_share=RESISTANCE_SCATTER_SHARE)
     efcs = [e.efc for e in per_event if e.efc is not None]
     today: dict = {"efc": efcs[-1] if efcs else None, "resistance_basis": basis}
     if capacity_trend is not None:
@@ -528,14 +529,21 @@ def _resistances(per_event: list[EventHealth]):
             "as measured", got)
 
 
-def _trend(chosen: list[EventHealth], values: list, intervals: list) -> Smoothed | None:
+#: Scatter of a pack's resistance between events beyond their intervals, as a share,
+#: assumed while fewer than five events can measure it: temperature and state of charge
+#: move a load-step resistance by tens of per cent (Plett 2015, ch. 2), so 10 %.
+RESISTANCE_SCATTER_SHARE = 0.1
+
+
+def _trend(chosen: list[EventHealth], values: list, intervals: list,
+           **options) -> Smoothed | None:
     from .trend import smooth
 
     if not chosen:
         return None
     lo = [np.nan if iv is None or iv[0] is None else iv[0] for iv in intervals]
     hi = [np.nan if iv is None or iv[1] is None else iv[1] for iv in intervals]
-    return smooth([e.efc for e in chosen], values, lo, hi)
+    return smooth([e.efc for e in chosen], values, lo, hi, **options)
 
 
 #: Events listed as the source of a figure today: those carrying this share of it.

@@ -280,7 +280,8 @@ def _mixture(ll, last):
 
 
 def smooth(efc, values, low95=None, high95=None, *, robust: bool = True,
-           grid_points: int = GRID_POINTS) -> Smoothed | None:
+           grid_points: int = GRID_POINTS,
+           nugget_share: float = DEFAULT_NUGGET_SHARE) -> Smoothed | None:
     """The smoothed value over EFC with its 95 % band (module docstring).
 
     Parameters
@@ -297,6 +298,9 @@ def smooth(efc, values, low95=None, high95=None, *, robust: bool = True,
     grid_points : int
         Points of the curve between the first and the last estimate, besides the
         estimates' own.
+    nugget_share : float
+        Scatter between estimates beyond their intervals, as a share of the value,
+        assumed when fewer than :data:`MIN_FOR_NUGGET` estimates cannot measure it.
 
     Returns
     -------
@@ -325,7 +329,7 @@ def smooth(efc, values, low95=None, high95=None, *, robust: bool = True,
     n = x.size
     level_scale = float(np.median(np.abs(y))) or 1.0
     if n < MIN_FOR_NUGGET or np.ptp(x) <= 0:
-        out = _few(x, y, sd, level_scale, n)
+        out = _few(x, y, sd, nugget_share * level_scale, n)
     else:
         out = _smooth_many(x, y, sd, level_scale, robust, grid_points)
 
@@ -368,10 +372,9 @@ def _smooth_many(x, y, sd, level_scale, robust, grid_points) -> Smoothed:
                     weights=weights, influence=influence, n=n)
 
 
-def _few(x, y, sd, level_scale, n) -> Smoothed:
+def _few(x, y, sd, nugget, n) -> Smoothed:
     """Fewer than :data:`MIN_FOR_NUGGET` estimates: a weighted straight line (one
-    estimate: itself), with the nugget :data:`DEFAULT_NUGGET_SHARE` of the value."""
-    nugget = DEFAULT_NUGGET_SHARE * level_scale
+    estimate: itself), with an assumed ``nugget`` [unit]."""
     var = sd ** 2 + nugget ** 2
     if n == 1 or np.ptp(x) <= 0:
         w = 1 / var
