@@ -90,7 +90,7 @@ KNEE_FACTOR = (2.0, 12.0)
 #: Simulated futures and their steps in ln(EFC) up to :data:`HORIZON_FACTOR` x today.
 PATHS = 4000
 STEPS = 400
-HORIZON_FACTOR = 10.0
+HORIZON_FACTOR = 30.0
 
 #: Estimates needed for a forecast.
 MIN_ESTIMATES = 3
@@ -343,7 +343,7 @@ def _normal_draws(rng, mean, cov, size: int) -> np.ndarray:
 
 
 def simulate(fit: FadeFit, reference_Ah: float, paths: int = PATHS, steps: int = STEPS,
-             seed: int = 0, horizon: float = HORIZON_FACTOR) -> tuple[np.ndarray, np.ndarray]:
+             seed: int = 0, horizon: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Simulated futures of the log-capacity from today (module docstring).
 
     Returns
@@ -355,6 +355,7 @@ def simulate(fit: FadeFit, reference_Ah: float, paths: int = PATHS, steps: int =
     """
     rng = np.random.default_rng(seed)
     x_now = fit.x_now
+    horizon = HORIZON_FACTOR if horizon is None else horizon
     s = np.linspace(0.0, np.log(horizon), steps + 1)
     efc = x_now * np.exp(s)
     pick = rng.choice(len(fit.points), size=paths, p=fit.weights)

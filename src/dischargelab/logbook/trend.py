@@ -7,15 +7,20 @@ whose rate is an integrated random walk (Harvey 1989, ch. 2; Durbin & Koopman 20
 sec. 3.2), the state-space form of a cubic smoothing spline (Wecker & Ansley 1983):
 
     level(x + d) = level(x) + d rate(x) + w1,   rate(x + d) = rate(x) + w2,
-    cov(w1, w2) = q [[d^3/3, d^2/2], [d^2/2, d]],
+    cov(w1, w2) = q_x [[d^3/3, d^2/2], [d^2/2, d]],
     estimate_k = level(x_k) + e_k,   var(e_k) = sd_k^2 + nugget^2.
 
-``q`` (how fast the fade rate may change) and the ``nugget`` (the scatter between
-events that their own intervals do not hold: a capacity test's interval is its
-coulomb count's sampling step, not the cycle-to-cycle spread of a real cell) are
-the maximum-likelihood values (diffuse start, the first two events left out of the
-likelihood). A Kalman filter and the Rauch-Tung-Striebel smoother then give the level
-and its variance at every EFC, weighting each event by its interval.
+The rate's drift is taken in proportion to the rate itself,
+``q_x = q (rate(x)^2 + floor^2) / span`` (``floor`` the mean rate over the estimates,
+``span`` their EFC range; the filtered rate stands in for ``rate(x)``): a fade that
+speeds up after a knee is followed as fast as it happens, and ``q`` has no unit. ``q``
+and the ``nugget`` (the scatter between events that their own intervals do not hold: a
+capacity test's interval is its coulomb count's sampling step, not the cycle-to-cycle
+spread of a real cell) are read from the likelihood over a grid (diffuse start, the first
+two events left out); the smoother runs at the most likely pair, and the value at the
+last estimate mixes all pairs by their likelihood, so an uncertain drift widens today's
+interval. A Kalman filter and the Rauch-Tung-Striebel smoother give the level and its
+variance at every EFC, weighting each event by its interval.
 
 Outliers: the errors are taken as Student's t with :data:`T_DOF` degrees of freedom,
 fitted by iteratively reweighting each event's variance (the EM algorithm of the
@@ -76,7 +81,8 @@ class Smoothed:
     last_cov : numpy.ndarray
         2x2 covariance of (level, rate) at the last point (for extrapolation).
     drift : float
-        Variance rate ``q`` of the rate's random walk [unit^2 per EFC^3].
+        Variance rate of the rate's random walk at the last point,
+        ``q (rate^2 + floor^2) / span`` [unit^2 per EFC^3] (carries the band ahead).
     nugget : float
         Scatter between estimates beyond their intervals [unit].
     weights : numpy.ndarray
@@ -252,7 +258,8 @@ def _smooth(x, y, r, w, q, nugget2, grid):
     return pts, ms, ps, c0
 
 
-#: Grid of the hyperparameters: log of q / (scale^2 / span^3) and of nugget^2 / scale^2.
+#: Grid of the hyperparameters: log of q and of nugget^2 / scale^2 (``scale`` the spread
+#: of successive estimates' differences).
 LOG_DRIFT = np.arange(-6.0, 6.01, 0.75)
 LOG_NUGGET = np.arange(-12.0, 2.01, 0.5)
 
@@ -366,9 +373,10 @@ def _smooth_many(x, y, sd, level_scale, robust, grid_points) -> Smoothed:
     mean, cov = _mixture(ll, last)
     ms[-1], ps[-1] = mean, cov
     level_sd = np.sqrt(np.clip(ps[:, 0, 0], 0, None))
+    drift = q * (mean[1] ** 2 + _floor2(x, y)) / span
     return Smoothed(efc=pts, level=ms[:, 0], level_sd=level_sd,
                     rate=ms[:, 1], rate_sd=np.sqrt(np.clip(ps[:, 1, 1], 0, None)),
-                    last_cov=ps[-1], drift=float(q), nugget=float(np.sqrt(nugget2)),
+                    last_cov=ps[-1], drift=float(drift), nugget=float(np.sqrt(nugget2)),
                     weights=weights, influence=influence, n=n)
 
 
