@@ -206,9 +206,11 @@ def _spark_capacity(row: dict) -> str:
     pts = [p for p in row["points"] if p["capacity_Ah"] is not None]
     band = row.get("band")
     xs = [p["efc"] for p in pts] + (band["efc"] if band else [])
-    ys = [p["capacity_Ah"] for p in pts] + ((band["lo"] + band["hi"]) if band else [])
+    # the scale holds the events and the threshold; the band's far edge is cut at the frame
+    ys = [p["capacity_Ah"] for p in pts]
     if row.get("threshold_Ah") is not None:
         ys.append(row["threshold_Ah"])
+        ys.append(row["threshold_Ah"] - 0.25 * (max(ys) - row["threshold_Ah"]))
     x, y = _scale(xs, 2, SPARK_W - 2), _scale(ys, SPARK_H - 2, 2)
     if x is None or y is None:
         return "-"
