@@ -1,14 +1,15 @@
 # Two entry points on a fresh machine (only Python >= 3.11 needed):
 #   make demo   -> builds .venv, installs dischargelab, runs the demo into ./demo-out/
 #   make test   -> same .venv, runs the whole test suite
-# Checks CI runs too: make lint (ruff), make typecheck (mypy on the public API),
-# make min-versions (the suite with every dependency at its declared lower bound).
+# Checks CI runs too: make docs (the documentation site), make lint (ruff), make typecheck
+# (mypy on the public API), make min-versions (the suite with every dependency at its
+# declared lower bound).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck docs min-versions bench browser postgres clean
+.PHONY: demo test lint typecheck docs min-versions bench browser postgres mdbtools clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,7 +20,7 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/dischargelab demo --out demo-out --force
 
-test: $(STAMP) browser postgres
+test: $(STAMP) browser postgres mdbtools
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)
@@ -29,9 +30,18 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy src/dischargelab/__init__.py $(wildcard src/dischargelab/api.py)
 
-# API reference from the docstrings (numpydoc) into docs/api/.
-docs: $(STAMP)
-	$(BIN)/pdoc --docformat numpy -o docs/api dischargelab dischargelab.models dischargelab.engine
+# The documentation site (Sphinx: docs/*.md, the API reference from the numpydoc docstrings,
+# the gallery made by running examples/) into docs/_build/html, offline, warnings as errors.
+DOCS_STAMP := $(VENV)/.docs-installed
+
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	rm -rf docs/_build docs/generated docs/gallery docs/sg_execution_times.rst
+	$(BIN)/python -m sphinx -W --keep-going -q -b html -j 1 docs docs/_build/html
+	@echo "documentation: docs/_build/html/index.html"
 
 # A separate venv (.venv/min-versions) with the lower bounds from pyproject.toml.
 min-versions:
@@ -58,6 +68,15 @@ postgres:
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq postgresql >/dev/null; \
 	  else echo "note: postgresql not found; the logbook's PostgreSQL tests will be skipped"; fi; }
 
+# Arbin .res files are MS Access databases, read through Debian's mdbtools (mdb-export):
+# installed when missing and we may; otherwise the .res tests are skipped (outside CI).
+mdbtools:
+	@command -v mdb-export >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing mdbtools (reader of Arbin .res files)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mdbtools >/dev/null; \
+	  else echo "note: mdbtools not found; the Arbin .res tests will be skipped"; fi; }
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fit_speed.py
 	$(BIN)/python benchmarks/fit_latency.py
@@ -69,6 +88,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/acquire_throughput.py
 	$(BIN)/python benchmarks/logbook.py
 	$(BIN)/python benchmarks/fleet.py
+	$(BIN)/python benchmarks/tester_files.py
 
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache
+	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .mypy_cache docs/_build docs/generated docs/gallery

@@ -1,4 +1,4 @@
-"""Machine description printed under every benchmark table, and the tables themselves."""
+"""Machine description printed under every benchmark table, and the plain-text table."""
 
 import os
 import platform
@@ -24,17 +24,8 @@ def machine_line() -> str:
             f"numpy {numpy.__version__}; scipy {scipy.__version__}")
 
 
-def load_line() -> str:
-    """The load average (1, 5, 15 min) of a shared machine, to read timings against."""
-    try:
-        one, five, fifteen = os.getloadavg()
-    except OSError:
-        return "load average: unknown"
-    return f"load average {one:.2f}, {five:.2f}, {fifteen:.2f} ({os.cpu_count()} cores)"
-
-
 def table(title: str, head: list[str], rows: list[list]) -> None:
-    """Print a plain-text table (columns padded to their widest cell)."""
+    """Print a titled table with left-aligned columns."""
     print(f"\n{title}")
     widths = [max(len(str(x)) for x in [h] + [r[k] for r in rows]) for k, h in enumerate(head)]
     print("  ".join(str(h).ljust(w) for h, w in zip(head, widths)))

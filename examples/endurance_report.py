@@ -1,57 +1,62 @@
-"""Pilot's report: fit a battery, validate it on other rates, fly a mission, write one HTML page.
+"""Pilot's report
+==============
 
-Uses the Samsung 30Q discharges bundled with the package (1C and 4C to fit, C/10 to
-validate) and, when the shared data folder is beside the checkout, the 2C and 3C runs
-too. The mission is the bundled fixed-wing survey mission on a 4S2P pack.
+Fit a battery, check it on rates it did not see, fly a mission and write one HTML page.
 
-Usage: python examples/endurance_report.py [--out DIR]
+Uses the Samsung 30Q discharges bundled with dischargelab (1C and 4C to fit, C/10 to
+validate) and, when the shared data folder is beside the checkout (or given with
+``--more``), the 2C and 3C runs too. The mission is the bundled fixed-wing survey on a
+4S2P pack of the fitted cells.
+
+Usage: python examples/endurance_report.py [--out DIR] [--more DIR]
 """
 
 import argparse
 from pathlib import Path
 
-from dischargelab.fit import Curve, fit_battery
-from dischargelab.io import read_discharge
-from dischargelab.mission import load_mission, run_mission
+import dischargelab as dl
+from dischargelab.demo import demo_data_dir
 from dischargelab.report import write_report
-from dischargelab.validate import compare_files
 
-HERE = Path(__file__).resolve().parent
-BUNDLED = HERE.parent / "src" / "dischargelab" / "data" / "samsung30q"
-SHARED = HERE.parent.parent / "shared" / "data" / "samsung30q_S001"
+#: The other Samsung 30Q runs, relative to where the script runs (the checkout)
+SHARED = Path("..") / "shared" / "data" / "samsung30q_S001"
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 CUTOFF_CELL_V = 3.0
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="report-out", help="folder for the battery and report")
-    out = Path(parser.parse_args().out)
+    parser.add_argument("--more", default=str(SHARED),
+                        help="folder with Q30_S001_2C.csv and Q30_S001_3C.csv to validate on "
+                             "too, if it exists (default: %(default)s)")
+    args = parser.parse_args()
+    out, more = Path(args.out), Path(args.more)
     out.mkdir(parents=True, exist_ok=True)
 
-    curves = [Curve.from_frame(*read_discharge(BUNDLED / f"Q30_S001_{rate}.csv",
-                                               columns=COLUMNS)) for rate in ("1C", "4C")]
-    fit = fit_battery(curves)
-    battery_file = fit.battery.save(out / "samsung30q.json")
+    runs = [dl.read(demo_data_dir() / f"Q30_S001_{rate}.csv", columns=COLUMNS)
+            for rate in ("1C", "4C")]
+    fit = dl.fit(runs)                                     # model picked by evidence
     print(fit.report())
+    cell = fit.save(out / "samsung30q.json", chemistry="li-ion")
 
-    unseen = [BUNDLED / "Q30_S001_C10.csv"]
-    unseen += [SHARED / f"Q30_S001_{rate}.csv" for rate in ("2C", "3C")
-               if (SHARED / f"Q30_S001_{rate}.csv").exists()]
-    cases = compare_files(battery_file, unseen, cutoff_cell_V=CUTOFF_CELL_V, columns=COLUMNS)
+    unseen = [demo_data_dir() / "Q30_S001_C10.csv"]
+    unseen += [more / f"Q30_S001_{rate}.csv" for rate in ("2C", "3C")
+               if (more / f"Q30_S001_{rate}.csv").exists()]
+    cases = dl.validate(cell, [dl.read(path, columns=COLUMNS) for path in unseen],
+                        cutoff=CUTOFF_CELL_V)
     for case in cases:
         s = case.summary
         print(f"validation {Path(s['file']).name}: "
               f"endurance error {s['endurance_error_pct']:+.2f} %"
               f", voltage RMS {s['voltage_rmse_pct']:.2f} %")
 
-    mission = load_mission("fixed-wing-survey", battery=battery_file,
-                           cutoff_cell_V=CUTOFF_CELL_V)
-    mission = mission.with_battery(mission.battery.with_pack(4, 2))
-    result = run_mission(mission, draws=300, seed=0)
-    report = write_report(out / "report.html", battery_file, mission_result=result,
+    pack = dl.load(cell).with_pack(4, 2)
+    survey = dl.endurance(pack, "fixed-wing-survey", cutoff_cell_V=CUTOFF_CELL_V)
+    report = write_report(out / "report.html", cell, mission_result=survey,
                           validation=cases, title="Samsung 30Q 4S2P survey pack")
-    print(f"endurance {result.endurance_s / 60:.1f} min; report: {report}")
+    print(f"endurance {survey.endurance_s / 60:.1f} min; report: {report}")
 
 
 if __name__ == "__main__":

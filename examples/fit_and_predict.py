@@ -1,4 +1,8 @@
-"""Fit a cell from one measured discharge and predict other currents and a power.
+"""Fit and predict
+===============
+
+Fit a cell from one measured discharge and predict other currents and a constant power,
+with the building blocks under ``dl.fit`` (readers, the fit, simulations, plots).
 
 Uses the Samsung 30Q 1C discharge bundled with dischargelab; change DATA and the
 column mapping for your own file.
@@ -20,13 +24,16 @@ CUTOFF_CELL_V = 2.5
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="fit-out", help="folder for the plots and battery file")
     out = Path(parser.parse_args().out)
 
     data, meta = read_discharge(DATA, columns=DEMO_COLUMNS)
     print(meta["summary"])
-    result = fit_battery(Curve.from_frame(data, meta, name="1C"), bootstrap=50)
+    # one rate with its logged temperature: the thermal family (what dl.fit picks here)
+    result = fit_battery(Curve.from_frame(data, meta, name="1C"), model="shepherd-thermal",
+                         bootstrap=50)
     print(result.report())
     battery = result.battery
     battery.save(out / "battery.json")

@@ -1,4 +1,7 @@
-"""Mission endurance: the paper's Table 5 flight, a fixed-wing survey and a multirotor hover.
+"""Mission endurance
+=================
+
+The paper's Table 5 flight, a fixed-wing survey and a multirotor hover.
 
 Flies the three bundled example missions on the Hacker 4S LiFePO4
 preset (paper Table 4), then flies the fixed-wing survey on a 4S2P pack of Samsung 30Q
@@ -10,13 +13,12 @@ Usage: python examples/mission_endurance.py [--out DIR]
 import argparse
 from pathlib import Path
 
-from dischargelab.fit import Curve, fit_battery
-from dischargelab.io import read_discharge
+import dischargelab as dl
+from dischargelab.demo import demo_data_dir
 from dischargelab.mission import load_mission, run_mission
 from dischargelab.plot import save
 
-HERE = Path(__file__).resolve().parent
-BUNDLED = HERE.parent / "src" / "dischargelab" / "data" / "samsung30q"
+BUNDLED = demo_data_dir()
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 
@@ -25,7 +27,8 @@ def minutes(seconds: float) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="mission-out", help="folder for the plots")
     out = Path(parser.parse_args().out)
     out.mkdir(parents=True, exist_ok=True)
@@ -42,11 +45,9 @@ def main() -> None:
         save(result.plot(), out / f"{name}.png")
 
     # a fitted battery carries a covariance: the endurance gets a 95 % interval
-    curves = [Curve.from_frame(*read_discharge(BUNDLED / f"Q30_S001_{rate}.csv",
-                                               columns=COLUMNS)) for rate in ("1C", "4C")]
-    battery = fit_battery(curves).battery
-    mission = load_mission("fixed-wing-survey", battery=battery,
-                           cutoff_cell_V=3.0)
+    runs = [dl.read(BUNDLED / f"Q30_S001_{rate}.csv", columns=COLUMNS) for rate in ("1C", "4C")]
+    battery = dl.fit(runs).battery                     # model picked by evidence
+    mission = load_mission("fixed-wing-survey", battery=battery, cutoff_cell_V=3.0)
     mission = mission.with_battery(battery.with_pack(4, 2))
     result = run_mission(mission, draws=300, seed=0)
     e = result.uncertainty["endurance_s"]

@@ -1,4 +1,7 @@
-"""The demo's fit, prediction and missions in a short script with the public API.
+"""Use it from Python
+===================
+
+The demo's fit, predictions and missions in a short script with the public API.
 
 Reads the bundled Samsung 30Q discharges (C/10, 1C, 4C), fits a model picked by
 evidence, predicts 2C and 4C, and flies the paper's Table 5 and a survey on a
@@ -17,7 +20,8 @@ COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="api-out", help="folder for the battery file and plot")
     out = Path(parser.parse_args().out)
     out.mkdir(parents=True, exist_ok=True)

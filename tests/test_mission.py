@@ -169,6 +169,66 @@ def test_infeasible_mission_is_reported():
     assert any("cannot be completed" in w for w in result.warnings)
 
 
+def test_a_current_the_pack_cannot_deliver_is_said_with_the_current_it_could():
+    # 4S1P of the test cell: 60 A at take-off is far beyond it (the cutoff comes at once)
+    pack = PACK.with_pack(4, 1)
+    mission = current_mission([Phase("climb", "current", 5.0, 30.0),
+                               Phase("dash", "current", 60.0, 10.0),
+                               Phase("cruise", "current", 4.0, 300.0)], battery=pack)
+    result = run_mission(mission)
+    found = result.cannot_deliver
+    assert result.ended_by == "cutoff" and not result.completed
+    assert found["phase"] == "dash" and found["kind"] == "current" and found["load"] == 60.0
+    # the limit: the pack voltage after the climb, as the dash starts, reaches the cutoff
+    climb = simulate(pack, [Step("current", 5.0, 30.0)], cutoff_cell_V=3.0)
+    q = climb.charge_Ah[-1]
+    limit = brentq(lambda i: float(pack.voltage(i, q)) - 12.0, 0.0, 60.0, xtol=1e-9)
+    assert found["max_current_A"] == pytest.approx(limit, rel=1e-6)
+    assert found["soc_pct"] == pytest.approx(100 * (1 - q / pack.capacity_Ah), rel=1e-9)
+    message = found["message"]
+    assert message.startswith("the pack cannot deliver the 60 A of 'dash' at 99 % charge")
+    assert f"at most {limit:.3g} A there" in message and "C per cell" in message
+    assert result.warnings[0] == message
+    assert not any("does not complete" in w for w in result.warnings)
+    assert result.to_dict()["cannot_deliver"]["message"] == message
+    # just under the limit the dash flies; a flight that runs down mid-phase is no such case
+    ok = run_mission(current_mission([Phase("climb", "current", 5.0, 30.0),
+                                      Phase("dash", "current", 0.99 * limit, 10.0)],
+                                     battery=pack, reserve=0.0))
+    assert ok.cannot_deliver is None and ok.phases[1]["duration_s"] > 0
+    empty = run_mission(current_mission([Phase("hover", "current", 10.0, until="cutoff")],
+                                        battery=pack, reserve=0.0))
+    assert empty.ended_by == "cutoff" and empty.cannot_deliver is None
+
+
+def test_a_power_the_pack_cannot_deliver_is_said_with_the_power_it_could():
+    mission = current_mission([Phase("boost", "power", 5000.0, 5.0)])
+    result = run_mission(mission)
+    found = result.cannot_deliver
+    assert found["kind"] == "power" and result.flight_time_s == 0.0
+    # largest V * i with V = a - b i >= the cutoff, from the pack's own voltage
+    a = float(PACK.voltage(0.0, 0.0))
+    b = a - float(PACK.voltage(1.0, 0.0))
+    i_cut = (a - 12.0) / b
+    best = a * a / (4 * b) if a / 2 >= 12.0 else i_cut * 12.0
+    assert found["max_power_W"] == pytest.approx(best, rel=1e-9)
+    assert f"at most {best:.4g} W there" in found["message"]
+    assert "cannot deliver the 5000 W of 'boost' at 100 % charge" in found["message"]
+
+
+def test_a_cutoff_above_the_rest_voltage_is_said_as_such():
+    result = run_mission(current_mission([Phase("hover", "current", 1.0, 60.0)], cutoff=4.5))
+    assert result.cannot_deliver["max_current_A"] == 0.0
+    assert "even without load its voltage" in result.cannot_deliver["message"]
+
+
+def test_a_bundled_mission_is_named_not_located():
+    assert load_mission("paper-table5").source == "paper-table5"
+    path = MISSIONS / "paper-table5.toml"
+    assert load_mission(path).source == str(path)
+    assert load_mission("paper-table5").name == load_mission(path).name
+
+
 # ---------------------------------------------------------------------------------------------
 # Power phases use simulate's V*i = P solution
 # ---------------------------------------------------------------------------------------------

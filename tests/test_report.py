@@ -79,7 +79,7 @@ def test_report_is_self_contained_and_complete(full_report):
     for section in ("Battery model", "Fit to the measured discharge", "Simulated discharges",
                     "Mission", "Validation against measured discharges"):
         assert f">{section}<" in page
-    assert page.count("<table>") >= 6
+    assert page.count("<table") >= 6
     # the four figures (fit, family, mission, validation) are real PNGs
     pngs = embedded_pngs(page)
     assert len(pngs) == 4
@@ -136,6 +136,76 @@ def test_report_renders_in_chromium(full_report, tmp_path):
     image = np.asarray(Image.open(shot).convert("L"), dtype=float)
     assert image.shape == (1400, 1100)
     assert image.std() > 20                       # text and plots, not a blank page
+
+
+def page_width_overflow(page: Path, width: int, tmp_path: Path) -> dict:
+    """Load ``page`` in Chromium with a viewport ``width`` CSS px wide (a phone's width
+    through device emulation): the document's scrollWidth and clientWidth, how many boxes
+    reach past the right edge, and a screenshot of the first screen."""
+    from web_helpers import Browser
+
+    browser = Browser()
+    try:
+        browser.driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {
+            "width": width, "height": 900, "deviceScaleFactor": 1, "mobile": width < 600})
+        browser.get(page.as_uri())
+        browser.wait_for("document.readyState === 'complete'", what="the report")
+        got = browser.js(
+            "const e = document.documentElement; return {scroll: e.scrollWidth, client: "
+            "e.clientWidth, wide: [...document.querySelectorAll('body *')].filter(x => "
+            "x.getBoundingClientRect().right > e.clientWidth + 1).length};")
+        got["shot"] = tmp_path / f"{page.stem}-{width}.png"
+        browser.driver.save_screenshot(str(got["shot"]))
+        return got
+    finally:
+        browser.quit()
+
+
+@pytest.fixture(scope="module")
+def ecm_report(tmp_path_factory):
+    """The report of an ecm fit (18 open-circuit-voltage parameters) with a mission."""
+    import dischargelab as dl
+    from dischargelab.demo import demo_data_dir
+
+    folder = tmp_path_factory.mktemp("ecm")
+    fit = dl.fit([dl.read(demo_data_dir() / "Q30_S001_1C.csv", columns=COLUMNS)],
+                 model="ecm", bootstrap=10)
+    path = fit.save(folder / "ecm.json")
+    mission = load_mission("multirotor-hover", battery=path, cutoff_cell_V=3.0)
+    result = run_mission(mission.with_battery(mission.battery.with_pack(4, 1)), draws=20,
+                         seed=0)
+    return write_report(folder / "ecm.html", path, mission_result=result), fit
+
+
+def test_ecm_report_plots_the_ocv_and_folds_its_numbers(ecm_report):
+    path, fit = ecm_report
+    page = path.read_text(encoding="utf-8")
+    assert "open-circuit voltage curve" in page             # the figure's alt text
+    folded = re.search(r"<details><summary>([^<]*)</summary>(.*?)</details>", page, re.S)
+    assert folded and "18 parameters" in folded.group(1)
+    ocv_names = [n for n in fit.parameters if n.startswith("ocv_d")]
+    assert len(ocv_names) == 18
+    # each drop is in the folded table, none in the main one
+    assert all(f">{n}<" in folded.group(2) for n in ocv_names)
+    main_table = page[page.index(">Battery model<"):page.index("<details>")]
+    assert not any(f">{n}<" in main_table for n in ocv_names)
+    assert ">U_full_V<" in main_table and ">R0_ohm<" in main_table
+    assert len(embedded_pngs(page)) == 4        # OCV, fit, family, mission
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("width", [1280, 390])
+def test_report_fits_the_screen_width(ecm_report, full_report, width, tmp_path):
+    """No horizontal scroll bar on a laptop or a phone: the summary rows wrap, the tables
+    become cards on a phone, the figures shrink."""
+    for page in (ecm_report[0], full_report[0]):
+        got = page_width_overflow(page, width, tmp_path)
+        assert got["client"] == pytest.approx(width, abs=20), got   # scroll bars hidden
+        assert got["scroll"] <= got["client"] and got["wide"] == 0, (page.name, got)
+        from PIL import Image
+
+        image = np.asarray(Image.open(got["shot"]).convert("L"), dtype=float)
+        assert image.std() > 20
 
 
 def test_preset_report_skips_the_fit_with_a_note(tmp_path):

@@ -23,6 +23,11 @@ BENCHMARKS = {
                                 "peak RSS MB"),
     "logbook.py": (["--copies", "20"], "later capacities in band"),
     "fleet.py": (["--packs", "1", "--repeats", "1"], "One file's task"),
+    "server_load.py": (["--readers", "4", "--seconds", "3", "--idle", "10", "--uploads", "2",
+                        "--cell-c", "3"], "uploads stored exactly once"),
+    # needs Debian's chromium and chromium-driver (make browser), as the web page tests do
+    "web_plot_speed.py": (["--points", "2000", "--repeats", "3"], "next draws, median"),
+    "tester_files.py": ([], "tester's counter"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }

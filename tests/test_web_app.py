@@ -11,6 +11,7 @@ import pytest
 from dischargelab.acquire.pipeline import Sample
 from dischargelab.errors import DischargelabError
 from dischargelab.web.guard import path_problem
+from dischargelab.web.limits import Limits
 from dischargelab.web.live import RING_EVENTS, LiveHub
 from dischargelab.web.server import Server, build_server, check_bind
 from web_helpers import ThreadServer, multipart
@@ -18,7 +19,7 @@ from web_helpers import ThreadServer, multipart
 
 @pytest.fixture
 def server(tmp_path):
-    srv = ThreadServer(db=str(tmp_path / "logbook.sqlite"), max_upload_bytes=50_000)
+    srv = ThreadServer(db=str(tmp_path / "logbook.sqlite"), limits=Limits(max_upload_bytes=50_000))
     yield srv
     srv.server.stop()
 
@@ -90,8 +91,7 @@ def _upload_until(server, body, ctype, done, timeout_s=10):
 
 
 def test_uploads_beyond_two_at_once_are_told_to_try_again(server):
-    from dischargelab.web.packs import MAX_CONCURRENT_UPLOADS
-
+    MAX_CONCURRENT_UPLOADS = Limits().max_uploads
     csv = b"time_s,current_A,voltage_V\n" + b"".join(
         b"%d,1.0,%.3f\n" % (k, 4.1 - 0.001 * k) for k in range(600))
     body, ctype = multipart({"pack": "p1"}, {"file": ("run.csv", csv)})
@@ -128,6 +128,23 @@ def test_other_sites_and_other_host_names_are_refused(server):
                                      {"Content-Type": "application/json"})
     assert status == 409 or status == 400
     assert server.alive()
+
+
+def test_behind_a_proxy_the_public_name_is_answered(tmp_path):
+    srv = ThreadServer(db=str(tmp_path / "lb.sqlite"), public_hosts=["dl.example.org"])
+    try:
+        status, data, _ = srv.request("GET", "/api/live", headers={"Host": "dl.example.org"})
+        assert status == 200 and "active" in data
+        status, data, _ = srv.request("POST", "/api/live/stop", b"{}", {
+            "Host": "dl.example.org", "Origin": "https://dl.example.org"})
+        assert status == 409 and "no test is running" in data["error"]   # past the guard
+        status, data, _ = srv.request("POST", "/api/live/stop", b"{}", {
+            "Host": "dl.example.org", "Origin": "https://evil.example"})
+        assert status == 403
+        status, data, _ = srv.request("GET", "/api/live", headers={"Host": "evil.example"})
+        assert status == 421
+    finally:
+        srv.server.stop()
 
 
 def test_listening_beyond_loopback_needs_a_token():
@@ -266,3 +283,31 @@ def test_importing_dischargelab_does_not_import_the_web_stack():
             "('starlette', 'uvicorn', 'python_multipart', 'multipart', 'anyio', "
             "'dischargelab.web')]; print(bad); assert not bad")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
+
+
+def test_limits_refuse_nonsense_in_one_line():
+    from dischargelab.errors import DataError
+
+    assert Limits().header_timeout_s == 10.0 and Limits().max_uploads == 2
+    for bad, words in (({"header_timeout_s": 0}, "header_timeout_s must be a positive"),
+                       ({"body_min_rate_Bps": float("nan")}, "bytes/s"),
+                       ({"max_connections": 0}, "max_connections must be a whole number >= 1"),
+                       ({"read_threads": 2.5}, "read_threads must be a whole number"),
+                       ({"max_uploads": True}, "max_uploads must be a whole number")):
+        with pytest.raises(DataError, match=words):
+            Limits(**bad)
+
+
+def test_the_open_file_limit_is_raised_to_fit_the_connections_or_said():
+    code = ("import resource; from dischargelab.web.server import open_files_for\n"
+            "from dischargelab.errors import DischargelabError\n"
+            "resource.setrlimit(resource.RLIMIT_NOFILE, (200, 400))\n"
+            "open_files_for(300)\n"
+            "assert resource.getrlimit(resource.RLIMIT_NOFILE)[0] == 364\n"
+            "try:\n    open_files_for(1000)\nexcept DischargelabError as exc:\n"
+            "    print(exc)\nelse:\n    raise SystemExit('not refused')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "1000 connections need 1064 open files, and this system allows 400" in done.stdout
+    assert "lower max_connections to 336" in done.stdout and "ulimit -n" in done.stdout

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dischargelab.io.logfile import read_log
-from web_helpers import Browser, ServerProcess
+from web_helpers import CSP_PROBE, Browser, ServerProcess, plot_state
 
 RATE_HZ = 10.0            # logger rate; time compression 1, so 10 samples per wall second
 WATCH_S = 30.0            # the acceptance window
@@ -22,6 +22,7 @@ MIN_UPDATES_PER_S = 5
 def demo_server(tmp_path):
     server = ServerProcess(["serve", "--demo", "--port", "0", "--runs", str(tmp_path / "runs"),
                             "--db", str(tmp_path / "logbook.sqlite")])
+    server.runs = tmp_path / "runs"
     yield server
     server.stop()
 
@@ -65,6 +66,8 @@ def compare_with_log(data: dict, log_path) -> None:
 
 @pytest.mark.slow
 def test_live_page_keeps_up_and_holds_every_logged_sample(demo_server, browser):
+    browser.driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument",
+                                   {"source": CSP_PROBE})
     browser.get(demo_server.base + "/live")
     start_from_the_page(browser, rate_Hz=RATE_HZ, speed=1, c_rate=1)
     page_t0 = browser.js("return performance.now();")
@@ -88,6 +91,26 @@ def test_live_page_keeps_up_and_holds_every_logged_sample(demo_server, browser):
     browser.wait_for(f"window.__live && window.__live.n.length > {received + 20}", 30,
                      "the history and new samples after a reload")
     assert browser.js("return window.__live.snapshots;") == 1
+
+    # zoomed into the first samples, the view stays put while samples keep arriving;
+    # a double click shows the whole run again, up to the newest sample
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    over = browser.driver.find_element("css selector", "#plot-voltage .u-over")
+    width = plot_state(browser, "plot-voltage")["over"][0]
+    ActionChains(browser.driver).move_to_element_with_offset(over, -width // 2 + 5, 0) \
+        .click_and_hold().move_by_offset(width // 4, 0).release().perform()
+    zoomed = plot_state(browser, "plot-voltage")
+    assert zoomed["zoomed"]
+    browser.wait_for(f"window.__live.n.length > {len(zoomed['xs']) + 10}", 30, "more samples")
+    time.sleep(0.3)                              # a draw after them
+    later = plot_state(browser, "plot-voltage")
+    assert later["x"] == zoomed["x"] and len(later["xs"]) > len(zoomed["xs"])
+    ActionChains(browser.driver).double_click(over).perform()
+    whole = plot_state(browser, "plot-voltage")
+    # (a sample may arrive between the reset and the next draw)
+    assert not whole["zoomed"] and whole["x"][1] >= whole["xs"][-1] - 2 / RATE_HZ
+    assert browser.js("return window.__csp;") == []
     browser.driver.find_element("id", "stop").click()
     browser.wait_for("window.__live.status && window.__live.status.ended_by === 'user'", 30,
                      "the stop")
@@ -95,7 +118,8 @@ def test_live_page_keeps_up_and_holds_every_logged_sample(demo_server, browser):
     time.sleep(0.5)                              # the last samples and the end state
     data = page_data(browser)
     assert data["n"][-1] == state["samples"] - 1
-    compare_with_log(data, state["info"]["out"])
+    assert "/" not in state["info"]["out"]      # the log's name, not where the server keeps it
+    compare_with_log(data, demo_server.runs / state["info"]["out"])
     assert "stopped from the web page" in browser.text("message")
 
 

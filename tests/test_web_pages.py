@@ -24,7 +24,7 @@ pytest.importorskip("starlette")
 import dischargelab as dl
 from dischargelab.engine import Step
 from dischargelab.simulate import simulate
-from web_helpers import Browser, ServerProcess, multipart
+from web_helpers import CSP_PROBE, Browser, ServerProcess, multipart, plot_state
 
 CELL_C = "samsung30q_ageing_cellC"
 #: Cycles of cell C in the logbook (cycle 300 was overcharged; the rest span its fade).
@@ -203,6 +203,14 @@ def test_pack_page_reads_without_writing_then_refits_and_flies(server, browser, 
     result = browser.wait_for("window.__endurance", 60, "the endurance result")
     assert result["flight_time_s"] == pytest.approx(expected["flight_time_s"], rel=1e-9)
     assert any("scaled to its health today" in n for n in result["notes"])
+    assert result["source"] == MISSION                  # a name, not a path on the server
+    # the paper's 50 A take-off on 4S1P of these 3 Ah cells: the page says it cannot fly
+    cannot = expected["cannot_deliver"]
+    assert result["cannot_deliver"] == cannot and cannot["phase"] == "takeoff"
+    assert cannot["message"].startswith("the pack cannot deliver the 50 A of 'takeoff'")
+    row = browser.js("const r = document.querySelector('#endurance-result tr.cannot');"
+                     "return r && [r.cells[0].textContent, r.cells[1].textContent];")
+    assert row == ["Cannot fly", cannot["message"]]
 
 
 @pytest.mark.slow
@@ -234,6 +242,30 @@ def test_uploads_through_the_form_and_the_api_appear_in_the_list(server, browser
         expected = lb.packs().to_dict()["rows"]
     assert [r["name"] for r in expected] == ["cell C", "zippy 2S", "zippy spare"]
     assert rows == [list_row(r) for r in expected]
+
+
+def strings(value):
+    """Every string in a JSON answer (keys and values)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield k
+            yield from strings(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from strings(v)
+    elif isinstance(value, str):
+        yield value
+
+
+def test_answers_carry_what_the_page_shows_and_no_server_path(server, db):
+    detail = server.get_json("/api/packs/cell%20C")
+    assert set(detail) == {"name", "summary", "health", "model", "model_note"}
+    assert [e["source"] for e in detail["health"]["events"]] == [
+        f"DischargeCycle{c:03d}.txt" for c in CYCLES]
+    for answer in (detail, server.get_json("/api/packs"), server.get_json("/api/missions"),
+                   server.get_json("/api/live")):
+        for text in strings(answer):
+            assert str(db.parent) not in text and not text.startswith("/"), text
 
 
 def test_bad_requests_get_a_clear_4xx_and_the_server_stays_up(server, db, tmp_path):
@@ -290,3 +322,73 @@ def test_unknown_pack_and_garbage_upload_on_the_pages(server, browser, tmp_path)
                                "the refusal")
     assert message.startswith("garbage.bin: ") and "\n" not in message
     assert server.alive and len(server.get_json("/api/packs")["rows"]) == 2
+
+
+def test_pack_page_plots_zoom_pan_and_read_out(server, browser, db):
+    """The capacity plot (uPlot): hovering a point reads its EFC and capacity; a drag zooms
+    in, the y axis fits what is left; the wheel zooms, shift + drag pans, a double click
+    shows everything again; the Content-Security-Policy reports nothing."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+    from selenium.webdriver.common.keys import Keys
+
+    browser.driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument",
+                                   {"source": CSP_PROBE})
+    browser.get(server.base + "/packs/cell%20C")
+    browser.wait_for("window.__pack && window.__pack.loaded", what="the pack page")
+    with dl.Logbook(str(db)) as lb:
+        events = [e for e in lb.health("cell C").to_dict()["events"] if e["capacity_Ah"]]
+    over = browser.driver.find_element("css selector", "#plot-capacity .u-over")
+    full = plot_state(browser, "plot-capacity")
+    assert full["zoomed"] is False
+    efc = [e["efc"] for e in events]
+    assert full["x"][0] < min(efc) < max(efc) < full["x"][1]
+    width, height = full["over"]
+    capacity = full["labels"].index("capacity")
+
+    def at(x_value, y_value) -> tuple[int, int]:
+        """Offset from the plot area's centre of a data point [CSS px]."""
+        px, py = browser.js("const u = document.getElementById('plot-capacity').__dlPlot.u; "
+                            "return [u.valToPos(arguments[0], 'x'), "
+                            "u.valToPos(arguments[1], 'y')];", x_value, y_value)
+        return round(px - width / 2), round(py - height / 2)
+
+    # hover: the legend reads the point under the cursor
+    event = events[2]
+    ActionChains(browser.driver).move_to_element_with_offset(over, *at(
+        event["efc"], event["capacity_Ah"])).perform()
+    legend = browser.wait_for("(() => { const l = [...document.querySelectorAll('#plot-capacity "
+                              ".u-legend .u-series .u-value')].map(v => v.textContent); "
+                              f"return l[{capacity}] !== '–' && l; }})()", 5, "a read-out")
+    assert float(legend[capacity]) == pytest.approx(event["capacity_Ah"], abs=0.001)
+    assert float(legend[0]) == pytest.approx(event["efc"], abs=0.5)
+
+    # drag across the first half: zoom in, and the y axis fits the points left in view
+    ActionChains(browser.driver).move_to_element_with_offset(over, -width // 2 + 5, 0) \
+        .click_and_hold().move_by_offset(width // 2 - 10, 0).release().perform()
+    zoomed = plot_state(browser, "plot-capacity")
+    assert zoomed["zoomed"]
+    assert zoomed["x"][1] - zoomed["x"][0] < 0.6 * (full["x"][1] - full["x"][0])
+    shown = [e["capacity_Ah"] for e in events
+             if zoomed["x"][0] <= e["efc"] <= zoomed["x"][1]]
+    assert shown and len(shown) < len(events)
+    assert zoomed["y"][0] <= min(shown) and max(shown) <= zoomed["y"][1]
+
+    # shift + drag pans (same span, moved), the wheel zooms in at the cursor
+    span = zoomed["x"][1] - zoomed["x"][0]
+    ActionChains(browser.driver).move_to_element_with_offset(over, 0, 0).key_down(Keys.SHIFT) \
+        .click_and_hold().move_by_offset(-width // 4, 0).release().key_up(Keys.SHIFT).perform()
+    panned = plot_state(browser, "plot-capacity")
+    assert panned["x"][1] - panned["x"][0] == pytest.approx(span, rel=1e-6)
+    assert panned["x"][0] > zoomed["x"][0]
+    ActionChains(browser.driver).scroll_from_origin(ScrollOrigin.from_element(over), 0, -120) \
+        .perform()
+    browser.wait_for("(() => { const u = document.getElementById('plot-capacity').__dlPlot.u; "
+                     f"return u.scales.x.max - u.scales.x.min < {span * 0.95}; }})()", 5,
+                     "the wheel's zoom")
+
+    # a double click shows everything again
+    ActionChains(browser.driver).double_click(over).perform()
+    again = plot_state(browser, "plot-capacity")
+    assert again["x"] == pytest.approx(full["x"]) and not again["zoomed"]
+    assert browser.js("return window.__csp;") == []

@@ -206,3 +206,19 @@ class ThreadServer:
     def alive(self) -> bool:
         status, data, _ = self.request("GET", "/api/live")
         return status == 200 and "active" in data
+
+
+#: Collects the page's Content-Security-Policy violations from its first script on.
+CSP_PROBE = ("window.__csp = []; document.addEventListener('securitypolicyviolation', "
+             "e => window.__csp.push(e.violatedDirective + ' ' + e.blockedURI));")
+
+
+def plot_state(browser, element_id: str) -> dict:
+    """The chart's x and y ranges, the data it holds and its legend's read-outs."""
+    return browser.js(
+        "const p = document.getElementById(arguments[0]).__dlPlot, u = p.u; return {"
+        "x: [u.scales.x.min, u.scales.x.max], y: [u.scales.y.min, u.scales.y.max], "
+        "xs: u.data[0], labels: u.series.map(s => s.label), zoomed: p.zoomed, "
+        "legend: [...u.root.querySelectorAll('.u-legend .u-series')].map("
+        "r => r.querySelector('.u-value').textContent), "
+        "over: [u.over.clientWidth, u.over.clientHeight]};", element_id)

@@ -33,7 +33,9 @@ def read(path: str | Path, **options: Any) -> Discharge:
     Parameters
     ----------
     path : str or path-like
-        CSV/TSV/LabVIEW/DJI/dischargelab log, or a flight log where supported.
+        CSV/TSV/LabVIEW/DJI/dischargelab log, a flight log (ArduPilot, PX4 ULog,
+        blackbox, MAVLink .tlog, in-flight CSV) or a battery tester's file (Neware,
+        BioLogic, Arbin, Maccor: one discharge step, ``segment=N`` picks step N).
     **options
         Reader options of :func:`dischargelab.io.read_discharge` (``columns``,
         ``current_A`` [A] for files without a current, ``sign``, ``units``,
@@ -64,6 +66,9 @@ def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *
         flights of one pack from :func:`dischargelab.flight.flight_curves` (fitted by
         :func:`dischargelab.flight.fit_flights`: each flight from its own initial
         charge, the capacity held near the label when the flights do not reach the knee).
+        A battery tester's file (Neware, BioLogic, Arbin, Maccor) given by path gives
+        the first full discharge at each of its rates (the result's notes say which
+        steps); choose others with ``dl.read(path, segment=N)``.
     model : str
         ``"auto"`` (by evidence; ``"ecm"`` for flights), ``"shepherd"``,
         ``"shepherd-thermal"`` or ``"ecm"``.
@@ -108,15 +113,19 @@ def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *
         return _fit_flights(discharges, model=model, cells=cells, parallel=parallel,
                             bootstrap=bootstrap, fixed=fixed, bounds=bounds, use_rest=use_rest,
                             seed=seed)
+    from .io.cyclers import used_steps_note
+
     items = discharges if isinstance(discharges, (list, tuple)) else [discharges]
     if not items:
         raise DataError("no discharges to fit")
-    curves = [(_as_discharge(d)).to_curve() for d in items]
+    runs = [run for d in items for run in _as_discharges(d, "fit")]
     cells = 1 if cells is None else cells
-    return fit_battery(curves, cells_series=cells, strings_parallel=parallel, fixed=fixed,
-                       bounds=bounds, paper_mode=paper_mode, use_rest=use_rest,
-                       bootstrap=bootstrap, seed=seed, model=model, cooling=cooling,
-                       chemistry=chemistry)
+    result = fit_battery([run.to_curve() for run in runs], cells_series=cells,
+                         strings_parallel=parallel, fixed=fixed, bounds=bounds,
+                         paper_mode=paper_mode, use_rest=use_rest, bootstrap=bootstrap,
+                         seed=seed, model=model, cooling=cooling, chemistry=chemistry)
+    result.notes.extend(used_steps_note([run.meta for run in runs]))
+    return result
 
 
 def _fit_flights(flights, *, model, cells, parallel, bootstrap, fixed, bounds, use_rest, seed):
@@ -239,15 +248,21 @@ def validate(battery: Battery | str | Path,
     items = discharges if isinstance(discharges, (list, tuple)) else [discharges]
     out = []
     for d in items:
-        dis = _as_discharge(d)
-        out.append(compare_discharge(bat, dis.to_pandas(), dict(dis.meta), cut,
-                                     low_timer_s=low_timer_s))
+        for dis in _as_discharges(d, "all"):
+            out.append(compare_discharge(bat, dis.to_pandas(), dict(dis.meta), cut,
+                                         low_timer_s=low_timer_s))
     return out
 
 
-def _as_discharge(item) -> Discharge:
+def _as_discharges(item, choose: str) -> list[Discharge]:
+    """A Discharge, or the discharges of a file (several steps of a tester's file)."""
     if isinstance(item, Discharge):
-        return item
+        return [item]
     if isinstance(item, (str, Path)):
-        return read(item)
+        from .io import read_discharges
+
+        name = Path(item).name
+        return [Discharge.from_frame(frame, meta, name=f"{name} step {meta['step']['number']}"
+                                     if isinstance(meta.get("step"), dict) else name)
+                for frame, meta in read_discharges(item, choose=choose)]
     raise DataError(f"expected a Discharge or a file path, got {type(item).__name__}")

@@ -359,6 +359,37 @@ def start_load(family, params: dict, step: Step, *, charge_Ah: float, ambient_C:
     return float(current[0]), float(pack.voltage(state, current)[0]), max_power
 
 
+def load_limits(family, params: dict, state: dict, *, cutoff_pack_V: float, ambient_C: float,
+                cells_series: int = 1, strings_parallel: int = 1) -> dict:
+    """What the pack can deliver at ``state`` (one draw) without its voltage falling below
+    ``cutoff_pack_V`` [V].
+
+    At a given state the pack voltage is affine in the current, ``V = a - b I``, so the
+    largest current is ``(a - V_cut) / b`` and the largest power the largest ``I (a - b I)``
+    up to it: ``a^2 / 4b`` when the voltage at that optimum (``a / 2``) is above the cutoff,
+    else ``I_max V_cut``. Both are 0 where ``a`` is already at or below the cutoff.
+
+    Returns
+    -------
+    dict
+        ``max_current_A`` [A], ``max_power_W`` [W] and ``no_load_voltage_V`` (``a``, the
+        pack voltage at zero current in this state) [V].
+    """
+    def first(values):
+        return {k: np.atleast_1d(np.asarray(v, dtype=float))[:1] for k, v in values.items()}
+
+    pack = _Pack(family, first(params), cells_series, strings_parallel, float(ambient_C))
+    a, b = (float(x[0]) for x in pack.affine(first(state)))
+    out = {"max_current_A": 0.0, "max_power_W": 0.0, "no_load_voltage_V": a}
+    if not (np.isfinite(a) and a > cutoff_pack_V):
+        return out
+    if not (np.isfinite(b) and b > 0):
+        return {**out, "max_current_A": float("inf"), "max_power_W": float("inf")}
+    current = (a - cutoff_pack_V) / b
+    power = a * a / (4.0 * b) if a / 2.0 >= cutoff_pack_V else current * cutoff_pack_V
+    return {**out, "max_current_A": current, "max_power_W": power}
+
+
 def _current_at(pack, st, state, t_in_step):
     """Pack current for step ``st`` at ``state`` (NaN where a power cannot be delivered)."""
     if st.kind == "rest":

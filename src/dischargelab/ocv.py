@@ -32,12 +32,12 @@ OCV_SOC = np.round(np.linspace(1.0, 0.0, 21), 2)
 #: Generic open-circuit voltage per cell [V] at :data:`OCV_SOC`, by chemistry: a prior.
 #:
 #: * ``"lipo"``: LiCoO2/graphite (the chemistry of hobby LiPo packs): the Enertech
-#:   2.28 Ah pouch cell's C/10 discharge to 3.0 V [2]_, plus the ohmic drop at its load
+#:   2.28 Ah pouch cell's C/10 discharge to 3.0 V (ref. [2]), plus the ohmic drop at its load
 #:   step (0.228 A x 25.9 mOhm); the full value is its rest voltage before the load.
 #: * ``"li-ion"``: NMC/graphite 18650 (Li-ion drone packs): the Samsung INR18650-30Q
-#:   C/10 discharge to 2.5 V [3]_, plus its load-step ohmic drop (0.30 A x 36.3 mOhm).
+#:   C/10 discharge to 2.5 V (ref. [3]), plus its load-step ohmic drop (0.30 A x 36.3 mOhm).
 #: * ``"lifepo4"``: LiFePO4/graphite: the shape of the K2 LFP26650 1C discharge at
-#:   30 degC to 2.5 V [3]_ (the first 0.5 % of the charge, the voltage just after
+#:   30 degC to 2.5 V (ref. [3]) (the first 0.5 % of the charge, the voltage just after
 #:   charging, left out), shifted up by 0.1375 V so that 50 % reads the nominal 3.3 V:
 #:   that set has no rest voltage, so its level is an assumption.
 #:

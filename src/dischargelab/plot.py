@@ -51,6 +51,14 @@ def _axes(ax, figsize=(8, 5)):
     return ax
 
 
+def _stacked_axes(axes, figsize, ratios):
+    """The given axes, or a new figure of panels stacked on one time axis (heights ``ratios``)."""
+    if axes is None:
+        _, axes = pyplot().subplots(len(ratios), 1, figsize=figsize, sharex=True,
+                                    layout="constrained", gridspec_kw={"height_ratios": ratios})
+    return np.asarray(axes)
+
+
 #: File suffixes :func:`save` can write (matplotlib's static formats).
 FIGURE_SUFFIXES = (".png", ".svg", ".svgz", ".pdf", ".jpg", ".jpeg", ".eps", ".ps", ".tif",
                    ".tiff", ".webp")
@@ -169,6 +177,42 @@ def plot_family(results, ax=None, x: str = "charge", labels=None):
     ax.legend(fontsize=8)
     return ax
 
+
+
+def plot_ocv(battery, ax=None, reference=None, points: int = 201):
+    """Open-circuit voltage per cell against the state of charge.
+
+    Parameters
+    ----------
+    battery : Battery
+        Its family's ``open_circuit_voltage`` at rest, from full to the model capacity.
+    ax : matplotlib Axes, optional
+    reference : tuple (label, soc, voltage_V), optional
+        Another curve to compare with, e.g. the chemistry's generic one
+        (:func:`dischargelab.ocv.ocv_from_soc`): state of charge [0-1] and voltage per cell
+        [V], drawn dashed.
+    points : int
+        Points along the state of charge.
+    """
+    ax = _axes(ax, figsize=(6.4, 4.0))
+    fam = battery.family
+    soc = np.linspace(1.0, 0.0, points)
+    p = {n: float(battery.parameters[n]) for n in fam.names}
+    state = fam.initial_state(p, charge_Ah=(1.0 - soc) * p["C_Ah"] * (1 - 1e-9))
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        ocv = np.asarray(fam.open_circuit_voltage(p, state), dtype=float)
+    ax.plot(100 * soc, ocv, color="C0", lw=2, label=f"fitted ({fam.name})")
+    if reference is not None:
+        label, ref_soc, ref_V = reference
+        ax.plot(100 * np.asarray(ref_soc), ref_V, color="0.45", ls="--", lw=1, label=label)
+    ax.set_xlim(100, 0)
+    ax.set_xlabel("state of charge [%]")
+    ax.set_ylabel("open-circuit voltage per cell [V]")
+    ax.set_title(f"{battery.name + ': ' if battery.name else ''}open-circuit voltage per cell",
+                 fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return ax
 
 
 def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool = True):
@@ -356,13 +400,7 @@ def plot_flight_report(report: FlightReport, axes=None):
     -------
     numpy.ndarray of Axes
     """
-    from .plot import pyplot
-
-    plt = pyplot()
-    if axes is None:
-        fig, axes = plt.subplots(3, 1, figsize=(9, 8.5), sharex=True, layout="constrained",
-                                 gridspec_kw={"height_ratios": [3, 2, 3]})
-    axes = np.asarray(axes)
+    axes = _stacked_axes(axes, (9, 8.5), [3, 2, 3])
     av, ai, ar = axes
     seen = set()
 
@@ -476,14 +514,11 @@ def plot_health(health, axes=None):
     -------
     numpy.ndarray of Axes
     """
-    plt = pyplot()
     rows = [(e, e.to_dict()) for e in health.events if e.efc is not None]
     with_cells = [(d["efc"], *cell_figures(d)) for _, d in rows
                   if any(v is not None for v in cell_figures(d))]
-    if axes is None:
-        n = 3 if with_cells else 2
-        fig, axes = plt.subplots(n, 1, figsize=(9, 8.5 if n == 3 else 7.5), sharex=True,
-                                 layout="constrained", height_ratios=(3, 2, 1.5)[:n])
+    axes = _stacked_axes(axes, (9, 8.5) if with_cells else (9, 7.5),
+                         [3, 2, 1.5] if with_cells else [3, 2])
     ax_c, ax_r = axes[0], axes[1]
     fc, today = health.forecast, health.today
     if fc is not None:
@@ -618,3 +653,64 @@ def _plot_cells(ax, with_cells):
         twin.set_ylabel("weakest cell [%]")
         twin.legend(loc="upper right", fontsize=7.5)
     ax.grid(alpha=0.3)
+
+#: Shade of each kind of tester step in :func:`plot_tester_steps`.
+STEP_COLORS = {"charge": "C0", "discharge": "C3", "rest": "0.85"}
+#: Up to this many steps, the discharge steps are numbered on the plot.
+MAX_NUMBERED_STEPS = 60
+
+
+def plot_tester_steps(frame, steps: list[dict], meta: dict, axes=None):
+    """Voltage and current of a battery tester's file over test time, steps shaded by kind.
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        ``time_s`` [s], ``voltage_V`` [V], ``current_A`` [A, discharge positive].
+    steps : list of dict
+        The steps (:func:`dischargelab.io.cyclers.steps.step_table`).
+    meta : dict
+        ``source`` and ``format`` for the title.
+    axes : sequence of two matplotlib Axes, optional
+
+    Returns
+    -------
+    numpy.ndarray of Axes
+    """
+    axes = _stacked_axes(axes, (10, 6), [3, 2])
+    av, ai = axes
+    t = frame["time_s"].to_numpy(dtype=float)
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    scale, unit = (3600.0, "h") if span > 4 * 3600 else (60.0, "min") if span > 600 else (1.0, "s")
+    x = (t - t[0]) / scale
+    i = frame["current_A"].to_numpy(dtype=float)
+    current_scale, current_unit = (1e3, "mA") if np.max(np.abs(i)) < 0.5 else (1.0, "A")
+    av.plot(x, frame["voltage_V"].to_numpy(dtype=float), lw=0.8, color="k")
+    ai.plot(x, i * current_scale, lw=0.8, color="k")
+    shown = set()
+    for s in steps:
+        if s["kind"] == "rest" and s["rows"] < 2:
+            continue
+        a, b = (s["start_s"] - t[0]) / scale, (s["end_s"] - t[0]) / scale
+        label = s["kind"] if s["kind"] not in shown else None
+        shown.add(s["kind"])
+        for ax in axes:
+            ax.axvspan(a, b, color=STEP_COLORS.get(s["kind"], "0.9"), alpha=0.18, lw=0,
+                       label=label if ax is av else None)
+        full = s["kind"] == "discharge" and s.get("after_charge") and s.get("to_limit")
+        if len(steps) <= MAX_NUMBERED_STEPS and s["kind"] == "discharge":
+            av.annotate(f"{s['number']}" + ("*" if full else ""), ((a + b) / 2, 1.0),
+                        xycoords=("data", "axes fraction"), ha="center", va="bottom",
+                        fontsize=7, color="C3")
+    av.set_ylabel("voltage [V]")
+    ai.set_ylabel(f"current [{current_unit}] (discharge +)")
+    ai.set_xlabel(f"test time [{unit}]")
+    av.legend(loc="lower left", fontsize=8)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    name = Path(str(meta.get("source", ""))).name
+    numbered = ("; discharge steps numbered, * = full (from a charge to the lower limit)"
+                if len(steps) <= MAX_NUMBERED_STEPS else "")
+    av.set_title(f"{name} ({meta.get('format')}): {len(steps)} steps{numbered}", fontsize=9,
+                 pad=14)
+    return axes

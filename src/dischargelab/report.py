@@ -26,26 +26,45 @@ from .uncertainty import held_out_summary
 
 CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#1d2430;
-background:#f4f6f9}
+background:#f4f6f9;overflow-wrap:anywhere}
 main{max-width:1060px;margin:0 auto;padding:24px 28px 48px;background:#fff}
 h1{font-size:1.6em;margin:0 0 4px}h2{font-size:1.25em;margin:32px 0 8px;
 border-bottom:2px solid #dfe4ea;padding-bottom:4px}h3{font-size:1.05em;margin:18px 0 6px}
 .sub{color:#5b6573;margin:0 0 16px}
-.cards{display:flex;flex-wrap:wrap;gap:12px;margin:16px 0}
-.card{flex:1 1 200px;border:1px solid #dfe4ea;border-radius:8px;padding:10px 14px;
+.cards{display:grid;grid-template-columns:repeat(auto-fit,minmax(180px,1fr));gap:12px;
+margin:16px 0}
+.card{border:1px solid #dfe4ea;border-radius:8px;padding:10px 14px;
 background:#fafbfc}.card .v{font-size:1.45em;font-weight:600}.card .l{color:#5b6573;
 font-size:.85em}
+.tw{overflow-x:auto}
 table{border-collapse:collapse;margin:8px 0 12px;font-size:.9em;width:100%}
-th,td{border-bottom:1px solid #e3e7ec;padding:5px 8px;text-align:right;white-space:nowrap}
-th{background:#eef1f5;font-weight:600}td:first-child,th:first-child{text-align:left}
+th,td{border-bottom:1px solid #e3e7ec;padding:5px 8px;text-align:right}
+td{white-space:nowrap}th{background:#eef1f5;font-weight:600;overflow-wrap:normal}
+td:first-child,th:first-child{text-align:left}
 td.t,th.t{text-align:left;white-space:normal}
+table.facts td:first-child{width:30%;color:#5b6573;white-space:normal}
+table.facts td{text-align:left;white-space:normal}
 .warn{background:#fff5e0;border-left:4px solid #e5a000;padding:6px 10px;margin:6px 0}
 .bad{background:#fdecec;border-left:4px solid #d33;padding:6px 10px;margin:6px 0}
 .note{background:#eef5ff;border-left:4px solid #4a86d6;padding:6px 10px;margin:6px 0}
+details{margin:8px 0 12px}summary{cursor:pointer;color:#2f5fa8;font-weight:600}
 figure{margin:10px 0}figure img{max-width:100%;height:auto;border:1px solid #e3e7ec}
+figure.half{max-width:640px}
 figcaption{color:#5b6573;font-size:.85em}footer{color:#5b6573;font-size:.8em;margin-top:36px}
+@media (max-width:640px){
+main{padding:14px 12px 32px}h1{font-size:1.3em}
+table.data thead{display:none}
+table.data,table.data tbody,table.data tr,table.data td{display:block;width:auto}
+table.data tr{border:1px solid #e3e7ec;border-radius:6px;margin:0 0 8px;padding:4px 8px}
+table.data td{border:0;padding:2px 0;text-align:right;white-space:normal}
+table.data td::before{content:attr(data-label);float:left;color:#5b6573;padding-right:10px;
+text-align:left}
+table.data td:first-child{font-weight:600}
+table.facts td{display:block;width:auto;border:0;padding:2px 0}
+table.facts td:first-child{width:auto;padding-top:8px}
+table.facts tr{display:block;border-bottom:1px solid #e3e7ec}
+}
 """
-
 
 # ---------------------------------------------------------------------------------------------
 # Small HTML helpers
@@ -76,6 +95,7 @@ def _minutes(seconds) -> str:
 
 
 def _table(headers, rows, text_columns=()) -> str:
+    """A data table; on a phone each row becomes a card of ``header: value`` lines."""
     text_class = ' class="t"'
     head = "".join(f"<th{text_class if k in text_columns else ''}>{_e(h)}</th>"
                    for k, h in enumerate(headers))
@@ -84,17 +104,29 @@ def _table(headers, rows, text_columns=()) -> str:
         cells = []
         for k, cell in enumerate(row):
             cls = ' class="t"' if k in text_columns else ""
-            cells.append(f"<td{cls}>{_e(cell)}</td>")
+            label = f' data-label="{_e(headers[k])}"' if k < len(headers) else ""
+            cells.append(f"<td{cls}{label}>{_e(cell)}</td>")
         body.append("<tr>" + "".join(cells) + "</tr>")
-    thead = f"<thead><tr>{head}</tr></thead>" if any(headers) else ""
-    return f"<table>{thead}<tbody>{''.join(body)}</tbody></table>"
+    return (f'<div class="tw"><table class="data"><thead><tr>{head}</tr></thead>'
+            f"<tbody>{''.join(body)}</tbody></table></div>")
+
+
+def _facts(rows) -> str:
+    """Label / value rows (a summary): the values wrap, nothing runs past the page."""
+    body = "".join(f"<tr><td>{_e(label)}</td><td>{_e(value)}</td></tr>" for label, value in rows)
+    return f'<table class="facts"><tbody>{body}</tbody></table>'
+
+
+def _folded(summary: str, content: str) -> str:
+    """``content`` one click away under ``summary`` (closed by default)."""
+    return f"<details><summary>{_e(summary)}</summary>{content}</details>"
 
 
 def _messages(items, cls="warn") -> str:
     return "".join(f'<div class="{cls}">{_e(m)}</div>' for m in items)
 
 
-def _figure(ax, caption: str, alt: str) -> str:
+def _figure(ax, caption: str, alt: str, size: str = "") -> str:
     """Render the figure holding ``ax`` to an embedded PNG and close it."""
     from .plot import pyplot
 
@@ -104,7 +136,8 @@ def _figure(ax, caption: str, alt: str) -> str:
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
     data = base64.b64encode(buf.getvalue()).decode("ascii")
-    return (f'<figure><img src="data:image/png;base64,{data}" alt="{_e(alt)}">'
+    cls = f' class="{size}"' if size else ""
+    return (f'<figure{cls}><img src="data:image/png;base64,{data}" alt="{_e(alt)}">'
             f"<figcaption>{_e(caption)}</figcaption></figure>")
 
 
@@ -129,14 +162,17 @@ def _intervals(battery: Battery) -> dict:
     return out
 
 
-def _battery_section(battery: Battery) -> str:
+def _parameter_rows(battery: Battery, names) -> list[list[str]]:
+    """Value, standard error, 95 % interval and status of the parameters ``names``."""
     extra = battery.extra
     stderr = extra.get("stderr") if isinstance(extra.get("stderr"), dict) else {}
     fixed = extra.get("fixed") if isinstance(extra.get("fixed"), dict) else {}
     intervals = _intervals(battery)
     rows = []
     for k, par in enumerate(battery.family.parameters):
-        name, unit, meaning = par.name, par.unit, par.description
+        name = par.name
+        if name not in names:
+            continue
         value = float(battery.parameters[name])
         if name in fixed:
             err, lo, hi, status = "fixed", "-", "-", "fixed"
@@ -147,36 +183,75 @@ def _battery_section(battery: Battery) -> str:
             err = _fmt(sd, ".3g")
             lo, hi = (_fmt(x, ".5g") for x in intervals[name])
             status = "fitted" if battery.covariance is not None else "given"
-        rows.append([name, meaning, unit, _fmt(value, ".6g"), err, lo, hi, status])
+        rows.append([name, par.description, par.unit, _fmt(value, ".6g"), err, lo, hi, status])
+    return rows
+
+
+PARAMETER_HEADERS = ["parameter", "meaning", "unit", "value", "std. error", "95 % low",
+                     "95 % high", "status"]
+
+
+def _battery_facts(battery: Battery) -> list[tuple[str, str]]:
+    """The summary rows under the parameter table (label, value); add a row here."""
+    extra = battery.extra
+    facts = []
+    if extra.get("rmse_V") is not None:
+        facts.append(("fit RMSE", f"{1000 * float(extra['rmse_V']):.2f} mV per cell"))
+    error = extra.get("model_error")
+    if isinstance(error, dict) and isinstance(error.get("relative_sd"), (int, float)):
+        facts.append(("held-out error of the time to cutoff", held_out_summary(error)))
+    thermal = extra.get("thermal")
+    if isinstance(thermal, dict) and thermal.get("Cth_J_per_K") is not None:
+        facts.append(("thermal model", f"heat capacity {float(thermal['Cth_J_per_K']):.3g} J/K, "
+                      f"thermal resistance {float(thermal['Rth_K_per_W']):.3g} K/W "
+                      f"({thermal.get('source', '')})"))
+    if battery.fit_currents_A:
+        facts.append(("fitted at (cell current)",
+                      ", ".join(f"{x:.3g} A" for x in battery.fit_currents_A)))
+    if extra.get("n_samples"):
+        facts.append(("samples fitted", str(extra["n_samples"])))
+    src = extra.get("source")
+    if isinstance(src, dict) and src.get("reference"):
+        facts.append(("coefficients from", str(src["reference"])))
+    return facts
+
+
+def _ocv_figure(battery: Battery) -> str:
+    """The open-circuit voltage curve the fit found, beside the chemistry's generic one."""
+    from .ocv import OCV_SOURCE, check_chemistry, ocv_from_soc
+    from .plot import plot_ocv
+
+    chemistry = check_chemistry(battery.chemistry)
+    soc = np.linspace(1.0, 0.0, 101)
+    label = OCV_SOURCE[chemistry].split(" from ")[0] + (
+        "" if battery.chemistry else " (chemistry not given)")
+    ax = plot_ocv(battery, reference=(label, soc, ocv_from_soc(soc, chemistry)))
+    return _figure(ax, "Open-circuit voltage per cell against the state of "
+                   "charge: the fitted curve and the chemistry's generic curve.",
+                   "open-circuit voltage curve", "half")
+
+
+def _battery_section(battery: Battery) -> str:
+    extra = battery.extra
+    ocv_names = set(battery.family.ocv_parameters)
+    main = [n for n in battery.parameter_names if n not in ocv_names]
     parts = ["<h2>Battery model</h2>",
              f'<p class="sub">{_e(battery.family.title)} (model '
              f"<code>{_e(battery.model)}</code>) per cell, pack "
              f"{battery.cells_series}S{battery.strings_parallel}P"
              f"{', ' + _e(battery.chemistry) if battery.chemistry else ''}; model capacity "
              f"{battery.capacity_Ah:.3f} Ah per pack.</p>",
-             _table(["parameter", "meaning", "unit", "value", "std. error", "95 % low",
-                     "95 % high", "status"], rows, text_columns=(1,))]
-    facts = []
-    if extra.get("rmse_V") is not None:
-        facts.append(["fit RMSE", f"{1000 * float(extra['rmse_V']):.2f} mV per cell"])
-    error = extra.get("model_error")
-    if isinstance(error, dict) and isinstance(error.get("relative_sd"), (int, float)):
-        facts.append(["held-out error of the time to cutoff", held_out_summary(error)])
-    thermal = extra.get("thermal")
-    if isinstance(thermal, dict) and thermal.get("Cth_J_per_K") is not None:
-        facts.append(["thermal model", f"heat capacity {float(thermal['Cth_J_per_K']):.3g} J/K, "
-                      f"thermal resistance {float(thermal['Rth_K_per_W']):.3g} K/W "
-                      f"({_e(thermal.get('source', ''))})"])
-    if battery.fit_currents_A:
-        facts.append(["fitted at (cell current)",
-                      ", ".join(f"{x:.3g} A" for x in battery.fit_currents_A)])
-    if extra.get("n_samples"):
-        facts.append(["samples fitted", str(extra["n_samples"])])
-    src = extra.get("source")
-    if isinstance(src, dict) and src.get("reference"):
-        facts.append(["coefficients from", str(src["reference"])])
+             _table(PARAMETER_HEADERS, _parameter_rows(battery, main), text_columns=(1,))]
+    if ocv_names:
+        parts.append(_ocv_figure(battery))
+        parts.append(_folded(f"the curve's {len(ocv_names)} parameters (open-circuit voltage "
+                             f"drops between state-of-charge nodes)",
+                             _table(PARAMETER_HEADERS, _parameter_rows(battery, ocv_names),
+                                    text_columns=(1,))))
+    facts = _battery_facts(battery)
     if facts:
-        parts.append(_table(["", ""], facts))
+        parts.append(_facts(facts))
+    src = extra.get("source")
     if battery.covariance is None:
         parts.append(_messages(["no parameter covariance stored (a preset or hand-written "
                                 "file): intervals and the endurance uncertainty are "
@@ -372,7 +447,7 @@ def _mission_section(result) -> str:
                                            f"{100 * unc['completed_fraction']:.0f} % of them"])
     if unc and unc.get("interval_includes"):
         rows.append(["the interval includes", " + ".join(unc["interval_includes"])])
-    parts.append(_table(["quantity", "value"], rows, text_columns=(1,)))
+    parts.append(_facts(rows))
     parts.append(_figure(result.plot(), "Pack voltage through the flight, phases shaded, "
                                         "cutoff and reserve marked (paper Fig. 11 style).",
                          "mission voltage profile"))
@@ -384,9 +459,10 @@ def _mission_section(result) -> str:
     if len(phase_rows) > 40:
         phase_rows = phase_rows[:20] + [["...", "", "", "", "", "", "", "", ""]] + \
             phase_rows[-19:]
-    parts.append("<h3>Phases</h3>")
-    parts.append(_table(["phase", "load", "start", "duration", "current [A]", "power [W]",
-                         "charge [Ah]", "end voltage [V]", "end SOC [%]"], phase_rows))
+    parts.append(_folded(f"Phase by phase ({len(result.phases)} phases)",
+                         _table(["phase", "load", "start", "duration", "current [A]",
+                                 "power [W]", "charge [Ah]", "end voltage [V]", "end SOC [%]"],
+                                phase_rows)))
     parts.append(_messages(result.warnings, "warn"))
     return "".join(parts)
 
@@ -515,14 +591,15 @@ def build_report(battery, *, mission_result=None, validation=None, title: str | 
 
 
 def write_report(path, battery, **kwargs) -> Path:
-    """Write :func:`build_report` to ``path`` (UTF-8); returns the path."""
+    """Write :func:`build_report` to ``path`` (UTF-8, atomically); returns the path."""
+    from .atomic import write_text
+
     path = Path(path)
     if path.suffix.lower() not in (".html", ".htm"):
         raise DataError(f"report file must end in .html, got {path.name!r}")
     text = build_report(battery, **kwargs)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text, encoding="utf-8")
-    return path
+    return write_text(path, text)
 
 
 __all__ = ["build_report", "write_report"]

@@ -169,6 +169,14 @@ def _same_file(a, b) -> bool:
         return False
 
 
+def _same_step(fitted: dict, meta: dict) -> bool:
+    """The same step of a tester's file (True for files without steps)."""
+    a, b = fitted.get("step"), meta.get("step")
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.get("number") == b.get("number")
+    return True
+
+
 def _run_ambient_C(battery: Battery, data) -> float:
     """Ambient of a run [degC]: its first logged temperature, else the battery's."""
     if "temperature_C" in data:
@@ -229,22 +237,25 @@ def _constant_current_voltage(battery: Battery, prediction: SimulationResult, t,
 def _initial_charge(battery: Battery, meta: dict) -> tuple[float, str | None]:
     """(pack charge already taken out at the start [Ah], a note or None).
 
-    A flight from a flight log need not start full: its charge comes from the
-    rest voltage just before take-off through the model's own open-circuit
-    voltage (:func:`dischargelab.ocv.model_charge_at_rest`). Bench discharges
-    start full.
+    A flight from a flight log need not start full, nor a tester's discharge step
+    that does not follow a charge (``meta["starts_full"]`` False): its charge comes
+    from the rest voltage just before the load through the model's own
+    open-circuit voltage (:func:`dischargelab.ocv.model_charge_at_rest`). Bench
+    discharges start full.
     """
     rest = meta.get("rest_sample")
-    if meta.get("flight") is None or not isinstance(rest, dict) or \
-            rest.get("voltage_V") is None:
+    partial = meta.get("flight") is not None or meta.get("starts_full") is False
+    if not partial or not isinstance(rest, dict) or rest.get("voltage_V") is None:
         return 0.0, None
     from .ocv import model_charge_at_rest
 
     charge = model_charge_at_rest(battery, float(rest["voltage_V"]),
                                   float(rest.get("current_A") or 0.0))
     soc = 100.0 * (1.0 - charge / battery.capacity_Ah)
-    return charge, (f"the flight starts at {soc:.0f} % of the model's charge ({charge:.3g} Ah "
-                    f"out), from the rest voltage {rest['voltage_V']:.2f} V before take-off")
+    what, when = ("flight", "take-off") if meta.get("flight") is not None else \
+        ("discharge", "the load")
+    return charge, (f"the {what} starts at {soc:.0f} % of the model's charge ({charge:.3g} Ah "
+                    f"out), from the rest voltage {rest['voltage_V']:.2f} V before {when}")
 
 
 def _predict_run(battery: Battery, t, i, inside, cutoff_pack: float, ambient: float,
@@ -303,6 +314,8 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
     v = np.asarray(data["voltage_V"], dtype=float)
     i = np.asarray(data["current_A"], dtype=float)
     name = str(meta.get("source") or meta.get("name") or "data")
+    if isinstance(meta.get("step"), dict):  # one step of a battery tester's file
+        name = f"{name} step {meta['step']['number']}"
     if t.size < 3:
         raise DataError(f"{name}: only {t.size} samples; nothing to validate")
     if not (np.isfinite(cutoff_cell_V) and cutoff_cell_V > 0):
@@ -409,7 +422,7 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
     if isinstance(sources, list) and meta.get("source"):
         summary["in_fit"] = any(isinstance(s, dict) and _same_file(s.get("source"),
                                                                      meta["source"])
-                                for s in sources)
+                                and _same_step(s, meta) for s in sources)
         if summary["in_fit"]:
             warnings.append("this file was used in the fit: not an independent validation")
     if any(battery.fit_currents_A):

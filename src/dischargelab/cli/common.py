@@ -115,6 +115,11 @@ def data_options(func):
         click.option("--segment", default="auto", show_default=True, metavar="auto|none|N",
                      help="Which discharge to keep: auto (the main one), none (all rows) or the "
                           "N-th segment (counting from 1) of a file holding several."),
+        click.option("--step", "steps", multiple=True, metavar="N[,N...]",
+                     help="Battery tester files (Neware, BioLogic, Arbin, Maccor): the discharge "
+                          "steps to use, numbered as `dischargelab steps FILE` lists them "
+                          "(repeatable or a comma list) [default: fit takes the first full "
+                          "discharge at each rate, validate every discharge step]."),
     ]
     for option in reversed(options):
         func = option(func)
@@ -191,14 +196,35 @@ def write_csv(frame, path) -> Path:
     return write_text(path, frame.to_csv(index=False))
 
 
+def number_list(values, option: str, what: str) -> list[int] | None:
+    """``--step 7 --step 12,17`` as [7, 12, 17]; None when not given (numbers count from 1)."""
+    if not values:
+        return None
+    numbers = []
+    for value in values:
+        for part in str(value).split(","):
+            try:
+                number = int(part)
+            except ValueError:
+                raise DischargelabError(f"{option} expects {what} numbers such as 1 or 1,2,3; "
+                                        f"got {value!r}") from None
+            if number < 1:
+                raise DischargelabError(f"{option} numbers count from 1; got {number}")
+            numbers.append(number)
+    return numbers
+
+
 def read_data_files(paths, columns=None, current=None, sign="auto", segment="auto", units=None,
-                    status=None, verb="reading", flight_options=None):
+                    status=None, verb="reading", flight_options=None, steps=None,
+                    choose="fit"):
     """Read measured files with the shared data options; returns [(data, meta), ...].
 
+    A battery tester's file gives several discharges: ``steps`` (``--step``), else
+    ``choose`` (``"fit"`` or ``"all"``, see :func:`dischargelab.io.read_discharges`).
     Raises DischargelabError with one line on bad options or input.
     """
     from ..atomic import check_inputs
-    from ..io import parse_columns, parse_units, read_discharge
+    from ..io import parse_columns, parse_units, read_discharges
 
     paths = expand_paths(paths)
     check_inputs(paths)
@@ -224,8 +250,10 @@ def read_data_files(paths, columns=None, current=None, sign="auto", segment="aut
     for k, (path, amps) in enumerate(zip(paths, currents)):
         if status is not None:
             status.update(f"{verb} {Path(path).name} ({k + 1}/{len(paths)})")
-        loaded.append(read_discharge(path, columns=column_map, current_A=amps, sign=sign,
-                                     segment=segment, units=unit_map, **(flight_options or {})))
+        loaded.extend(read_discharges(path, steps=number_list(steps, "--step", "step"),
+                                      choose=choose,
+                                      columns=column_map, current_A=amps, sign=sign,
+                                      segment=segment, units=unit_map, **(flight_options or {})))
     return loaded
 
 
@@ -247,7 +275,7 @@ def print_data_warnings(warnings) -> None:
 
 
 def load_curves(paths, columns=None, current=None, sign="auto", segment="auto", units=None,
-                pack=None, strict=False, status=None):
+                pack=None, strict=False, status=None, steps=None):
     """Read files into fit curves after the plausibility checks.
 
     ``pack`` holds the keyword arguments of
@@ -255,12 +283,14 @@ def load_curves(paths, columns=None, current=None, sign="auto", segment="auto", 
     strings_parallel, chemistry, e0_V). Returns ``(curves, metas, warnings)``.
     """
     from ..fit import Curve
+    from ..io import discharge_label
 
-    loaded = read_data_files(paths, columns, current, sign, segment, units, status=status)
+    loaded = read_data_files(paths, columns, current, sign, segment, units, status=status,
+                             steps=steps, choose="fit")
     warnings = check_plausible(loaded, pack or {}, strict)
     curves, metas = [], []
     for data, meta in loaded:
-        curves.append(Curve.from_frame(data, meta, name=Path(meta.get("source", "")).stem))
+        curves.append(Curve.from_frame(data, meta, name=discharge_label(meta)))
         metas.append(meta)
     return curves, metas, warnings
 
@@ -363,13 +393,14 @@ def progress_callback(status, what: str):
 
 
 def validation_cases(battery, paths, cutoff, columns, current, sign, segment, units,
-                      status=None, flight_options=None, low_timer_s=None):
+                      status=None, flight_options=None, low_timer_s=None, steps=None):
     from ..validate import compare_discharge
 
     return [compare_discharge(battery, data, meta, cutoff, low_timer_s=low_timer_s)
             for data, meta in read_data_files(paths, columns, current, sign, segment, units,
                                               status=status, verb="validating",
-                                              flight_options=flight_options)]
+                                              flight_options=flight_options, steps=steps,
+                                              choose="all")]
 
 
 def executor_options(func):

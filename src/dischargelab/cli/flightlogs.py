@@ -17,6 +17,7 @@ from .common import (
     guard_outputs,
     json_option,
     load_battery_arg,
+    number_list,
     out,
     print_json,
     table,
@@ -25,20 +26,7 @@ from .common import (
 
 def flight_numbers_option(values) -> list[int] | None:
     """``--flight 1 --flight 2,3`` as [1, 2, 3]; None when not given."""
-    if not values:
-        return None
-    numbers = []
-    for value in values:
-        for part in str(value).split(","):
-            try:
-                number = int(part)
-            except ValueError:
-                raise DischargelabError(f"--flight expects flight numbers such as 1 or 1,2,3; "
-                                        f"got {value!r}") from None
-            if number < 1:
-                raise DischargelabError(f"--flight numbers count from 1; got {number}")
-            numbers.append(number)
-    return numbers
+    return number_list(values, "--flight", "flight")
 
 
 def flight_fit_wanted(paths, flights, battery_index, capacity) -> bool:
@@ -50,7 +38,8 @@ def flight_fit_wanted(paths, flights, battery_index, capacity) -> bool:
         raise DischargelabError("give either flight logs or discharge files to fit, not both")
     if not all(logs) and (flights or battery_index is not None or capacity is not None):
         raise DischargelabError("--flight, --battery and --capacity apply to flight logs "
-                                "(ArduPilot, PX4 ULog, blackbox, in-flight logger CSV)")
+                                "(ArduPilot, PX4 ULog, blackbox, telemetry .tlog, in-flight "
+                                "logger CSV)")
     return all(logs)
 
 
@@ -184,8 +173,9 @@ def autopilot_params_cmd(battery, pack_name, db, firmware, cells, parallel, load
 def convert_cmd(log, output, flight, battery, topic, fields, force, as_json):
     """Convert a flight log's battery data to a canonical CSV.
 
-    Reads ArduPilot .bin/.log, PX4 .ulg, Betaflight/INAV blackbox and in-flight
-    logger CSV (found from the content) and writes time_s, voltage_V,
+    Reads ArduPilot .bin/.log, PX4 .ulg, Betaflight/INAV blackbox, MAVLink
+    telemetry logs (.tlog, as Mission Planner and QGroundControl save them) and
+    in-flight logger CSV (found from the content) and writes time_s, voltage_V,
     current_A (discharge positive), measured temperature and cell voltages,
     the log's own counters and a flight column. The summary names the flights,
     the charge drawn, the current-sensor offset and every dropped record.
@@ -195,6 +185,7 @@ def convert_cmd(log, output, flight, battery, topic, fields, force, as_json):
       dischargelab convert flight.bin -o flight.csv
       dischargelab convert log.ulg --battery 1 --flight 2 -o pack2.csv
       dischargelab convert btfl_001.bbl --json
+      dischargelab convert 2021-12-02_13-26-14.tlog -o flight.csv
     """
     from ..io.flightlog import convert_flight_log
 

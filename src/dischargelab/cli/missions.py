@@ -78,6 +78,8 @@ def print_mission(result) -> None:
             unc["reason"] if unc else "no uncertainty requested (--draws 0)") + ")"
     label = "endurance, landing at the reserve" if st else "flight time"
     out.print(f"{m.name}: {label} {head}", markup=False)
+    if result.cannot_deliver:
+        out.print(f"cannot fly: {result.cannot_deliver['message']}", markup=False)
     rows = [["battery", f"{m.battery.name or '-'} ({m.battery.cells_series}S"
                         f"{m.battery.strings_parallel}P, {m.capacity_Ah:.3f} Ah)"],
             ["cutoff / reserve", f"{m.cutoff_cell_V:g} V/cell ({m.cutoff_pack_V:.2f} V pack) / "
@@ -93,8 +95,9 @@ def print_mission(result) -> None:
             ["charge / energy used", f"{result.simulation.capacity_Ah:.3f} Ah / "
                                      f"{result.simulation.energy_Wh_total:.1f} Wh"]]
     if st:
-        rows.append([f"max {st['phase']}", f"{duration_text(st['max_s'])} "
-                                          f"(limited by the {st['binding']})"])
+        limit = ("the mission cannot complete even without it"
+                 if st["binding"] == "infeasible" else f"limited by the {st['binding']}")
+        rows.append([f"max {st['phase']}", f"{duration_text(st['max_s'])} ({limit})"])
         if st["margin_s"] is not None:
             rows.append([f"margin on {st['phase']}", duration_text(st["margin_s"])])
     out.print(table("Endurance", ["quantity", "value"], rows))
@@ -107,7 +110,8 @@ def print_mission(result) -> None:
     out.print(table("Phases", ["phase", "load", "start [s]", "duration [s]", "current [A]",
                                "charge [Ah]", "end V", "end SOC [%]"], phase_rows))
     for w in result.warnings:
-        out.print(f"warning: {w}", markup=False)
+        if not (result.cannot_deliver and w == result.cannot_deliver["message"]):
+            out.print(f"warning: {w}", markup=False)
     for n in result.notes:
         out.print(f"note: {n}", markup=False)
 
@@ -218,8 +222,7 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
 @force_option
 @json_option
 def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment,
-               units,
-               cells, parallel, draws, seed, title, output, force, as_json):
+               units, steps, cells, parallel, draws, seed, title, output, force, as_json):
     """Write one self-contained HTML report for the pilot: model, fit, mission, validation.
 
     \b
@@ -262,7 +265,7 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
                 raise DischargelabError("give --cutoff V (per cell) for the validation: the "
                                         "battery's chemistry is unknown")
             cases = validation_cases(bat, validate_paths, cut, columns, current, sign, segment,
-                                      units, status)
+                                      units, status, steps=steps)
         status.update("drawing plots")
         label = battery if isinstance(battery, str) else None
         from ..atomic import atomic_path

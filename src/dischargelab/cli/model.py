@@ -161,7 +161,7 @@ def _print_fit(result, battery_path=None):
 @click.option("--quiet", is_flag=True,
               help="Print only the result (warnings that change it are always shown).")
 @json_option
-def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, flights,
+def fit_cmd(data, columns, current, sign, units, segment, steps, cells, parallel, flights,
             battery_index, capacity, e0, fix, bound, model_name, paper_mode, bootstrap,
             no_rest, nominal_capacity, name, chemistry, cooling, output, plot_path, force,
             strict, quiet, as_json):
@@ -180,6 +180,8 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, fligh
       dischargelab fit c10.csv c1.csv c4.csv --model ecm -o cell.json
       dischargelab fit 29.csv --capacity 1.6 --model ecm -o pack.json
       dischargelab fit btfl_001.bbl --flight 1,2,3 --capacity 1.3 --model ecm
+      dischargelab fit TestFile.nda -o cell.json          # a tester's file: its full discharges
+      dischargelab fit maccor_001.txt --step 7,22 -o cell.json
     """
     from ..fit import AUTO, fit_battery
     from ..models import get_family
@@ -210,7 +212,8 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, fligh
                 "e0_V": e0}
         with err.status("reading", spinner="dots") as status:
             curves, metas, data_warnings = load_curves(paths, columns, current, sign, segment,
-                                                       units, pack, strict, status=status)
+                                                       units, pack, strict, status=status,
+                                                       steps=steps)
             status.update(f"fitting {len(curves)} curve(s), model {model_name}")
             result = fit_battery(curves, cells_series=cells, strings_parallel=parallel,
                                  fixed=fixed, bounds=bounds, paper_mode=paper_mode,
@@ -233,9 +236,13 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, fligh
     if output:
         battery.save(output)
     print_data_warnings(data_warnings)
+    from ..io.cyclers import used_steps_note
+
+    steps_used = used_steps_note(metas)
     if as_json:
         doc = result.to_dict()
         doc["name"] = label
+        doc["tester_steps"] = steps_used
         doc["data_warnings"] = [f.text(OPTION_OF_ARGUMENT) for f in data_warnings]
         if output:
             doc["battery_file"] = str(output)
@@ -246,6 +253,8 @@ def fit_cmd(data, columns, current, sign, units, segment, cells, parallel, fligh
             summary = meta.get("summary")
             if summary:
                 out.print(f"{meta.get('source', '')}: {summary}", markup=False)
+    for line in steps_used:
+        out.print(line, markup=False)
     _print_fit(result, output)
     if not output and not quiet:
         out.print("(not saved: add -o battery.json to keep this model)")
@@ -483,8 +492,8 @@ def models_cmd(as_json):
               help="Save measured vs predicted curves (PNG, SVG or PDF).")
 @force_option
 @json_option
-def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, cells, parallel,
-                 flight, low_timer, battery_index, plot_path, force, as_json):
+def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, steps, cells,
+                 parallel, flight, low_timer, battery_index, plot_path, force, as_json):
     """Compare the model with measured discharges: endurance and voltage errors.
 
     Each DATA file is predicted with its own measured current (constant or the
@@ -497,6 +506,7 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
           time_s=0,current_A=1,voltage_V=2 --plot validation.png
       dischargelab validate battery.json log.txt --current 2.28 --cutoff 3.0 --json
       dischargelab validate pack.json btfl_001.bbl --flight 2 --cutoff 3.3
+      dischargelab validate cell.json maccor_001.txt --step 12,17 --cutoff 2.6
     """
     from ..validate import summarise
 
@@ -507,7 +517,8 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
     chosen = {k: v for k, v in (("flight", flight), ("battery", battery_index)) if v is not None}
     with err.status("validating", spinner="dots") as status:
         cases = validation_cases(bat, paths, cutoff, columns, current, sign, segment, units,
-                                  status, flight_options=chosen, low_timer_s=low_timer)
+                                  status, flight_options=chosen, low_timer_s=low_timer,
+                                  steps=steps)
     if plot_path:
         from ..plot import plot_validation, save
 

@@ -40,17 +40,29 @@ def plateau_ratio(curve: Curve) -> float | None:
 class FitResult:
     """Outcome of :func:`fit_battery` (values, errors, diagnostics, data)."""
 
+    #: Fitted per-cell parameters of the family :attr:`model` (names carry their units).
     parameters: CellParameters
+    #: Standard error of each free parameter (same units).
     stderr: dict
+    #: 95 % interval ``(low, high)`` of each free parameter.
     ci95: dict
+    #: Covariance of the free parameters, in the order of :attr:`free`.
     covariance: np.ndarray
+    #: Correlation of the free parameters, in the order of :attr:`free`.
     correlation: np.ndarray
+    #: Names of the fitted parameters.
     free: list
+    #: Parameters held fixed: ``{name: value}``.
     fixed: dict
+    #: Bounds of the fit: ``{name: (low, high)}``.
     bounds: dict
+    #: Root-mean-square voltage residual per cell [V].
     rmse_V: float
+    #: Samples fitted.
     n_samples: int
+    #: What to worry about, each with its fix, in plain words.
     warnings: list
+    #: What the fit did and chose, in plain words.
     notes: list
     identifiability: Identifiability
     curves: list
@@ -62,9 +74,11 @@ class FitResult:
     nfev: int
     n_starts: int
     bootstrap: np.ndarray | None = None
+    #: The model family fitted (``"shepherd"``, ``"shepherd-thermal"``, ``"ecm"``).
     model: str = "shepherd"
     ambient_C: float = 25.0
     thermal: dict | None = None
+    #: The held-out error of the time to cutoff that widens every prediction's interval.
     model_error: dict | None = None
     implausible: list = field(default_factory=list)
     #: The thermal prior of a thermal family fitted without a logged temperature
@@ -105,7 +119,9 @@ class FitResult:
         extra = {k: v for k, v in self.to_dict().items()
                  if k not in ("parameters", "cells_series", "strings_parallel",
                               "fit_currents_A", "model")}
-        extra["source"] = [dict(c.meta, name=c.name) for c in self.curves]
+        # where each curve came from; a tester file's list of every step stays in the file
+        extra["source"] = [dict({k: v for k, v in c.meta.items() if k != "steps"}, name=c.name)
+                           for c in self.curves]
         capacities = [float(c.charge_Ah[-1]) / self.strings_parallel for c in self.curves]
         lowest = int(np.argmin([abs(x) for x in self.fit_currents_A]))
         extra["measured_capacity_Ah"] = capacities[lowest]

@@ -170,7 +170,7 @@ def flight_curves(path, flights=None, battery: int | None = None,
     Parameters
     ----------
     path : str or path-like
-        Flight log (ArduPilot, PX4 ULog, blackbox, in-flight logger CSV).
+        Flight log (ArduPilot, PX4 ULog, blackbox, MAVLink .tlog, in-flight logger CSV).
     flights : int or list of int, optional
         Flights to use, counting from 1; default every flight.
     battery : int, optional

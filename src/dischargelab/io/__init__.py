@@ -9,9 +9,12 @@ One entry point, :func:`read_discharge`, for every supported source:
   derived from them (:mod:`.dji`);
 * dischargelab's own logger files (first line ``# dischargelab-log v1``,
   :mod:`.logfile`);
-* flight logs: ArduPilot DataFlash, PX4 ULog, Betaflight/INAV blackbox and
-  in-flight logger CSV with per-cell columns (:mod:`.flightlog`; one flight of
-  one battery is returned).
+* flight logs: ArduPilot DataFlash, PX4 ULog, Betaflight/INAV blackbox, MAVLink
+  telemetry logs and in-flight logger CSV with per-cell columns
+  (:mod:`.flightlog`; one flight of one battery is returned);
+* battery testers' files: Neware ``.nda``/``.ndax``, BioLogic ``.mpr``, Arbin
+  ``.res``/CSV/``.xlsx``, Maccor text exports (:mod:`.cyclers`; one step is
+  returned, with the tester's ``cycle_index`` and ``step_index``).
 
 Every reader returns ``(DataFrame, meta)``; the frame has ``time_s`` (0 at load
 start), ``voltage_V``, ``current_A`` (discharge positive) and, when present,
@@ -37,6 +40,12 @@ from .columns import (
     parse_units,
     validate_columns,
     validate_units,
+)
+from .cyclers import (
+    detect_tester,
+    discharge_numbers,
+    fit_steps,
+    tester_reader,
 )
 from .dji import BATTERY_MARK, flight_breaks, is_dji_raw, mode_events, read_dji_raw
 from .flightlog import detect_flight_log, read_flight_discharge
@@ -92,7 +101,10 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
         names such as ``"Voltage (mV)"`` or ``"current_mA"``, else V, A, s, degC.
     segment : "auto", "none" or int
         ``"auto"``: the longest discharge segment; ``"none"``: every valid row;
-        ``N``: the N-th segment counting from 1 (``--segment``).
+        ``N``: the N-th segment counting from 1 (``--segment``). Tester files
+        (Neware, BioLogic, Arbin, Maccor): ``N`` is step N of the file (a discharge
+        step, ``--step N``; ``meta["steps"]`` lists them), ``"auto"`` the first full
+        discharge (from a charge to the lower voltage limit).
     delimiter : str, optional
         ``","``, ``"\\t"``, ``";"``, ``"|"`` or ``"whitespace"``; detected when None.
     header : {"auto", True, False}
@@ -102,7 +114,7 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
     rest_sample : {"auto", "none"}
         Keep the rest sample before the load step in ``meta["rest_sample"]``.
     flight : int, optional
-        Flight logs (ArduPilot, PX4 ULog, blackbox, in-flight logger CSV; found
+        Flight logs (ArduPilot, PX4 ULog, blackbox, MAVLink .tlog, in-flight CSV; found
         from the content): the flight to keep, counting from 1 (``--flight``);
         default the longest (:mod:`.flightlog`).
     battery : int, optional
@@ -120,7 +132,9 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
         ("column" or "given"), ``dropped`` (rows by reason), ``summary`` (one
         sentence), ``rest_sample`` (``{"voltage_V", "time_s", "current_A",
         "line", "rule"}`` or None; time relative to load start), ``segments``
-        (every discharge segment found), ``segment`` (number kept),
+        (every discharge segment found), ``segment`` (number kept), for tester
+        files ``steps`` (every step: number, cycle, step, kind, times, charge) and
+        ``step`` (the one kept),
         ``time_offset_s`` (file time of load start), ``column_map``, ``units``,
         ``notes`` (everything inferred), plus reader keys (``events``...).
 
@@ -134,6 +148,73 @@ def read_discharge(path, *, columns=None, current_A=None, sign="auto", units=Non
                             units=units, delimiter=delimiter, header=header, fmt=fmt,
                             rest_sample=rest_sample, flight=flight, battery=battery)
     return read(segment=segment)
+
+
+#: What :func:`read_discharges` takes from a tester file when no step is named.
+CHOICES = ("fit", "all")
+
+
+def read_discharges(path, *, steps=None, choose: str = "fit", segment="auto", **options
+                    ) -> list[tuple[pd.DataFrame, dict]]:
+    """The discharges of a file a command works on: several for a tester file.
+
+    Parameters
+    ----------
+    path : str or path-like
+    steps : sequence of int, optional
+        Tester files: the steps to read (``--step``; numbers as in ``meta["steps"]``).
+    choose : {"fit", "all"}
+        Tester files without ``steps`` or ``segment``: ``"fit"`` the discharge steps
+        worth fitting (:func:`dischargelab.io.cyclers.fit_steps`), ``"all"`` every
+        discharge step. Each meta says why in ``chosen_by``.
+    segment, **options
+        As :func:`read_discharge`; other files give one discharge.
+
+    Returns
+    -------
+    list of (frame, meta)
+
+    Raises
+    ------
+    DataError
+        As :func:`read_discharge`; ``steps`` for a file that is not a tester file.
+    """
+    if choose not in CHOICES:
+        raise DataError(f"choose must be one of {', '.join(CHOICES)}; got {choose!r}")
+    segment = check_segment_option(segment)
+    if _tester_kind(path, options.get("fmt", "auto"), options.get("columns")) is None:
+        if steps is not None:
+            raise DataError(f"{Path(path).name} is not a battery tester file: steps apply to "
+                            "Neware, BioLogic, Arbin and Maccor files; choose a discharge with "
+                            "segment=N (--segment N)")
+        return [read_discharge(path, segment=segment, **options)]
+    read = discharge_reader(path, **options)
+    tester = read.tester
+    if steps is None and segment != "auto":
+        return [read(segment=segment)]
+    if steps is not None:
+        numbers = [check_segment_option(n) for n in steps]
+        why = "named by step"
+    elif choose == "fit":
+        numbers, why = fit_steps(tester.steps)
+    else:
+        numbers, why = discharge_numbers(tester.steps), "every discharge step"
+    if not numbers:
+        return [read(segment="auto")]
+    out = []
+    for number in numbers:
+        frame, meta = read(segment=number)
+        meta["chosen_by"] = why
+        out.append((frame, meta))
+    return out
+
+
+def discharge_label(meta: dict) -> str:
+    """A short label of a read discharge: the file's stem, and the step of a tester file
+    (``"maccor_001 step 7"``)."""
+    label = Path(str(meta.get("source") or meta.get("name") or "data")).stem
+    step = meta.get("step")
+    return f"{label} step {step['number']}" if isinstance(step, dict) else label
 
 
 def discharge_reader(path, *, columns=None, current_A=None, sign="auto", units=None,
@@ -169,10 +250,20 @@ def discharge_reader(path, *, columns=None, current_A=None, sign="auto", units=N
     if flight_log is not None:
         return functools.partial(read_flight_discharge, path, flight=flight, battery=battery,
                                  current_A=given, sign=sign, rest_sample=rest_sample)
+    tester = _tester_kind(path, fmt, columns)
+    if tester is not None:
+        if flight is not None or battery is not None:
+            raise DataError(f"{name} is a battery tester file: --flight and --battery apply to "
+                            "flight logs; choose a step with --step N")
+        if units:
+            raise DataError(f"{name} is a battery tester file: its units come from the file; "
+                            "leave --units out")
+        return tester_reader(path, kind=tester, current_A=given, sign=sign,
+                             rest_sample=rest_sample)
     if flight is not None or battery is not None:
-        raise DataError(f"{name} is not a flight log (ArduPilot, PX4 ULog, blackbox, in-flight "
-                        "logger CSV): --flight and --battery apply only to those; use "
-                        "--segment N to choose a discharge")
+        raise DataError(f"{name} is not a flight log (ArduPilot, PX4 ULog, blackbox, telemetry "
+                        ".tlog, in-flight logger CSV): --flight and --battery apply only to "
+                        "those; use --segment N to choose a discharge")
     text, encoding = load_text(path)
     kind = detect_format(text) if fmt == "auto" else fmt
     if kind == "dischargelab-log":
@@ -206,6 +297,14 @@ def discharge_reader(path, *, columns=None, current_A=None, sign="auto", units=N
                              rest_sample=rest_sample)
 
 
+def _tester_kind(path, fmt: str, columns) -> str | None:
+    """What :func:`dischargelab.io.cyclers.detect_tester` says, unless the format or the
+    columns are given (a table read as the user maps it) or the path is a flight log."""
+    if fmt != "auto" or columns is not None or detect_flight_log(path) is not None:
+        return None
+    return detect_tester(path)
+
+
 def _read_logfile(path: Path) -> tuple[CanonicalTable, float | None]:
     try:
         from .logfile import read_log
@@ -233,5 +332,6 @@ def _read_logfile(path: Path) -> tuple[CanonicalTable, float | None]:
     return CanonicalTable(frame=frame, line_numbers=lines, meta=meta), logged_current
 
 
-__all__ = ["read_discharge", "discharge_reader", "describe", "parse_columns", "parse_units",
-           "detect_format", "FORMATS", "CANONICAL_COLUMNS", "COLUMN_KEYS", "LOG_MAGIC"]
+__all__ = ["read_discharge", "read_discharges", "discharge_label", "discharge_reader", "describe",
+           "parse_columns", "parse_units", "detect_format", "FORMATS", "CANONICAL_COLUMNS",
+           "COLUMN_KEYS", "LOG_MAGIC"]

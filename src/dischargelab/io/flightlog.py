@@ -7,7 +7,8 @@ extra (``pip install 'dischargelab[logs]'``):
 * PX4 ULog (:mod:`.ulog`);
 * Betaflight / INAV blackbox (:mod:`.blackbox`);
 * in-flight logger CSV with per-cell columns, such as INA3221 monitors
-  (:mod:`.inflight_csv`, needs no extra).
+  (:mod:`.inflight_csv`, needs no extra);
+* MAVLink telemetry logs ``.tlog`` saved by a ground station (:mod:`.tlog`).
 
 
 Every reader returns a :class:`~.flightlog_base.FlightLog` (the shared types, cleaning
@@ -53,7 +54,8 @@ def detect_flight_log(path) -> str | None:
 
     ULog starts with ``ULog`` 0x01 0x12 0x35, binary DataFlash with 0xA3 0x95,
     text DataFlash has lines starting ``FMT,`` near the top, blackbox starts
-    with ``H Product:Blackbox flight data recorder``; in-flight logger CSV is
+    with ``H Product:Blackbox flight data recorder``, a telemetry log with records of
+    a UNIX time in microseconds and a MAVLink frame; in-flight logger CSV is
     recognised by its values (a pack column equal to the sum of the cell
     columns next to it), never by the file name.
 
@@ -76,6 +78,10 @@ def detect_flight_log(path) -> str | None:
         return "ardupilot-bin"
     if head.startswith(BLACKBOX_MAGIC):
         return "blackbox"
+    from .tlog import is_tlog
+
+    if is_tlog(head):
+        return "mavlink-tlog"
     if b"\x00" in head[:4096]:
         return None
     text = head.decode("utf-8", errors="replace").lstrip("\ufeff")
@@ -100,8 +106,9 @@ def read_flight_log(path, *, battery: int | None = None, flight: int | None = No
     Parameters
     ----------
     path : str or path-like
-        ArduPilot ``.bin``/``.log``, PX4 ``.ulg``, blackbox ``.bbl``/``.bfl``
-        or in-flight logger CSV; the format is found from the content.
+        ArduPilot ``.bin``/``.log``, PX4 ``.ulg``, blackbox ``.bbl``/``.bfl``,
+        MAVLink telemetry ``.tlog`` or in-flight logger CSV; the format is found
+        from the content.
     battery : int, optional
         Keep only this battery instance (PX4 ``multi_id``, ArduPilot instance).
     flight : int, optional
@@ -134,8 +141,8 @@ def read_flight_log(path, *, battery: int | None = None, flight: int | None = No
     kind = detect_flight_log(path)
     if kind is None:
         raise DataError(f"{path.name} is not a flight log this version reads (ArduPilot .bin/.log, "
-                        "PX4 .ulg, Betaflight/INAV blackbox, in-flight logger CSV with per-cell "
-                        "columns); for other data use read_discharge")
+                        "PX4 .ulg, Betaflight/INAV blackbox, MAVLink telemetry .tlog, in-flight "
+                        "logger CSV with per-cell columns); for other data use read_discharge")
     if (topic is not None or fields is not None) and kind not in ("ulog", "ardupilot-bin",
                                                                  "ardupilot-text"):
         raise DataError(f"{path.name}: topic= and fields= apply to ULog and DataFlash logs only "
@@ -164,6 +171,11 @@ def _read_ulog(path, *, topic, fields):
 def _read_blackbox(path, *, topic, fields):
     from .blackbox import read_blackbox
     return read_blackbox(path)
+
+
+def _read_tlog(path, *, topic, fields):
+    from .tlog import read_tlog
+    return read_tlog(path)
 
 
 def _read_inflight(path, *, topic, fields):
@@ -200,7 +212,7 @@ def _read_export(path, *, topic, fields):
 
 _READERS = {"ardupilot-bin": _read_ardupilot, "ardupilot-text": _read_ardupilot,
             "ulog": _read_ulog, "blackbox": _read_blackbox, "inflight-csv": _read_inflight,
-            "flightlog-csv": _read_export}
+            "flightlog-csv": _read_export, "mavlink-tlog": _read_tlog}
 
 
 def _check_fields(fields) -> dict:
@@ -297,6 +309,8 @@ def read_flight_discharge(path, *, flight=None, battery=None, current_A=None, si
         "segments": [_segment_dict(s, frame) for s in log.spans],
         "events": log.events, "flight_log_summary": log.summary(),
     })
+    if log.start_time:
+        meta["start_time"] = log.start_time
     meta["rest_sample"] = (_rest_before(frame, first, meta["time_offset_s"])
                            if rest_sample == "auto" and span is not None else None)
     meta["summary"] = summary_sentence(meta)
@@ -352,7 +366,8 @@ def convert_flight_log(path, out, *, flight: int | None = None, battery: int | N
 
     Columns: ``time_s, voltage_V, current_A`` [s, V, A discharge positive],
     ``temperature_C`` and ``cell1_V``... when measured, the log's own columns,
-    and ``flight`` (0 outside any flight). Two ``#`` comment lines at the top
+    ``session`` for a file of several joined recordings, and ``flight`` (0
+    outside any flight). Two ``#`` comment lines at the top
     name the source (JSON) and summarise it; :func:`read_flight_log` and
     :func:`dischargelab.io.read_discharge` read the file back with its
     flights. The file is written atomically
@@ -402,7 +417,7 @@ def convert_flight_log(path, out, *, flight: int | None = None, battery: int | N
         raise DataError(f"{path.name}: battery {series.index} has no samples in flight {flight}")
     frame = series.frame
     columns = [c for c in EXPORT_FIRST if c in frame] + series.cell_columns + \
-        [c for c in LOG_COLUMNS if c in frame] + ["flight"]
+        [c for c in LOG_COLUMNS if c in frame] + [c for c in ("session", "flight") if c in frame]
     info = {"source": path.name, "format": log.format, "battery": series.index,
             "label": series.label, "cells": series.cells, "capacity_mAh": series.capacity_mAh,
             "flight": flight}

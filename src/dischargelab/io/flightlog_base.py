@@ -20,6 +20,9 @@ battery instance, in canonical columns and units (the glossary of
 ``log_resistance_ohm``    the log's own internal-resistance estimate [ohm]
 ``log_voltage_rest_V``    the log's own resting-voltage estimate [V]
 ``log_energy_Wh``         the log's own consumed-energy counter [Wh]
+``session``               recording session (1, 2, ...) of a file holding several
+                          joined recordings (telemetry logs); charge is never
+                          counted across two sessions
 ``flight``                flight number (1, 2, ...), 0 outside any flight
 ========================  ==================================================
 
@@ -56,7 +59,7 @@ from .segment import runs
 
 #: Names returned by :func:`detect_flight_log`.
 FLIGHT_LOG_FORMATS = ("ardupilot-bin", "ardupilot-text", "ulog", "blackbox", "inflight-csv",
-                      "flightlog-csv")
+                      "flightlog-csv", "mavlink-tlog")
 
 #: ULog file magic (8 bytes with the version byte following).
 ULOG_MAGIC = b"ULog\x01\x12\x35"
@@ -103,6 +106,7 @@ DROP_REASONS = {
     "time_not_increasing": "time not after the previous record",
     "no_time": "no time for the record (no GPS time before it)",
     "malformed": "malformed line",
+    "unknown_value": "voltage or current the sender marks unknown (MAVLink UINT16_MAX, -1)",
 }
 
 
@@ -187,20 +191,36 @@ class BatterySeries:
         return [c for c in self.frame.columns if c.startswith("cell") and c.endswith("_V")]
 
     def charge_mAh(self) -> float:
-        """Charge drawn [mAh]: trapezoidal integral of ``current_A`` over ``time_s``."""
+        """Charge drawn [mAh]: trapezoidal integral of ``current_A`` over ``time_s``
+        (never across the join of two recording sessions, see ``session``)."""
         if self.rows < 2:
             return 0.0
         t = self.frame["time_s"].to_numpy(dtype=float)
         i = self.frame["current_A"].to_numpy(dtype=float)
-        return float(np.sum(0.5 * (i[1:] + i[:-1]) * np.diff(t)) / 3.6)
+        steps = 0.5 * (i[1:] + i[:-1]) * np.diff(t)
+        return float(np.sum(steps[self._same_session()]) / 3.6)
 
     def counter_mAh(self) -> float | None:
-        """Charge by the log's own counter [mAh] (last minus first), or None."""
+        """Charge by the log's own counter [mAh] (last minus first, summed over the
+        recording sessions), or None."""
         if "log_discharged_mAh" not in self.frame:
             return None
         values = self.frame["log_discharged_mAh"].to_numpy(dtype=float)
-        values = values[np.isfinite(values)]
-        return float(values[-1] - values[0]) if values.size >= 2 else None
+        known = np.isfinite(values)
+        if known.sum() < 2:
+            return None
+        sessions = (self.frame["session"].to_numpy()[known] if "session" in self.frame
+                    else np.zeros(int(known.sum()), dtype=int))
+        values = values[known]
+        return float(sum(values[sessions == s][-1] - values[sessions == s][0]
+                         for s in np.unique(sessions)))
+
+    def _same_session(self) -> np.ndarray:
+        """For each step between two samples: True when both are in one recording session."""
+        if "session" not in self.frame:
+            return np.ones(max(self.rows - 1, 0), dtype=bool)
+        session = self.frame["session"].to_numpy()
+        return session[1:] == session[:-1]
 
     def describe(self) -> str:
         """A few words: label, cells, capacity."""
@@ -251,6 +271,12 @@ class FlightLog:
         Notes about the whole file.
     flight_number : int or None
         Set on the parts returned by :meth:`flights`.
+    skipped : dict
+        Messages of the file skipped before any battery record was made, by reason
+        (e.g. ``{"corrupt_messages": 3}`` for a telemetry log).
+    start_time : str or None
+        Clock time (ISO 8601, UTC) of ``time_s = 0`` when the log records one on a
+        clock that runs through the whole file (a telemetry log of one recording).
     """
 
     source: str
@@ -260,6 +286,8 @@ class FlightLog:
     events: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     flight_number: int | None = None
+    skipped: dict[str, int] = field(default_factory=dict)
+    start_time: str | None = None
 
     def battery(self, index: int | None = None) -> BatterySeries:
         """The battery with instance ``index``, or the first one with samples (None).
@@ -319,6 +347,7 @@ class FlightLog:
                 "flights": [s.to_dict() for s in self.spans],
                 "batteries": [b.to_dict() for b in self.batteries],
                 "events": list(self.events), "notes": list(self.notes),
+                "skipped": dict(self.skipped), "start_time": self.start_time,
                 "summary": self.summary()}
 
 

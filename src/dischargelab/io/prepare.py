@@ -74,8 +74,8 @@ def check_current_option(current_A) -> float | None:
 
 
 def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto",
-            segment="auto", rest_sample="auto", rows_read: int | None = None
-            ) -> tuple[pd.DataFrame, dict]:
+            segment="auto", rest_sample="auto", rows_read: int | None = None,
+            discharge_only: bool = True) -> tuple[pd.DataFrame, dict]:
     """Clean canonical rows and keep the discharge.
 
     Parameters
@@ -88,6 +88,9 @@ def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto
         See :func:`dischargelab.io.read_discharge`.
     rows_read : int, optional
         Data rows in the file when the reader already dropped some (partial line).
+    discharge_only : bool
+        Refuse rows whose voltage rises overall (not a discharge); False for a whole
+        tester file of charges and discharges read with ``segment="none"``.
 
     Returns
     -------
@@ -182,7 +185,8 @@ def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto
     # ---- plausibility of units
     explicit = set(meta.pop("explicit_units", []))
     v = frame["voltage_V"].to_numpy(dtype=float)
-    _check_positive_voltage(v, lines, path_name)
+    if not meta.pop("cell_voltage_known", False):  # a tester's half cell may sit near 0 V
+        _check_positive_voltage(v, lines, path_name)
     if "voltage_V" not in explicit and np.percentile(np.abs(v), 98) > IMPLAUSIBLE_V:
         raise DataError(f"{path_name}: voltages up to {np.max(v):g} V look like millivolts; "
                         f"add --units voltage_V=mV (or --units voltage_V=V if they are volts)")
@@ -299,7 +303,8 @@ def prepare(table: CanonicalTable, path_name: str, *, current_A=None, sign="auto
         kept["current_A"] = given
         meta["current_source"] = "given"
 
-    _check_voltage(kept, kept_lines, path_name)
+    if discharge_only:
+        _check_voltage(kept, kept_lines, path_name)
 
     offset = float(kept["time_s"].iloc[0])
     kept["time_s"] = kept["time_s"] - offset

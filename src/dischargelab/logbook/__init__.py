@@ -149,7 +149,16 @@ class Logbook:
         from .ingest import add_upload
 
         with self._errors():
-            return add_upload(self._engine, file_name, data, pack, reader_options)
+            return add_upload(self._engine, (file_name, data), pack, reader_options)
+
+    def add_upload(self, path, pack: str, **reader_options):
+        """Add one uploaded file that the server received to ``path`` (a temporary file
+        named as the upload): it is read from there once, stored under its name, and its
+        location is not recorded. Returns an AddResult."""
+        from .ingest import add_upload
+
+        with self._errors():
+            return add_upload(self._engine, path, pack, reader_options)
 
     def set_pack(self, name: str, *, label_capacity_Ah: float | None = None,
                  chemistry: str | None = None, cells: int | None = None) -> None:

@@ -54,7 +54,7 @@ TASK_FILES = 8
 
 #: File suffixes taken from folders (a file named on its own is always tried).
 DATA_SUFFIXES = (".csv", ".txt", ".tsv", ".lvm", ".log", ".bin", ".ulg", ".bbl", ".bfl",
-                 ".dat")
+                 ".dat", ".tlog", ".nda", ".ndax", ".mpr", ".res", ".xlsx")
 
 #: Files in folders whose names start with these are documentation, not data.
 SKIP_PREFIXES = ("license", "copying", "readme", "notice")
@@ -303,20 +303,26 @@ def _payloads(executor, by_path: dict):
     return ((path, Path(path).read_bytes()) for path in paths)
 
 
-def add_upload(engine, file_name: str, data: bytes, pack: str,
-               reader_options: dict | None = None) -> AddResult:
-    """Add one file given as bytes (an upload; see :meth:`dischargelab.Logbook.add_bytes`)."""
+def add_upload(engine, source, pack: str, reader_options: dict | None = None) -> AddResult:
+    """Add one uploaded file, stored under its name with no path: ``source`` is
+    ``(file name, bytes)`` or a file (an upload received to a temporary file named as the
+    upload); see :meth:`dischargelab.Logbook.add_bytes` and
+    :meth:`dischargelab.Logbook.add_upload`."""
     if not str(pack or "").strip():
         raise LogbookError("the pack name is empty")
-    name = safe_file_name(file_name)
+    if isinstance(source, tuple):
+        name, data = safe_file_name(source[0]), source[1]
+        source, sha = (name, data), sha256_bytes(data)
+    else:
+        source = Path(source)
+        name, sha = source.name, sha256_file(source)
     result = AddResult()
-    sha = sha256_bytes(data)
     with schema.reading(engine) as conn:
         if known_hashes(conn, [sha]):
             result.skipped.append(name)
             return result
     try:
-        summary = summarise_source((name, data), check_reader_options(reader_options))
+        summary = summarise_source(source, check_reader_options(reader_options))
     except DischargelabError as exc:
         result.rejected.append((name, str(exc).splitlines()[0]))
         return result

@@ -66,7 +66,7 @@ KNEE_SPAN = 0.03
 
 #: Reader formats that are flights.
 FLIGHT_FORMATS = ("ardupilot-bin", "ardupilot-text", "ulog", "blackbox", "inflight-csv",
-                  "flightlog-csv", "dji-raw", "dji-derived-csv")
+                  "flightlog-csv", "mavlink-tlog", "dji-raw", "dji-derived-csv")
 
 #: Reader options a summary may be given (the rest are the logbook's own).
 READER_OPTIONS = ("columns", "current_A", "sign", "units", "delimiter", "header", "fmt",
@@ -235,7 +235,7 @@ def _summarise_path(path: Path, name: str, data: bytes, options: dict,
         event = summarise_event(frame, meta, whole, whole_meta)
         event["index"] = index
         event["kind"] = "flight" if fmt in FLIGHT_FORMATS else "discharge"
-        event["cycle"] = cycle
+        event["cycle"] = meta.get("cycle", cycle)  # a tester's step knows its cycle
         events.append(event)
     notes = list(dict.fromkeys(n for _, meta in reads for n in meta.get("notes", [])))
     return SourceSummary(sha256=sha256_bytes(data), file_name=name, size_bytes=len(data),

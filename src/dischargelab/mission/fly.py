@@ -474,6 +474,38 @@ def max_stretch_s(mission: Mission, *, points: int | None = None) -> dict:
             "binding": binding, "margin_s": margin}
 
 
+def load_at_start(mission: Mission, leg: _Leg, sim: SimulationResult) -> dict | None:
+    """The load a recorded flight (one draw) could not even start, or None.
+
+    A flight that ended by the cutoff or the power limit at the very start of a phase
+    (no time flown in it) met a load the pack cannot deliver in that state; the pack's
+    largest current and power there come from :func:`dischargelab.engine.load_limits`.
+
+    Returns
+    -------
+    dict or None
+        ``phase`` (its label), ``kind`` ("current" or "power"), ``load`` [A or W],
+        ``soc_pct`` (when it met the load) and the keys of
+        :func:`~dischargelab.engine.load_limits`.
+    """
+    if sim.ended_by not in ("cutoff", "power limit") or not leg.steps:
+        return None
+    k = int(sim.step[-1])
+    step = leg.steps[k]
+    flown = sim.time_s[sim.step == k]
+    if step.kind not in ("current", "power") or flown[-1] > flown[0]:
+        return None
+    bat = mission.battery
+    limits = engine.load_limits(
+        bat.family, dict(bat.parameters), leg.state, cutoff_pack_V=mission.cutoff_pack_V,
+        ambient_C=mission.resolved_ambient_C, cells_series=bat.cells_series,
+        strings_parallel=bat.strings_parallel)
+    name, _, repetition = leg.labels[k]
+    return {"phase": name if repetition is None else f"{name} #{repetition}",
+            "kind": step.kind, "load": float(step.value), **limits,
+            "soc_pct": float(100.0 * (1.0 - sim.charge_Ah[-1] / mission.capacity_Ah))}
+
+
 def leg_simulation(mission: Mission, leg: _Leg) -> SimulationResult:
     """The recorded flight (one draw) as a SimulationResult."""
     keys = ("time_s", "current_A", "voltage_V", "charge_Ah", "temperature_C", "step")

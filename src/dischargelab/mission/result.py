@@ -27,6 +27,7 @@ from .fly import (
     Flyer,
     fly_mission,
     leg_simulation,
+    load_at_start,
     max_stretch_s,
     mission_outcomes,
 )
@@ -63,6 +64,10 @@ class MissionResult:
     notes : list of str
         What the result rests on that the caller should know (e.g. a logbook pack's
         model scaled to its health today).
+    cannot_deliver : dict or None
+        When the flight ended at the very start of a phase, the load the pack cannot
+        deliver: :func:`dischargelab.mission.fly.load_at_start` plus ``message``, the
+        sentence that says so (also the first warning).
     """
 
     mission: Mission
@@ -81,6 +86,7 @@ class MissionResult:
     warnings: list
     uncertainty: dict | None = None
     notes: list = field(default_factory=list)
+    cannot_deliver: dict | None = None
 
     @property
     def soc_pct(self) -> np.ndarray:
@@ -133,6 +139,8 @@ class MissionResult:
             "uncertainty": self.uncertainty,
             "warnings": list(self.warnings),
             "notes": list(self.notes),
+            "cannot_deliver": None if self.cannot_deliver is None else
+            dict(self.cannot_deliver),
         }
         return out
 
@@ -233,6 +241,33 @@ def extrapolation_warnings(battery: Battery, phase_rows: list[dict]) -> list[str
     return out
 
 
+def cannot_deliver_text(mission: Mission, found: dict) -> str:
+    """One sentence: the load of :func:`~dischargelab.mission.fly.load_at_start` that the
+    pack cannot deliver, and the most it can deliver there."""
+    bat = mission.battery
+    where = f"'{found['phase']}' at {found['soc_pct']:.0f} % charge"
+    cutoff = f"the {mission.cutoff_pack_V:.2f} V cutoff"
+    if found["max_current_A"] <= 0:
+        return (f"the pack cannot fly {where}: even without load its voltage "
+                f"({found['no_load_voltage_V']:.2f} V) is at or below {cutoff}; check the "
+                "cutoff, the cells in series and the state of charge at take-off")
+    if found["kind"] == "power":
+        return (f"the pack cannot deliver the {found['load']:g} W of {where}: its voltage "
+                f"would fall below {cutoff} at once; it can deliver at most "
+                f"{found['max_power_W']:.4g} W there")
+    p = bat.strings_parallel
+    rated = bat.rated_capacity_Ah / p
+
+    def per_cell(pack_A: float) -> str:
+        amps = "" if p == 1 else f"{pack_A / p:.3g} A, "
+        return f"{amps}{pack_A / p / rated:.3g}C per cell"
+
+    return (f"the pack cannot deliver the {found['load']:g} A of {where} "
+            f"({per_cell(found['load'])}): its voltage would fall below {cutoff} at once; "
+            f"it can deliver at most {found['max_current_A']:.3g} A there "
+            f"({per_cell(found['max_current_A'])})")
+
+
 def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
                 points_per_step: int = POINTS_PER_PHASE, progress=None) -> MissionResult:
     """Fly a mission: time series, endurance, maximum stretch, margins and warnings.
@@ -280,7 +315,11 @@ def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
     rows = _phase_table(mission, sim, labels)
     soc_end = float(100.0 * (1.0 - sim.charge_Ah[-1] / mission.capacity_Ah))
     warnings = []
-    if not completed:
+    cannot = load_at_start(mission, leg, sim)
+    if cannot is not None:
+        cannot["message"] = cannot_deliver_text(mission, cannot)
+        warnings.append(cannot["message"])
+    elif not completed:
         where = _label_text(labels[-1])
         warnings.append(f"the mission does not complete: the {ended_by} is reached "
                         f"after {flight_time:.0f} s, during '{where}'")
@@ -301,7 +340,7 @@ def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
         completed=completed, ended_by=ended_by, flight_time_s=flight_time,
         endurance_s=float(endurance), cutoff_time_s=cutoff_time, reserve_time_s=reserve_time,
         soc_end_pct=soc_end, min_voltage_V=float(np.min(sim.voltage_V)), stretch=stretch,
-        warnings=warnings,
+        warnings=warnings, cannot_deliver=cannot,
     )
     extra = mission.battery.extra
     if extra.get("logbook") and extra.get("note"):  # a logbook pack at today's health

@@ -140,7 +140,7 @@ class Mission:
     initial_soc_pct : float
         State of charge at take-off [%].
     name, source : str
-        Title and mission file path.
+        Title, and the mission file's path (a bundled mission's name for one of those).
     aircraft : dict or None
         The ``[aircraft]`` table used for flight-condition phases.
     ambient_C : float or None
@@ -630,13 +630,16 @@ def load_mission(path, *, battery=None, cutoff_cell_V: float | None = None,
     DataError
         One line naming the file, the phase and the problem.
     """
+    given = str(path)
     path = mission_path(path)
+    # a bundled mission is named by its name, not by where the package lies
+    source = given if not Path(given).exists() else str(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise DataError(f"{path}: not valid TOML ({exc})") from None
     except UnicodeDecodeError:
         raise DataError(f"{path}: not a UTF-8 text file") from None
-    return parse_mission(data, battery=battery, base_dir=path.parent, source=str(path),
+    return parse_mission(data, battery=battery, base_dir=path.parent, source=source,
                          cutoff_cell_V=cutoff_cell_V, reserve_pct=reserve_pct,
                          ambient_C=ambient_C)

@@ -242,6 +242,9 @@ class Family:
     states: tuple[State, ...] = (State("charge_Ah", "Ah", "charge"),)
     #: Parameters shown in plot titles and short summaries.
     headline: tuple[str, ...] = ()
+    #: Parameters that together shape the open-circuit voltage curve (a free-form OCV):
+    #: reports draw the curve and keep these numbers folded away.
+    ocv_parameters: tuple[str, ...] = ()
     #: True when what sets the family apart is a logged temperature: without one it
     #: reduces to another family, and ``model="auto"`` does not try it.
     needs_temperature: bool = False

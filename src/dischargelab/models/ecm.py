@@ -204,6 +204,7 @@ class EquivalentCircuit(Family):
                    "two RC pairs (Arrhenius in T), lumped thermal state: rate-dependent capacity "
                    "(LiFePO4) and relaxation after load.")
     headline = ("U_full_V", "R0_ohm", "R1_ohm", "R2_ohm", "tau_d_s", "C_Ah")
+    ocv_parameters = OCV_DROP_NAMES
     parameters = _ocv_parameters() + (
         Parameter("R0_ohm", "ohm", 0.0, 2.0, 0.02, True, "series resistance"),
         Parameter("R1_ohm", "ohm", 0.0, 2.0, 0.01, True, "fast RC pair resistance",

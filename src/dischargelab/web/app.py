@@ -5,8 +5,11 @@
 (live bench, logbook). Nothing else is served: static files are looked up by exact name in a
 table read at start-up, so no request path can reach the file system.
 
-Every error is JSON ``{"error": "one line"}`` with a 4xx status (5xx only for a bug, which is
-logged; the server stays up).
+Every error is JSON ``{"error": "one line"}`` with a 4xx status (503 when busy, 5xx
+otherwise only for a bug, which is logged; the server stays up). Outermost,
+:class:`~dischargelab.web.connections.BodyDeadline` bounds the time a body may take, then
+:class:`~dischargelab.web.guard.Guard` checks each request; the logbook and the physics run
+in bounded thread pools (:mod:`~dischargelab.web.work`), never on the event loop.
 """
 
 from __future__ import annotations
@@ -21,17 +24,18 @@ require("starlette", "web")
 
 from starlette.applications import Starlette  # noqa: E402
 from starlette.exceptions import HTTPException  # noqa: E402
-from starlette.requests import Request  # noqa: E402
+from starlette.requests import ClientDisconnect, Request  # noqa: E402
 from starlette.responses import JSONResponse, Response, StreamingResponse  # noqa: E402
 from starlette.routing import Route  # noqa: E402
 
 from .assets import Assets  # noqa: E402
 from .bench import BenchError, LiveBench  # noqa: E402
 from .body import error, read_json  # noqa: E402
+from .connections import BodyDeadline  # noqa: E402
 from .guard import Guard, RequestRefused  # noqa: E402
+from .limits import Limits  # noqa: E402
+from .work import ClientGone, Workers  # noqa: E402
 
-#: Largest upload accepted by default [bytes] (a long 50 Hz log is a few MB).
-MAX_UPLOAD_BYTES = 64 * 1024 * 1024
 #: How often a connected live page gets the status numbers [s].
 STATUS_EVERY_S = 0.5
 #: Comment sent on an idle event stream so proxies and browsers keep it open [s].
@@ -44,8 +48,7 @@ def _sse(kind: str, data) -> bytes:
 
 
 def create_app(logbook_url=None, live: LiveBench | None = None, token: str | None = None,
-               max_upload_bytes: int = MAX_UPLOAD_BYTES, *, allowed_hosts=None,
-               logbook=None) -> Starlette:
+               limits: Limits | None = None, *, allowed_hosts=None, logbook=None):
     """The ASGI application of ``dischargelab serve``.
 
     Parameters
@@ -59,8 +62,8 @@ def create_app(logbook_url=None, live: LiveBench | None = None, token: str | Non
     token : str, optional
         When given, every request must carry it (``Authorization: Bearer TOKEN``, the
         ``dl_token`` cookie the page sets, or ``?token=`` once).
-    max_upload_bytes : int
-        Largest upload accepted [bytes]; larger ones get 413.
+    limits : Limits, optional
+        Time-outs, threads and sizes (default :class:`Limits`'s defaults).
     allowed_hosts : list of str, optional
         Host names accepted in the Host header (default: loopback names only, which
         refuses DNS-rebinding requests).
@@ -69,13 +72,17 @@ def create_app(logbook_url=None, live: LiveBench | None = None, token: str | Non
 
     Returns
     -------
-    starlette.applications.Starlette
+    ASGI application
+        The Starlette application inside its guards; ``.state`` holds ``bench``,
+        ``packs``, ``workers`` and ``limits``.
     """
     from .packs import PackPages
 
+    limits = limits or Limits()
+    workers = Workers(limits)
     bench = live or LiveBench()
     assets = Assets.load()
-    packs = PackPages(logbook_url, logbook=logbook, max_upload_bytes=int(max_upload_bytes))
+    packs = PackPages(logbook_url, logbook=logbook, limits=limits, workers=workers)
 
     def page(name: str):
         async def endpoint(request: Request) -> Response:
@@ -91,7 +98,8 @@ def create_app(logbook_url=None, live: LiveBench | None = None, token: str | Non
     async def live_start(request: Request) -> Response:
         settings = await read_json(request)
         try:
-            started = await asyncio.to_thread(bench.start, settings)
+            started = await workers.work(request, bench.start, settings,
+                                         what="tests being started")
         except BenchError as exc:
             return error(409, str(exc))
         except DischargelabError as exc:
@@ -156,6 +164,9 @@ def create_app(logbook_url=None, live: LiveBench | None = None, token: str | Non
     async def bad_input(request: Request, exc: DataError) -> Response:
         return error(400, str(exc))
 
+    async def gone(request: Request, exc: Exception) -> Response:
+        return error(499, "the client closed the connection before the answer")
+
     @asynccontextmanager
     async def lifespan(app):
         try:
@@ -165,6 +176,7 @@ def create_app(logbook_url=None, live: LiveBench | None = None, token: str | Non
             if shutdown is not None:
                 await asyncio.to_thread(shutdown)
             packs.close()
+            workers.close()
 
     routes = [
         Route("/", page("packs"), methods=["GET"]),
@@ -178,7 +190,10 @@ def create_app(logbook_url=None, live: LiveBench | None = None, token: str | Non
         *packs.routes(),
     ]
     app = Starlette(routes=routes, lifespan=lifespan, exception_handlers={
-        404: not_found, HTTPException: http_error, RequestRefused: refused, DataError: bad_input})
+        404: not_found, HTTPException: http_error, RequestRefused: refused, DataError: bad_input,
+        ClientGone: gone, ClientDisconnect: gone})
     app.state.bench = bench
     app.state.packs = packs
-    return Guard(app, token=token, allowed_hosts=allowed_hosts)
+    app.state.workers = workers
+    app.state.limits = limits
+    return BodyDeadline(Guard(app, token=token, allowed_hosts=allowed_hosts), limits)

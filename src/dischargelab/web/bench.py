@@ -47,7 +47,7 @@ class LiveBench:
         settings = acquisition.settings
         self.acquisition = acquisition
         self.result = None
-        meta = {"out": str(settings.out), "port": settings.port, "source": settings.source,
+        meta = {"out": Path(settings.out).name, "port": settings.port, "source": settings.source,
                 "limits": limits.to_dict(), "rate_Hz": settings.rate_Hz,
                 "current_given_A": settings.current_A, "can_start": self.can_start}
         meta.update(info or {})
@@ -204,7 +204,7 @@ class DemoBench(LiveBench):
             self._thread = threading.Thread(target=self._run, args=(acq, device),
                                             name="dischargelab-web-bench", daemon=True)
             self._thread.start()
-        return {"started": True, "out": str(out), "settings": opts}
+        return {"started": True, "out": out.name, "settings": opts}
 
     def _new_log_path(self) -> Path:
         self.run_dir.mkdir(parents=True, exist_ok=True)

@@ -18,17 +18,23 @@ def error(status: int, message: str) -> JSONResponse:
     return JSONResponse({"error": message}, status_code=status)
 
 
+def check_length(request: Request, limit: int, what: str = "request body") -> None:
+    """Refuse (413) a body whose Content-Length is over ``limit`` bytes, before reading it."""
+    length = request.headers.get("content-length")
+    if length is None:
+        return
+    try:
+        declared = int(length)
+    except ValueError:
+        raise RequestRefused(400, "Content-Length is not a number") from None
+    if declared > limit:
+        raise RequestRefused(413, f"{what} of {declared} bytes is over the limit of "
+                                  f"{limit} bytes")
+
+
 async def read_body(request: Request, limit: int, what: str = "request body") -> bytes:
     """The request body, refusing (413) more than ``limit`` bytes before reading them all."""
-    length = request.headers.get("content-length")
-    if length is not None:
-        try:
-            declared = int(length)
-        except ValueError:
-            raise RequestRefused(400, "Content-Length is not a number") from None
-        if declared > limit:
-            raise RequestRefused(413, f"{what} of {declared} bytes is over the limit of "
-                                      f"{limit} bytes")
+    check_length(request, limit, what)
     chunks, size = [], 0
     async for chunk in request.stream():
         size += len(chunk)

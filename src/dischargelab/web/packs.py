@@ -2,14 +2,17 @@
 
 Every handler calls the public library (:class:`dischargelab.Logbook`,
 :func:`dischargelab.endurance`, :func:`dischargelab.simulate.curve_family`) in a worker
-thread and returns its ``to_dict()``; nothing here computes a battery quantity.
+thread (:mod:`~dischargelab.web.work`: reads and heavy work in separate bounded pools) and
+returns its ``to_dict()``; nothing here computes a battery quantity. Answers name things
+(packs, files, missions), never a path on the server.
 """
 
 from __future__ import annotations
 
-import asyncio
 import math
 import re
+import shutil
+import tempfile
 import threading
 
 from starlette.requests import Request
@@ -17,9 +20,11 @@ from starlette.responses import JSONResponse, Response
 from starlette.routing import Route
 
 from ..errors import DischargelabError, MissingExtraError
-from .body import error, read_body, read_json
+from .body import check_length, error, read_json
 from .guard import RequestRefused
-from .upload import parse_upload
+from .limits import Limits
+from .upload import UploadReader
+from .work import Workers
 
 #: A pack name: what the logbook's command line accepts, 1-100 characters, no control
 #: characters and no slash.
@@ -49,35 +54,59 @@ def _thin(values, points: int = CURVE_POINTS) -> list:
     return [None if not math.isfinite(float(values[i])) else float(values[i]) for i in idx]
 
 
+_PLAIN = (str, int, bool, type(None))
+
+
 def _clean(value):
-    """JSON-safe copy: NaN and infinities become None, tuples lists, numpy scalars floats."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
+    """JSON-safe copy: NaN and infinities become None, tuples lists, numpy scalars floats.
+
+    The common types are recognised by identity first: a pack page holds thousands of
+    floats, and this walk is on every answer."""
+    kind = type(value)
+    if kind is float:
+        return value if math.isfinite(value) else None
+    if kind is dict:
+        return {k if type(k) is str else str(k): _clean(v) for k, v in value.items()}
+    if kind is list or kind is tuple:
         return [_clean(v) for v in value]
+    if kind in _PLAIN:
+        return value
+    if isinstance(value, dict):
+        return _clean(dict(value))
+    if isinstance(value, (list, tuple)):
+        return _clean(list(value))
     if hasattr(value, "item") and not isinstance(value, (str, bytes)):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if value is None or isinstance(value, (str, int, float, bool)):
+        return _clean(value.item())             # numpy scalars
+    if isinstance(value, float):
+        return _clean(float(value))
+    if isinstance(value, _PLAIN):
         return value
     return str(value)
 
 
-#: Uploads read and stored at the same time; more get 503 (each is held in memory).
-MAX_CONCURRENT_UPLOADS = 2
-
-
 class PackPages:
-    """Routes of the logbook API; the logbook is opened at the first request needing it."""
+    """Routes of the logbook API; the logbook is opened at the first request needing it.
 
-    def __init__(self, url=None, *, logbook=None, max_upload_bytes: int):
+    Parameters
+    ----------
+    url : str, optional
+        The logbook (see :class:`dischargelab.Logbook`).
+    logbook : Logbook, optional
+        An opened logbook instead.
+    limits : Limits
+    workers : Workers
+        Where the logbook is read and the heavy work runs.
+    """
+
+    def __init__(self, url=None, *, logbook=None, limits: Limits, workers: Workers):
         self.url = url
         self._logbook = logbook
         self._own = logbook is None
-        self.max_upload_bytes = max_upload_bytes
+        self.limits = limits
+        self.workers = workers
         self._lock = threading.Lock()
-        self._uploads = asyncio.Semaphore(MAX_CONCURRENT_UPLOADS)
+        #: Uploads being received or stored now.
+        self.uploads = 0
 
     # ------------------------------------------------------------------ logbook
     def logbook(self):
@@ -102,9 +131,12 @@ class PackPages:
             raise RequestRefused(404, f"no pack named {name!r} in the logbook")
         return name
 
-    async def _call(self, func, *args):
+    @staticmethod
+    async def _call(run, request, func, *args):
+        """``run(request, func, *args)`` (a :class:`Workers` method), the library's errors
+        turned into one-line 4xx answers."""
         try:
-            return await asyncio.to_thread(func, *args)
+            return await run(request, func, *args)
         except RequestRefused:
             raise
         except MissingExtraError as exc:
@@ -124,14 +156,16 @@ class PackPages:
         ]
 
     async def list_packs(self, request: Request) -> Response:
-        data = await self._call(lambda: self.logbook().packs().to_dict())
+        data = await self._call(self.workers.read, request,
+                                lambda: self.logbook().packs().to_dict())
         return JSONResponse(_clean(data))
 
     def _pack_detail(self, name: str) -> dict:
         """What is stored about a pack, read only: a GET never fits or writes (a pack
         with a full discharge but no stored model says so; the refit is ``POST
         /api/packs/NAME/fit``). A pack that only flies shows its chemistry's prior at
-        today's capacity and resistance (built, not fitted: no write)."""
+        today's capacity and resistance (built, not fitted: no write). Only what the page
+        shows: the summary, the health with its per-event figures, the model's curves."""
         name = self._known(name)
         lb = self.logbook()
         pack = lb.pack(name)
@@ -140,7 +174,7 @@ class PackPages:
         summary["capacity_fraction"] = cap / ref if cap is not None and ref else None
         health = pack.health if pack.health is not None else lb.health(name)
         out = {"name": name, "summary": summary, "health": health.to_dict(),
-               "events": lb.events(name).to_dict(), "model": None, "model_note": None}
+               "model": None, "model_note": None}
         if not pack.fitted and pack.has_full_discharge:
             out["model_note"] = NO_MODEL
             return out
@@ -166,7 +200,8 @@ class PackPages:
         return out
 
     async def one_pack(self, request: Request) -> Response:
-        data = await self._call(self._pack_detail, request.path_params["name"])
+        data = await self._call(self.workers.read, request, self._pack_detail,
+                                request.path_params["name"])
         return JSONResponse(_clean(data))
 
     async def missions(self, request: Request) -> Response:
@@ -194,7 +229,8 @@ class PackPages:
         mission = body.get("mission")
         if not isinstance(mission, str) or not mission:
             raise RequestRefused(400, "give the mission's name: {\"mission\": \"paper-table5\"}")
-        data = await self._call(self._endurance, request.path_params["name"], mission)
+        data = await self._call(self.workers.work, request, self._endurance,
+                                request.path_params["name"], mission)
         return JSONResponse(_clean(data))
 
     def _refit(self, name: str) -> dict:
@@ -205,25 +241,52 @@ class PackPages:
 
     async def refit(self, request: Request) -> Response:
         await self._json(request)
-        data = await self._call(self._refit, request.path_params["name"])
+        data = await self._call(self.workers.work, request, self._refit,
+                                request.path_params["name"])
         return JSONResponse(_clean(data))
 
     async def _json(self, request: Request) -> dict:
         return await read_json(request)
 
     async def upload(self, request: Request) -> Response:
-        # An upload is held in memory a few times over while it is parsed and stored, so
-        # only a few run at once; the rest are told to try again (503) instead of waiting.
-        if self._uploads.locked():
-            raise RequestRefused(503, f"{MAX_CONCURRENT_UPLOADS} uploads are being stored; "
+        # Only a few uploads are received and stored at once (each is parsed in a work
+        # thread); the rest are told to try again (503) instead of waiting.
+        limits = self.limits
+        if self.uploads >= limits.max_uploads:
+            raise RequestRefused(503, f"{limits.max_uploads} uploads are being stored; "
                                       "try again when one has finished")
-        async with self._uploads:
-            body = await read_body(request, self.max_upload_bytes, "upload")
-            file_name, data, pack = parse_upload(request.headers.get("content-type", ""),
-                                                 body)
-            del body
-            pack = check_pack_name(pack)
-            result = await self._call(lambda: self.logbook().add_bytes(file_name, data, pack))
+        self.uploads += 1
+        folder = None
+        try:
+            try:
+                folder = tempfile.mkdtemp(prefix="dischargelab-upload-")
+            except OSError as exc:
+                raise RequestRefused(507, "no room on the server to receive the upload "
+                                          f"({exc.strerror or exc}); try again later") from None
+            received = await self._receive_upload(request, folder)
+            pack = check_pack_name(received.pack)
+            result = await self._call(self.workers.work, request,
+                                      lambda: self.logbook().add_upload(received.path, pack))
+        finally:
+            self.uploads -= 1
+            if folder is not None:
+                shutil.rmtree(folder, ignore_errors=True)
         if result.rejected:
-            return error(422, f"{file_name}: {result.rejected[0][1]}")
+            return error(422, f"{received.path.name}: {result.rejected[0][1]}")
         return JSONResponse(_clean(result.to_dict()))
+
+    async def _receive_upload(self, request: Request, folder: str):
+        """The request body streamed into ``folder`` (see :class:`UploadReader`)."""
+        limit = self.limits.max_upload_bytes
+        check_length(request, limit, "upload")
+        reader = UploadReader(request.headers.get("content-type", ""), folder)
+        size = 0
+        try:
+            async for chunk in request.stream():
+                size += len(chunk)
+                if size > limit:
+                    raise RequestRefused(413, f"upload is over the limit of {limit} bytes")
+                reader.write(chunk)
+            return reader.finish()
+        finally:
+            reader.close()

@@ -1,8 +1,10 @@
-"""Run the web application with uvicorn: bind rules, token, foreground or background thread.
+"""Run the web application with uvicorn: bind rules, token, limits, foreground or background.
 
 Listening on loopback (127.0.0.1) is the default. Any other address lets other machines
 in, so it needs a token (:func:`check_bind`); the address printed at start carries it.
 The socket is bound here, before uvicorn starts, so a busy port is a clear one-line error.
+uvicorn runs our h11 protocol (:func:`dischargelab.web.connections.protocol_class`: head
+time-out, connection caps) whatever else is installed.
 """
 
 from __future__ import annotations
@@ -16,11 +18,16 @@ import time
 from dataclasses import dataclass
 
 from ..errors import DischargelabError, require
+from .guard import LOOPBACK_HOSTS
 
 #: Default port of ``dischargelab serve``.
 DEFAULT_PORT = 8050
 #: Seconds open event streams get to close when the server stops.
 SHUTDOWN_GRACE_S = 1.0
+#: Connections the kernel queues before the server accepts them.
+BACKLOG = 2048
+#: File descriptors kept free of connections (logbook, temporary files, threads).
+SPARE_FILES = 64
 
 
 def is_loopback(host: str) -> bool:
@@ -89,9 +96,29 @@ def bind(host: str, port: int) -> socket.socket:
                                     "port (port=0 picks a free one)") from None
         raise DischargelabError(f"cannot listen on {host}:{port}: {exc.strerror or exc}"
                                 ) from None
-    sock.listen(128)
+    sock.listen(BACKLOG)
     sock.set_inheritable(True)
     return sock
+
+
+def open_files_for(connections: int) -> None:
+    """Raise this process's limit of open files (up to the hard limit) so that
+    ``connections`` connections fit; DischargelabError when the hard limit is too low."""
+    try:
+        import resource
+    except ImportError:                                  # not on Windows
+        return
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    need = connections + SPARE_FILES
+    if soft != resource.RLIM_INFINITY and soft < need:
+        top = need if hard == resource.RLIM_INFINITY else min(need, hard)
+        resource.setrlimit(resource.RLIMIT_NOFILE, (top, hard))
+        soft = top
+    if soft != resource.RLIM_INFINITY and soft < need:
+        raise DischargelabError(
+            f"{connections} connections need {need} open files, and this system allows "
+            f"{soft}: lower max_connections to {soft - SPARE_FILES} or raise the limit "
+            "(ulimit -n)")
 
 
 class Server:
@@ -103,17 +130,27 @@ class Server:
     host, port : str, int
     token : str, optional
         Required when ``host`` is not loopback.
+    limits : Limits, optional
+        Time-outs and connection caps (default :class:`~dischargelab.web.limits.Limits`).
     """
 
     def __init__(self, app, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
-                 token: str | None = None):
+                 token: str | None = None, limits=None):
+        from .connections import protocol_class
+        from .limits import Limits
+
         uvicorn = require("uvicorn", "web")
+        limits = limits or Limits()
         check_bind(host, token)
+        open_files_for(limits.max_connections)
         self.sock = bind(host, port)
         self.app = app
+        self.limits = limits
         self.listening = Listening(host, self.sock.getsockname()[1], token)
         config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="on",
-                                timeout_graceful_shutdown=SHUTDOWN_GRACE_S)
+                                timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+                                http=protocol_class(limits), backlog=BACKLOG,
+                                timeout_keep_alive=limits.keep_alive_s)
         self._server = uvicorn.Server(config)
         self._thread: threading.Thread | None = None
 
@@ -153,7 +190,7 @@ class Server:
 
 def build_server(*, db=None, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  token: str | None = None, demo: bool = False, runs=None, live=None,
-                 max_upload_bytes: int | None = None) -> Server:
+                 limits=None, public_hosts=()) -> Server:
     """The server ``dischargelab serve`` runs (not started yet; see :meth:`Server.run`).
 
     Parameters
@@ -167,20 +204,26 @@ def build_server(*, db=None, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
         their log files go to ``runs`` (default: a new temporary folder).
     live : LiveBench, optional
         An attached bench instead (``acquire ... --serve``).
-    max_upload_bytes : int, optional
-        Upload limit (default :data:`dischargelab.web.app.MAX_UPLOAD_BYTES`).
+    limits : Limits, optional
+        Time-outs, connection caps, threads, upload size (default
+        :class:`~dischargelab.web.limits.Limits`).
+    public_hosts : sequence of str
+        Host names the server also answers to on loopback: the name a reverse proxy in
+        front of it passes on in the Host header (``dl.example.org``).
     """
     import tempfile
 
-    from .app import MAX_UPLOAD_BYTES, create_app
+    from .app import create_app
     from .bench import DemoBench
+    from .limits import Limits
 
     if token == "auto":
         token = new_token()
     check_bind(host, token)
     if demo:
         live = DemoBench(runs or tempfile.mkdtemp(prefix="dischargelab-runs-"), hub=None)
-    app = create_app(db, live=live, token=token,
-                     max_upload_bytes=max_upload_bytes or MAX_UPLOAD_BYTES,
-                     allowed_hosts=None if is_loopback(host) else ["*"])
-    return Server(app, host, port, token)
+    limits = limits or Limits()
+    app = create_app(db, live=live, token=token, limits=limits,
+                     allowed_hosts=[*LOOPBACK_HOSTS, *public_hosts] if is_loopback(host)
+                     else ["*"])
+    return Server(app, host, port, token, limits)

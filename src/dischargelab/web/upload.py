@@ -1,11 +1,16 @@
-"""An upload form's body (multipart/form-data) parsed in memory.
+"""An upload form's body (multipart/form-data) streamed to a temporary file as it arrives.
 
-The body was already read under the size limit; it is parsed with python-multipart's
-streaming parser into memory only, so an upload never touches the disk before the logbook
-stores it.
+The body is fed chunk by chunk to python-multipart's streaming parser: the file part goes
+straight to a file in a new private temporary folder (under the name the upload gives,
+made safe), the pack name to a small bounded buffer. Nothing holds the whole upload in
+memory; the logbook then reads the file once. The caller removes the folder.
 """
 
 from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
 
 from ..logbook.summarise import safe_file_name
 from .guard import RequestRefused
@@ -13,6 +18,8 @@ from .guard import RequestRefused
 #: The form's fields.
 FILE_FIELD = "file"
 PACK_FIELD = "pack"
+#: Largest value of a text field (the pack name) and of one part's headers [bytes].
+MAX_FIELD_BYTES = 4096
 
 _USAGE = (f"send multipart/form-data with a '{FILE_FIELD}' (the log file) and a "
           f"'{PACK_FIELD}' (the pack's name) field")
@@ -28,64 +35,151 @@ def _multipart():
     return MultipartParser, parse_options_header, FormParserError
 
 
-def parse_upload(content_type: str, body: bytes) -> tuple[str, bytes, str]:
-    """``(file name, file bytes, pack name)`` from a multipart body; RequestRefused (400)
-    with one line saying what is missing or malformed."""
-    MultipartParser, parse_options_header, FormParserError = _multipart()
-    kind, params = parse_options_header(content_type)
-    if kind != b"multipart/form-data":
-        raise RequestRefused(400, f"upload is {content_type or 'not typed'!r}; {_USAGE}")
-    boundary = params.get(b"boundary")
-    if not boundary:
-        raise RequestRefused(400, f"multipart upload without a boundary; {_USAGE}")
-    parts: list[dict] = []
-    state: dict = {}
+@dataclass
+class Upload:
+    """A received upload: ``path`` (named as the upload, made safe), its ``size_bytes``
+    and the ``pack`` it is for."""
 
-    def on_part_begin():
-        state["part"] = {"headers": {}, "data": bytearray()}
-        state["field"], state["value"] = b"", b""
+    path: Path
+    size_bytes: int
+    pack: str
 
-    def on_header_field(data, start, end):
-        state["field"] += data[start:end]
 
-    def on_header_value(data, start, end):
-        state["value"] += data[start:end]
+class UploadReader:
+    """Feed the body with :meth:`write`, then :meth:`finish` returns the :class:`Upload`.
 
-    def on_header_end():
-        state["part"]["headers"][state["field"].lower()] = state["value"]
-        state["field"], state["value"] = b"", b""
+    Parameters
+    ----------
+    content_type : str
+        The request's Content-Type header.
+    folder : path-like
+        A new empty folder of our own, where the file is written.
 
-    def on_part_data(data, start, end):
-        state["part"]["data"] += data[start:end]
+    Raises
+    ------
+    RequestRefused
+        400 with one line saying what is missing or malformed.
+    """
 
-    def on_part_end():
-        parts.append(state.pop("part"))
+    def __init__(self, content_type: str, folder):
+        MultipartParser, self._options, self._error = _multipart()
+        kind, params = self._options(content_type)
+        if kind != b"multipart/form-data":
+            raise RequestRefused(400, f"upload is {content_type or 'not typed'!r}; {_USAGE}")
+        boundary = params.get(b"boundary")
+        if not boundary:
+            raise RequestRefused(400, f"multipart upload without a boundary; {_USAGE}")
+        self.folder = Path(folder)
+        self.path: Path | None = None
+        self.size = 0
+        self.pack = bytearray()
+        self._file = None
+        self._part: str | None = None      # "file", "pack" or "" (a field we ignore)
+        self._headers: dict[bytes, bytes] = {}
+        self._field = bytearray()
+        self._value = bytearray()
+        self._header_bytes = 0
+        self._parser = MultipartParser(boundary, {
+            "on_part_begin": self._part_begin, "on_header_field": self._header_field,
+            "on_header_value": self._header_value, "on_header_end": self._header_end,
+            "on_headers_finished": self._headers_finished, "on_part_data": self._part_data,
+            "on_part_end": self._part_end})
 
-    callbacks = {"on_part_begin": on_part_begin, "on_header_field": on_header_field,
-                 "on_header_value": on_header_value, "on_header_end": on_header_end,
-                 "on_part_data": on_part_data, "on_part_end": on_part_end}
-    parser = MultipartParser(boundary, callbacks)
-    try:
-        parser.write(body)
-        parser.finalize()
-    except FormParserError:
-        raise RequestRefused(400, f"the upload is not valid multipart/form-data; {_USAGE}"
-                             ) from None
-    file_name, data, pack = None, None, None
-    for part in parts:
-        disposition = part["headers"].get(b"content-disposition", b"")
-        _, options = parse_options_header(disposition)
+    # ---------------------------------------------------------------- parser callbacks
+    def _part_begin(self):
+        self._headers, self._part, self._header_bytes = {}, None, 0
+        self._field, self._value = bytearray(), bytearray()
+
+    def _grow(self, buffer: bytearray, data, start, end):
+        self._header_bytes += end - start
+        if self._header_bytes > MAX_FIELD_BYTES:
+            raise RequestRefused(400, f"a part's headers are longer than {MAX_FIELD_BYTES} "
+                                      f"bytes; {_USAGE}")
+        buffer += data[start:end]
+
+    def _header_field(self, data, start, end):
+        self._grow(self._field, data, start, end)
+
+    def _header_value(self, data, start, end):
+        self._grow(self._value, data, start, end)
+
+    def _header_end(self):
+        self._headers[bytes(self._field).lower()] = bytes(self._value)
+        self._field, self._value = bytearray(), bytearray()
+
+    def _headers_finished(self):
+        _, options = self._options(self._headers.get(b"content-disposition", b""))
         name = options.get(b"name", b"").decode("utf-8", "replace")
         if name == FILE_FIELD:
-            raw_name = options.get(b"filename", b"upload").decode("utf-8", "replace")
-            file_name = safe_file_name(raw_name)
-            data = bytes(part["data"])
+            if self._file is not None or self.path is not None:
+                raise RequestRefused(400, f"one file per upload; {_USAGE}")
+            raw = options.get(b"filename", b"upload").decode("utf-8", "replace")
+            self.path = self.folder / safe_file_name(raw)
+            self._file = open(self.path, "xb")  # closed in _part_end or close
+            self._part = FILE_FIELD
         elif name == PACK_FIELD:
-            pack = bytes(part["data"]).decode("utf-8", "replace").strip()
-    if data is None:
-        raise RequestRefused(400, f"no '{FILE_FIELD}' field in the upload; {_USAGE}")
-    if not data:
-        raise RequestRefused(400, f"the uploaded file {file_name!r} is empty")
-    if not pack:
-        raise RequestRefused(400, f"no '{PACK_FIELD}' field (the pack's name) in the upload")
-    return file_name, data, pack
+            self._part = PACK_FIELD
+        else:
+            self._part = ""
+
+    def _part_data(self, data, start, end):
+        if self._part == FILE_FIELD:
+            self._file.write(data[start:end])
+            self.size += end - start
+        elif self._part == PACK_FIELD:
+            if len(self.pack) + end - start > MAX_FIELD_BYTES:
+                raise RequestRefused(400, f"the '{PACK_FIELD}' field is longer than "
+                                          f"{MAX_FIELD_BYTES} bytes")
+            self.pack += data[start:end]
+
+    def _part_end(self):
+        if self._part == FILE_FIELD:
+            self._close_file()
+
+    def _close_file(self):
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    # ---------------------------------------------------------------- feeding
+    def write(self, chunk: bytes) -> None:
+        """Parse the next chunk of the body."""
+        try:
+            self._parser.write(chunk)
+        except self._error:
+            self.close()
+            raise RequestRefused(400, f"the upload is not valid multipart/form-data; "
+                                      f"{_USAGE}") from None
+        except OSError as exc:
+            self.close()
+            raise RequestRefused(507, "no room on the server to receive the upload "
+                                      f"({os.strerror(exc.errno) if exc.errno else exc}); "
+                                      "try again later") from None
+
+    def finish(self) -> Upload:
+        """The upload, once the whole body was written; RequestRefused (400) when a field
+        is missing, the body is cut short or the file is empty."""
+        try:
+            self._parser.finalize()
+        except self._error:
+            self.close()
+            raise RequestRefused(400, f"the upload is not valid multipart/form-data; "
+                                      f"{_USAGE}") from None
+        cut = self._file is not None              # the file part never ended
+        self.close()
+        if self.path is None:
+            raise RequestRefused(400, f"no '{FILE_FIELD}' field in the upload; {_USAGE}")
+        if cut:
+            raise RequestRefused(400, "the upload ended inside the file (the body is cut "
+                                      f"short); {_USAGE}")
+        if not self.size:
+            raise RequestRefused(400, f"the uploaded file {self.path.name!r} is empty")
+        pack = bytes(self.pack).decode("utf-8", "replace").strip()
+        if not pack:
+            raise RequestRefused(400, f"no '{PACK_FIELD}' field (the pack's name) in the "
+                                      "upload")
+        return Upload(self.path, self.size, pack)
+
+    def close(self) -> None:
+        """Close the file (the caller removes the folder)."""
+        self._close_file()

@@ -144,12 +144,18 @@
   function showEndurance(r) {
     const t = $("endurance-result");
     t.replaceChildren();
-    const rows = [["Mission", r.mission], ["Completed", r.completed ? "yes" : "no (" + r.ended_by + ")"],
-                  ["Flight time", DL.clock(r.flight_time_s)], ["Endurance to cutoff", DL.clock(r.endurance_s)],
-                  ["Charge used", DL.num(r.charge_used_Ah, 3) + " Ah"], ["State of charge at the end", DL.num(r.soc_end_pct, 1) + " %"],
-                  ["Minimum voltage", DL.num(r.min_voltage_V, 2) + " V"]];
-    for (const w of r.warnings || []) rows.push(["Warning", w]);
-    for (const [k, v] of rows) t.append(DL.el("tr", {}, [DL.el("th", {text: k}), DL.el("td", {text: String(v)})]));
+    const cannot = r.cannot_deliver ? r.cannot_deliver.message : null;
+    const rows = [["Mission", r.mission]];
+    if (cannot) rows.push(["Cannot fly", cannot]);
+    rows.push(["Completed", r.completed ? "yes" : "no (" + r.ended_by + ")"],
+              ["Flight time", DL.clock(r.flight_time_s)], ["Endurance to cutoff", DL.clock(r.endurance_s)],
+              ["Charge used", DL.num(r.charge_used_Ah, 3) + " Ah"], ["State of charge at the end", DL.num(r.soc_end_pct, 1) + " %"],
+              ["Minimum voltage", DL.num(r.min_voltage_V, 2) + " V"]);
+    for (const w of r.warnings || []) if (w !== cannot) rows.push(["Warning", w]);
+    for (const [k, v] of rows) {
+      t.append(DL.el("tr", k === "Cannot fly" ? {class: "cannot"} : {},
+                     [DL.el("th", {text: k}), DL.el("td", {text: String(v)})]));
+    }
     window.__endurance = r;
   }
 

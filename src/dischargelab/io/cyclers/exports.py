@@ -1,0 +1,392 @@
+"""Testers' text and spreadsheet exports, read by what their columns mean.
+
+Arbin (CSV and ``.xlsx`` from MITS Pro / MITS 7-8), Maccor text exports and
+other testers' exports name their columns in many ways (``Test_Time(s)``, ``Test
+Time (s)``, ``TestTime``; ``Current(A)``, ``Amps``, ``I/mA``). A column is given a
+**role** by its name without the unit, and scaled by the unit in its name
+(``(mA)``, ``[mAh]``, ``/mA.h``); the roles are test time, voltage, current,
+cycle and step numbers, a state column (charge / discharge / rest), the
+tester's charge and discharge counters, a per-step capacity counter,
+temperature and date-time. A table is a tester table when it has time, voltage,
+current and a cycle or step number.
+
+Maccor text: a few preamble lines, then a tab-separated header (``Rec#  Cyc#
+Step  TestTime  StepTime  Amp-hr  Watt-hr  Amps  Volts  State ...``); the
+current is unsigned and ``State`` (``C``, ``D``, ``R``) gives its sign; test
+time is written ``0d 00:00:05.05``.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import warnings
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ...errors import DataError, require
+from .steps import TesterRecords
+
+#: Unit as written -> (scale, offset) to the role's unit, by quantity.
+UNITS = {
+    "time": {"s": 1.0, "sec": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0, "hr": 3600.0},
+    "voltage": {"v": 1.0, "mv": 1e-3},
+    "current": {"a": 1.0, "ma": 1e-3, "ua": 1e-6, "µa": 1e-6, "μa": 1e-6},
+    "capacity": {"ah": 1.0, "a.h": 1.0, "mah": 1e-3, "ma.h": 1e-3, "uah": 1e-6, "µah": 1e-6,
+                 "µa.h": 1e-6},
+    "temperature": {"c": 0.0, "degc": 0.0, "°c": 0.0, "deg c": 0.0, "k": -273.15},
+}
+
+#: Role -> (quantity, names without unit, best first).
+ROLES = {
+    "time_s": ("time", ("test time", "testtime", "total time", "test", "time", "elapsed time",
+                        "test time s")),
+    "voltage_V": ("voltage", ("voltage", "volts", "ewe", "ecell", "cell voltage", "potential",
+                              "u", "v")),
+    "current_A": ("current", ("current", "amps", "cell current", "i", "<i>", "amp")),
+    "cycle_index": (None, ("cycle index", "cycle", "cyc#", "cyc", "cycle number", "cycle id",
+                           "cycle no", "cycle c")),
+    "step_index": (None, ("step index", "step", "step number", "step id", "step no", "ns")),
+    "state": (None, ("state", "status", "md", "step type", "step name", "mode")),
+    "tester_charge_Ah": ("capacity", ("charge capacity", "chg capacity", "charge cap",
+                                      "q charge", "chg cap")),
+    "tester_discharge_Ah": ("capacity", ("discharge capacity", "dchg capacity",
+                                         "discharge cap", "q discharge", "dchg cap")),
+    "tester_step_Ah": ("capacity", ("amp hr", "amp-hr", "capacity", "ah", "cap")),
+    "temperature_C": ("temperature", ("temperature", "temp", "aux temperature", "t1",
+                                      "aux temperature 1", "cell temperature")),
+    "datetime": (None, ("date time", "datetime", "dpt time", "timestamp", "realtime",
+                        "date")),
+}
+
+_BRACKET = re.compile(r"^(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]\s*$")
+_DAY_CLOCK = re.compile(r"^\s*(?:(\d+)\s*d\s*)?(\d+):(\d{1,2}):(\d{1,2}(?:\.\d*)?)\s*$")
+
+#: Temperatures outside this range [degC] are not a reading (an unconnected sensor).
+PLAUSIBLE_C = (-60.0, 150.0)
+
+
+def split_header(name: str) -> tuple[str, str | None]:
+    """``"Current(mA)"`` -> ``("current", "ma")``; ``"Q charge/discharge/mA.h"`` ->
+    ``("q charge/discharge", "ma.h")``; ``"Cyc#"`` -> ``("cyc#", None)``."""
+    text = str(name).strip().lstrip("\ufeff")
+    unit = None
+    match = _BRACKET.match(text)
+    if match and match.group(1):
+        text, unit = match.group(1), match.group(2)
+    elif "/" in text:
+        head, _, tail = text.rpartition("/")
+        if any(tail.strip().lower() in table for table in UNITS.values()):
+            text, unit = head, tail
+    base = re.sub(r"[\s_]+", " ", text.lower()).strip()
+    return base, (unit.strip().lower() if unit else None)
+
+
+def find_roles(names: list[str]) -> dict[str, tuple[int, float]]:
+    """Role -> (column position, scale to SI); the best-named column per role.
+
+    Raises
+    ------
+    DataError
+        A column named for a role carries a unit that does not fit it.
+    """
+    parsed = [split_header(n) for n in names]
+    found: dict[str, tuple[int, float]] = {}
+    taken: set[int] = set()
+    for role, (quantity, spellings) in ROLES.items():
+        best = None
+        for spelling in spellings:
+            for k, (base, unit) in enumerate(parsed):
+                if k in taken or base != spelling:
+                    continue
+                scale = _scale(quantity, unit)
+                if scale is None:
+                    continue
+                best = (k, scale)
+                break
+            if best is not None:
+                break
+        if best is None and role == "temperature_C":
+            best = next(((k, 0.0) for k, (base, unit) in enumerate(parsed)
+                         if k not in taken and base.startswith(("aux temperature", "temperature"))
+                         and _scale("temperature", unit) is not None), None)
+        if best is not None:
+            found[role] = best
+            taken.add(best[0])
+    return found
+
+
+def _scale(quantity: str | None, unit: str | None) -> float | None:
+    """The scale (offset for temperature) of ``unit``, the default for none, None if foreign."""
+    if quantity is None:
+        return 1.0 if unit is None else None
+    table = UNITS[quantity]
+    if unit is None:
+        return 0.0 if quantity == "temperature" else 1.0
+    return table.get(unit.replace(" ", ""))
+
+
+def is_tester_table(names: list[str]) -> bool:
+    """Time, voltage, current and a cycle or step number among the column names."""
+    roles = find_roles(names)
+    return all(r in roles for r in ("time_s", "voltage_V", "current_A")) and (
+        "cycle_index" in roles or "step_index" in roles)
+
+
+# --------------------------------------------------------------------------- text
+
+#: A tester table's header is looked for in this many first lines (EC-Lab text exports
+#: carry about a hundred lines of settings above it).
+HEADER_LINES = 300
+
+#: Records of a tester's table per (cycle, step) run, at least, among its first rows: a
+#: tester writes many records per step (a column that changes every row is not a step).
+MIN_RECORDS_PER_STEP = 3
+
+
+def text_header(lines: list[str]) -> tuple[int, str] | None:
+    """(line index, delimiter) of a tester table's header among the first lines, or None.
+
+    The rows below the header must hold steps: runs of one (cycle, step) pair of
+    :data:`MIN_RECORDS_PER_STEP` records or more on average.
+    """
+    for k, line in enumerate(lines[:HEADER_LINES]):
+        for delimiter in ("\t", ",", ";"):
+            names = line.rstrip("\r\n").split(delimiter)
+            if line.count(delimiter) >= 3 and is_tester_table(names):
+                return (k, delimiter) if _holds_steps(lines[k:k + 201], delimiter) else None
+    return None
+
+
+def _holds_steps(lines: list[str], delimiter: str) -> bool:
+    try:
+        table = pd.read_csv(io.StringIO("\n".join(lines)), sep=delimiter, header=0,
+                            decimal=_decimal(lines[1:], delimiter))
+    except (ValueError, pd.errors.ParserError):
+        return False
+    roles = find_roles([str(c) for c in table.columns])
+    keys = [table.iloc[:, roles[r][0]] for r in ("cycle_index", "step_index") if r in roles]
+    if not keys or len(table) < MIN_RECORDS_PER_STEP:
+        return bool(keys)
+    values = pd.concat(keys, axis=1).astype(str).agg("|".join, axis=1).to_numpy()
+    runs = 1 + int(np.sum(values[1:] != values[:-1]))
+    return len(values) / runs >= MIN_RECORDS_PER_STEP
+
+
+def read_text_export(path, text: str | None = None) -> TesterRecords:
+    """A tester's text export (Arbin CSV, Maccor text, others) as :class:`TesterRecords`."""
+    path = Path(path)
+    if text is None:
+        text = path.read_bytes().decode("utf-8", errors="replace")
+    lines = text.splitlines()
+    found = text_header(lines)
+    if found is None:
+        raise DataError(f"{path.name}: no tester table header (time, voltage, current and a "
+                        f"cycle or step column) in the first {HEADER_LINES} lines")
+    k, delimiter = found
+    decimal = _decimal(lines[k + 1:k + 51], delimiter)
+    try:
+        table = pd.read_csv(io.StringIO("\n".join(lines[k:])), sep=delimiter, header=0,
+                            low_memory=False, decimal=decimal)
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise DataError(f"{path.name}: the tester table cannot be parsed "
+                        f"({str(exc).splitlines()[0]})") from None
+    table = table.loc[:, [c for c in table.columns if not str(c).startswith("Unnamed")]]
+    vendor = _vendor(list(table.columns), lines[:k])
+    preamble = [line.strip() for line in lines[:k] if line.strip()]
+    records = np.arange(len(table)) + k + 2   # the file's line numbers
+    meta = {"format": f"{vendor}-text" if vendor else "tester-text", "preamble": preamble,
+            "reader": "dischargelab's tester-table reader (columns by name and unit)"}
+    return tester_records(table, records, path.name, meta)
+
+
+def _decimal(rows: list[str], delimiter: str) -> str:
+    """``","`` when the numbers are written with a decimal comma (European exports)."""
+    if delimiter == ",":
+        return "."
+    text = "\n".join(rows)
+    return "," if re.search(r"\d,\d", text) and not re.search(r"\d\.\d", text) else "."
+
+
+def _vendor(names: list[str], preamble: list[str]) -> str | None:
+    lowered = {str(n).strip().lower() for n in names}
+    if {"rec#", "cyc#"} & lowered or any(p.startswith(("Today's Date", "Procedure:"))
+                                         for p in preamble):
+        return "maccor"
+    if {"data_point", "test_time", "step_index", "test_time(s)"} & lowered or any(
+            str(n).lower().startswith(("test_time", "step_index")) for n in names):
+        return "arbin"
+    return None
+
+
+# --------------------------------------------------------------------------- spreadsheets
+
+def is_xlsx(head: bytes, path) -> bool:
+    """A zip holding ``xl/workbook.xml``: an Excel workbook."""
+    if not head.startswith(b"PK"):
+        return False
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return "xl/workbook.xml" in archive.namelist()
+    except (zipfile.BadZipFile, OSError):
+        return False
+
+
+def read_xlsx_export(path) -> TesterRecords:
+    """A tester's Excel export: every data sheet (a tester table), in time order."""
+    require("openpyxl", "cyclers")
+    path = Path(path)
+    try:
+        with warnings.catch_warnings():   # openpyxl's style warnings are not the user's
+            warnings.simplefilter("ignore", UserWarning)
+            sheets = pd.read_excel(path, sheet_name=None, header=None, engine="openpyxl")
+    except (ValueError, KeyError, OSError, zipfile.BadZipFile) as exc:
+        raise DataError(f"{path.name}: the workbook cannot be read by openpyxl "
+                        f"({str(exc).splitlines()[0]})") from None
+    parts, used, names = [], [], None
+    for sheet, raw in sheets.items():
+        if "stat" in sheet.lower():
+            continue   # per-cycle statistics, not records
+        rows = raw.head(20).astype(str).values.tolist()
+        header = next((k for k, row in enumerate(rows) if is_tester_table(row)), None)
+        if header is None:
+            continue
+        body = raw.iloc[header + 1:].reset_index(drop=True)
+        body.columns = [str(c) for c in raw.iloc[header]]
+        body = body.loc[:, [c for c in body.columns if c not in ("nan", "None")]]
+        if names is not None and list(body.columns) != names:
+            continue
+        names = list(body.columns)
+        parts.append(body)
+        used.append(sheet)
+    if not parts:
+        raise DataError(f"{path.name}: no sheet holds a tester table (time, voltage, current "
+                        "and a cycle or step column)")
+    table = pd.concat(parts, ignore_index=True)
+    vendor = "arbin" if any(s.lower().startswith("channel") for s in sheets) or \
+        _vendor(names or [], []) == "arbin" else None
+    meta = {"format": f"{vendor}-xlsx" if vendor else "tester-xlsx",
+            "reader": "dischargelab's tester-table reader over openpyxl "
+                      f"{_version('openpyxl')}",
+            "notes": [f"records from sheet(s) {', '.join(used)}"]}
+    return tester_records(table, np.arange(len(table)) + 1, path.name, meta)
+
+
+def _version(module: str) -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(module)
+    except PackageNotFoundError:
+        return "(version unknown)"
+
+
+# --------------------------------------------------------------------------- to records
+
+def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: dict
+                   ) -> TesterRecords:
+    """Canonical :class:`TesterRecords` from a tester table with named columns."""
+    names = [str(c) for c in table.columns]
+    roles = find_roles(names)
+    meta = dict(meta)
+    notes = list(meta.pop("notes", []))
+    out = pd.DataFrame(index=table.index)
+    column_map, units = {}, {}
+    for role, (k, scale) in roles.items():
+        column = table.iloc[:, k]
+        column_map[role] = names[k]
+        if role == "time_s":
+            out[role] = _seconds(column, scale, name)
+        elif role == "state":
+            out[role] = state_of(column)
+        elif role == "datetime":
+            continue
+        elif role == "temperature_C":
+            values = pd.to_numeric(column, errors="coerce").to_numpy(dtype=float) + scale
+            median = float(np.nanmedian(values)) if np.isfinite(values).any() else np.nan
+            if not PLAUSIBLE_C[0] <= median <= PLAUSIBLE_C[1]:
+                notes.append(f"{names[k]!r} reads {median:.4g} degC, not a temperature (no "
+                             "sensor?): not used")
+                del column_map[role]
+                continue
+            out[role] = values
+        else:
+            values = pd.to_numeric(column, errors="coerce").to_numpy(dtype=float)
+            out[role] = values if role in ("cycle_index", "step_index") else values * scale
+        unit = split_header(names[k])[1]
+        if unit:
+            units[role] = unit
+    for role in ("cycle_index", "step_index"):
+        if role not in out:
+            out[role] = 0
+            notes.append(f"no {role.replace('_', ' ')} column: every record counted as "
+                         f"{role.split('_')[0]} 0")
+        out[role] = out[role].fillna(0).astype(np.int64)
+    if "datetime" in roles:
+        start = _start_time(table.iloc[:, roles["datetime"][0]], out.get("time_s"))
+        if start:
+            meta["start_time"] = start
+    meta.update({"column_map": column_map, "units": units, "notes": notes})
+    return TesterRecords(frame=out, records=np.asarray(records), meta=meta)
+
+
+def state_of(column: pd.Series) -> np.ndarray:
+    """``"charge"``, ``"discharge"``, ``"rest"`` or ``""`` for each state value
+    (Maccor ``C``/``D``/``R``, Neware ``CC_DChg``/``CCCV_Chg``/``Rest``, words)."""
+    text = column.astype(str).str.strip().str.lower()
+    out = np.full(len(text), "", dtype=object)
+    values = text.to_numpy(dtype=object)
+    for k, value in enumerate(values):
+        if value in ("d",) or "dchg" in value or "disch" in value or value.startswith("dis"):
+            out[k] = "discharge"
+        elif value in ("c",) or "chg" in value or value.startswith("charg"):
+            out[k] = "charge"
+        elif value in ("r",) or value.startswith(("rest", "ocv", "pause")):
+            out[k] = "rest"
+    return out
+
+
+def _seconds(column: pd.Series, scale: float, name: str) -> np.ndarray:
+    """Test time [s] from numbers (with the unit's scale) or ``[Nd ]H:MM:SS.f`` text."""
+    values = pd.to_numeric(column, errors="coerce")
+    if values.notna().mean() > 0.9:
+        return values.to_numpy(dtype=float) * scale
+    text = column.astype(str)
+    parts = text.str.extract(_DAY_CLOCK)
+    if parts[1].notna().mean() > 0.9:
+        days = pd.to_numeric(parts[0], errors="coerce").fillna(0.0)
+        seconds = (days * 86400 + parts[1].astype(float) * 3600 + parts[2].astype(float) * 60
+                   + parts[3].astype(float))
+        return seconds.to_numpy(dtype=float)
+    raise DataError(f"{name}: the test time column holds {str(text.iloc[0])!r}, neither "
+                    "seconds nor a clock time")
+
+
+def _start_time(column: pd.Series, time_s) -> str | None:
+    """ISO 8601 time of test time 0 from a date-time column, when it parses."""
+    first = column.dropna()
+    if first.empty:
+        return None
+    value = first.iloc[0]
+    stamp = None
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        x = float(value)
+        if 1e9 < x < 4.2e9:                     # UNIX seconds
+            stamp = pd.Timestamp(x, unit="s")
+        elif 20000 < x < 80000:                 # Excel / OLE days
+            stamp = pd.Timestamp("1899-12-30") + pd.to_timedelta(x, unit="D")
+    else:
+        stamp = pd.to_datetime(str(value), errors="coerce")
+        if stamp is pd.NaT:
+            stamp = None
+    if stamp is None or pd.isna(stamp):
+        return None
+    offset = float(time_s.iloc[first.index[0]]) if time_s is not None else 0.0
+    return (stamp - pd.to_timedelta(offset, unit="s")).isoformat(timespec="seconds")
+
+
+__all__ = ["read_text_export", "read_xlsx_export", "tester_records", "find_roles",
+           "split_header", "is_tester_table", "text_header", "is_xlsx", "state_of"]

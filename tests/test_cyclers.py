@@ -1,0 +1,281 @@
+"""Battery testers' files: every shared file reads, its first full discharge matches the
+tester's own capacity counter, steps carry the tester's numbers, and exports with other
+column names, units and sheet splits read the same."""
+
+import json
+import os
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import dischargelab as dl
+from cli_run import run
+from dischargelab.errors import DataError, MissingExtraError
+from dischargelab.io import read_discharge, read_discharges
+from dischargelab.io.cyclers import (
+    detect_tester,
+    fit_steps,
+    full_discharges,
+    read_tester,
+)
+
+#: file -> (format, the step number of its first full discharge, that discharge's mean
+#: current [A]); from the data README and the testers' own step tables.
+FILES = {
+    "neware/TestFile.nda": ("neware-nda", 7, 3.0),
+    "neware/test_2.ndax": ("neware-ndax", 4, 7.92e-5),
+    "biologic/jdb11-1_c3_gcpl_5cycles_2V-3p8V_C-24_data_C09.mpr": ("biologic-mpr", 4, 8.88e-5),
+    "arbin/arbin_example.res": ("arbin-res", 3, 8.65e-5),
+    "arbin/20160805_test001_45_cc_01.res": ("arbin-res", 9, 1.52e-4),
+    "arbin/bs542_004_gr_li_50ua_50mv_1v_191020_Channel_11.xlsx": ("arbin-xlsx", 4, 5.0e-5),
+    "arbin/arbin_example.csv": ("arbin-text", 3, 3.42),
+    "maccor/maccor_001.txt": ("maccor-text", 7, 0.5),
+}
+
+#: The acceptance: charge counted from the current within 0.1 % of the tester's counter.
+CAPACITY_TOLERANCE = 1e-3
+
+
+def _needs_mdbtools(name: str) -> None:
+    if name.endswith(".res") and shutil.which("mdb-export") is None:
+        if os.environ.get("CI"):
+            pytest.fail("mdbtools is required in CI (make mdbtools: apt-get install mdbtools)")
+        pytest.skip("mdbtools not installed (apt-get install mdbtools)")
+
+
+@pytest.fixture(scope="module")
+def cyclers(shared_data):
+    return shared_data / "cyclers"
+
+
+@pytest.mark.parametrize("name", sorted(FILES))
+def test_every_tester_file_reads_and_its_first_full_discharge_matches_the_tester(cyclers,
+                                                                                 name):
+    _needs_mdbtools(name)
+    fmt, number, current = FILES[name]
+    tester = read_tester(cyclers / name)
+    assert tester.meta["format"] == fmt
+    first = full_discharges(tester.steps)[0]
+    assert first["number"] == number
+    assert first["mean_current_A"] == pytest.approx(current, rel=0.02)
+    assert first["tester_Ah"] > 0
+    assert abs(first["charge_Ah"] / first["tester_Ah"] - 1) < CAPACITY_TOLERANCE
+    # the discharge read_discharge gives by default is that step, discharge positive
+    frame, meta = read_discharge(cyclers / name)
+    assert meta["segment"] == number and meta["step"]["kind"] == "discharge"
+    assert frame["current_A"].median() > 0
+    assert frame["time_s"].iloc[0] == 0 and np.all(np.diff(frame["time_s"]) > 0)
+    assert meta["cycle"] == first["cycle"]
+    assert set(frame["step_index"]) == {first["step"]}
+
+
+def test_steps_carry_the_testers_numbers_and_kinds(cyclers):
+    tester = read_tester(cyclers / "maccor/maccor_001.txt")
+    kinds = [s["kind"] for s in tester.steps[:8]]
+    assert kinds == ["rest", "discharge", "rest", "charge", "charge", "rest", "discharge",
+                     "rest"]
+    assert [s["mode"] for s in tester.steps[3:5]] == ["CC", "CV"]
+    assert [s["step"] for s in tester.steps] == list(range(1, 25))
+    assert "state column" in tester.meta["sign_source"]
+    # the current is unsigned in the file: the state gives charge its sign
+    assert tester.steps[3]["mean_current_A"] == pytest.approx(-1.5, rel=1e-3)
+    assert fit_steps(tester.steps)[0] == [7, 12, 17, 22]
+    whole, meta = read_discharge(cyclers / "maccor/maccor_001.txt", segment="none")
+    assert whole["cycle_index"].dtype.kind == "i" and whole["step_index"].dtype.kind == "i"
+    assert len(meta["steps"]) == 24 and meta["segment"] is None
+    assert [s["number"] for s in meta["segments"]] == [2, 7, 12, 17, 22]
+    assert (whole["current_A"] < 0).any() and (whole["current_A"] > 0).any()
+
+
+def test_a_step_is_read_by_its_number_and_a_charge_step_is_refused(cyclers):
+    d = dl.read(cyclers / "maccor/maccor_001.txt", segment=12)
+    assert d.mean_current_A == pytest.approx(2.5, rel=1e-3)
+    assert d.rest_voltage_V == pytest.approx(4.173, abs=0.002)
+    assert d.meta["starts_full"] is True
+    with pytest.raises(DataError, match="is not a discharge.*2, 7, 12, 17, 22"):
+        read_discharge(cyclers / "maccor/maccor_001.txt", segment=4)
+    with pytest.raises(DataError, match="24 steps"):
+        read_discharge(cyclers / "maccor/maccor_001.txt", segment=30)
+    with pytest.raises(DataError, match="not a battery tester file"):
+        read_discharges(cyclers.parent / "samsung30q_S001/Q30_S001_1C.csv", steps=[2],
+                        columns="time_s=0,current_A=1,voltage_V=2")
+
+
+def test_neware_sign_cycles_and_ndax_step_times(cyclers):
+    nda = read_tester(cyclers / "neware/TestFile.nda")
+    assert [s["cycle"] for s in nda.steps] == [1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3]
+    assert "temperature_C" in nda.frame and nda.meta["start_time"].startswith("2024-05-27")
+    ndax = read_tester(cyclers / "neware/test_2.ndax")
+    assert np.all(np.diff(ndax.frame["time_s"]) >= 0)
+    assert any("interpolation" in n for n in ndax.meta["notes"])
+    assert len(fit_steps(ndax.steps)[0]) == 7     # one per rate of the rate test
+
+
+def test_biologic_set_point_current_is_used_and_said(cyclers):
+    d = dl.read(cyclers / "biologic/jdb11-1_c3_gcpl_5cycles_2V-3p8V_C-24_data_C09.mpr")
+    assert any("set point control/V/mA" in n for n in d.meta["notes"])
+    assert d.charge_Ah == pytest.approx(0.853e-3, rel=2e-3)
+
+
+def test_arbin_res_records_out_of_order_are_put_in_order(cyclers):
+    _needs_mdbtools(".res")
+    tester = read_tester(cyclers / "arbin/arbin_example.res")
+    assert any("Data_Point order" in n for n in tester.meta["notes"])
+    assert [s["number"] for s in full_discharges(tester.steps)] == [3, 7, 11, 15]
+
+
+# ----------------------------------------------------------------------------- held out
+
+def test_newer_arbin_export_names_and_units_read_the_same(cyclers, tmp_path):
+    """MITS Pro 8 style headers ("Test Time (s)", "Current (mA)"...), mA and mAh units."""
+    source = pd.read_csv(cyclers / "arbin/arbin_example.csv")
+    newer = pd.DataFrame({
+        "Date Time": pd.to_datetime(source["DateTime"], unit="s").dt.strftime(
+            "%m/%d/%Y %H:%M:%S"),
+        "Test Time (s)": source["Test_Time"], "Step Time (s)": source["Step_Time"],
+        "Cycle Index": source["Cycle_Index"], "Step Index": source["Step_Index"],
+        "Current (mA)": source["Current"] * 1000, "Voltage (V)": source["Voltage"],
+        "Charge Capacity (mAh)": source["Charge_Capacity"] * 1000,
+        "Discharge Capacity (mAh)": source["Discharge_Capacity"] * 1000,
+        "Aux_Temperature_1 (C)": source["Temperature"]})
+    path = tmp_path / "channel_5.csv"
+    newer.to_csv(path, index=False)
+    assert detect_tester(path) == "text"
+    old, new = read_tester(cyclers / "arbin/arbin_example.csv"), read_tester(path)
+    assert new.meta["format"] == "tester-text"
+    assert [s["kind"] for s in new.steps] == [s["kind"] for s in old.steps]
+    for a, b in zip(full_discharges(old.steps), full_discharges(new.steps)):
+        assert b["charge_Ah"] == pytest.approx(a["charge_Ah"], rel=1e-9)
+        assert b["tester_Ah"] == pytest.approx(a["tester_Ah"], rel=1e-9)
+    assert new.frame["temperature_C"].iloc[5] == pytest.approx(source["Temperature"].iloc[5])
+
+
+def test_maccor_export_with_seconds_and_comma_separation_reads_the_same(cyclers, tmp_path):
+    text = (cyclers / "maccor/maccor_001.txt").read_text()
+    lines = text.splitlines()
+    head = 3   # preamble lines before the header
+    table = pd.read_csv(cyclers / "maccor/maccor_001.txt", sep="\t", skiprows=head)
+    days = table["TestTime"].str.extract(r"(\d+)d\s+(\d+):(\d+):([\d.]+)").astype(float)
+    seconds = days[0] * 86400 + days[1] * 3600 + days[2] * 60 + days[3]
+    other = pd.DataFrame({"Rec#": table["Rec#"], "Cyc#": table["Cyc#"], "Step": table["Step"],
+                          "Test (Sec)": seconds, "Amp-hr": table["Amp-hr"],
+                          "Amps": table["Amps"], "Volts": table["Volts"],
+                          "State": table["State"]})
+    path = tmp_path / "maccor_export.csv"
+    path.write_text("\n".join(lines[:head]) + "\n" + other.to_csv(index=False))
+    tester = read_tester(path)
+    assert tester.meta["format"] == "maccor-text"
+    step = tester.step(7)
+    assert step["charge_Ah"] == pytest.approx(4.544, rel=1e-3)
+    assert abs(step["charge_Ah"] / step["tester_Ah"] - 1) < CAPACITY_TOLERANCE
+
+
+def test_workbook_split_over_sheets_reads_as_one(cyclers, tmp_path):
+    pytest.importorskip("openpyxl")
+    book = pd.read_excel(cyclers / "arbin/bs542_004_gr_li_50ua_50mv_1v_191020_Channel_11.xlsx",
+                         sheet_name="Channel_11_1")
+    path = tmp_path / "split.xlsx"
+    with pd.ExcelWriter(path, engine="openpyxl") as writer:
+        book.iloc[:2000].to_excel(writer, sheet_name="Channel_11_1", index=False)
+        book.iloc[2000:].to_excel(writer, sheet_name="Channel_11_2", index=False)
+        pd.DataFrame({"Cycle_Index": [1], "Charge_Time(s)": [1.0]}).to_excel(
+            writer, sheet_name="Statistics_11", index=False)
+    tester = read_tester(path)
+    assert len(tester.frame) == len(book)
+    whole = read_tester(cyclers / "arbin/bs542_004_gr_li_50ua_50mv_1v_191020_Channel_11.xlsx")
+    assert [s["charge_Ah"] for s in tester.steps] == pytest.approx(
+        [s["charge_Ah"] for s in whole.steps], rel=1e-12)
+
+
+# ----------------------------------------------------------------------------- errors
+
+def test_unreadable_files_name_the_reader_and_its_version(cyclers, tmp_path):
+    nda = tmp_path / "damaged.nda"
+    nda.write_bytes(b"NEWARE" + np.random.default_rng(3).integers(0, 256, 4000,
+                                                                 dtype=np.uint8).tobytes())
+    with pytest.raises(DataError) as info:
+        read_tester(nda)
+    assert "NewareNDA" in str(info.value) and "\n" not in str(info.value)
+    mpr = tmp_path / "cut.mpr"
+    mpr.write_bytes((cyclers / "biologic/jdb11-1_c3_gcpl_5cycles_2V-3p8V_C-24_data_C09.mpr")
+                    .read_bytes()[:5000])
+    with pytest.raises(DataError) as info:
+        read_tester(mpr)
+    assert "galvani" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_missing_mdbtools_names_the_debian_package(cyclers, monkeypatch):
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(MissingExtraError, match="apt-get install mdbtools"):
+        read_tester(cyclers / "arbin/arbin_example.res")
+
+
+# ----------------------------------------------------------------------------- commands
+
+def test_steps_command_and_step_option(cyclers, capsys, tmp_path):
+    code, out, err = run(capsys, "steps", cyclers / "neware/TestFile.nda", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["fit_steps"] == [7] and len(doc["steps"]) == 11
+    code, out, err = run(capsys, "validate", "zippy-1100-2s", cyclers / "maccor/maccor_001.txt",
+                         "--step", "99", "--cutoff", "2.6")
+    assert code == 2 and "24 steps" in err
+    code, out, err = run(capsys, "fit", cyclers.parent / "samsung30q_S001/Q30_S001_1C.csv",
+                         "--columns", "time_s=0,current_A=1,voltage_V=2", "--step", "2")
+    assert code == 2 and "not a battery tester file" in err
+
+
+def test_logbook_summary_has_one_event_per_discharge_step_with_its_cycle(cyclers):
+    from dischargelab.logbook.summarise import summarise_source
+
+    summary = summarise_source(cyclers / "neware/TestFile.nda", keep_raw=False)
+    assert [(e["kind"], e["cycle"], e["segment"]) for e in summary.events] == [
+        ("discharge", 1, 2), ("discharge", 2, 7)]
+    assert summary.events[1]["discharged_Ah"] == pytest.approx(5.8066, rel=1e-3)
+
+
+@pytest.mark.slow
+def test_fit_on_lithium_cells_validates_on_their_other_steps(cyclers):
+    """Maccor LG M50 at 0 degC: fitted at 0.5 and 10 A, checked at 2.5 and 5 A; Neware
+    cell: fitted on its full discharge (cycle 2), checked on cycle 1 from a partial charge."""
+    maccor = cyclers / "maccor/maccor_001.txt"
+    runs = [dl.read(maccor, segment=n) for n in (7, 22)]
+    fit = dl.fit(runs, bootstrap=0)
+    cases = dl.validate(fit.battery, [dl.read(maccor, segment=n) for n in (12, 17)],
+                        cutoff=2.6)
+    errors = [c.summary["endurance_error_s"] / c.summary["endurance_measured_s"]
+              for c in cases]
+    assert all(abs(e) < 0.05 for e in errors), errors
+    assert not any(c.summary["in_fit"] for c in cases)
+
+    neware = dl.fit(cyclers / "neware/TestFile.nda", bootstrap=0)
+    assert any("step 7 used" in n for n in neware.notes)
+    cases = dl.validate(neware.battery, cyclers / "neware/TestFile.nda", cutoff=2.6)
+    held_out = [c for c in cases if not c.summary["in_fit"]]
+    assert [c.summary["file"].endswith("step 2") for c in held_out] == [True]
+    error = held_out[0].summary["endurance_error_s"] / held_out[0].summary["endurance_measured_s"]
+    assert abs(error) < 0.15, error
+
+
+def test_ec_lab_text_export_with_decimal_commas_reads_like_the_mpr(cyclers, tmp_path):
+    """An EC-Lab .mpt: a long settings header, tab separated, decimal commas, I measured."""
+    from galvani import BioLogic
+
+    mpr = cyclers / "biologic/jdb11-1_c3_gcpl_5cycles_2V-3p8V_C-24_data_C09.mpr"
+    data = BioLogic.MPRfile(str(mpr)).data
+    table = pd.DataFrame({"Ns": data["Ns"], "time/s": data["time/s"], "Ewe/V": data["Ewe/V"],
+                          "<I>/mA": data["control/V/mA"], "cycle number": data["half cycle"] // 2,
+                          "Q charge/discharge/mA.h": data["Q charge/discharge/mA.h"]})
+    header = ["EC-Lab ASCII FILE", "Nb header lines : 120"] + \
+        [f"setting {k} : {k},5" for k in range(117)]
+    body = table.to_csv(sep="\t", index=False, float_format="%.7g").replace(".", ",")
+    path = tmp_path / "gcpl.mpt"
+    path.write_text("\n".join(header) + "\n" + body, encoding="latin-1")
+    assert detect_tester(path) == "text"
+    text, binary = read_tester(path), read_tester(mpr)
+    first_text, first_binary = full_discharges(text.steps)[0], full_discharges(binary.steps)[0]
+    assert first_text["number"] == first_binary["number"]
+    assert first_text["charge_Ah"] == pytest.approx(first_binary["charge_Ah"], rel=1e-5)
+    assert "voltage trend" in text.meta["sign_source"]
