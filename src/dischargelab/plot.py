@@ -580,9 +580,9 @@ def _health_title(health) -> str:
 
 
 def _plot_trend(ax, trend, scale, color, label):
-    lo = (trend.level - 1.96 * trend.level_sd) * scale
-    hi = (trend.level + 1.96 * trend.level_sd) * scale
-    ax.fill_between(trend.efc, lo, hi, color=color, alpha=0.15, lw=0, label=label)
+    lo, hi = trend.band()
+    ax.fill_between(trend.efc, lo * scale, hi * scale, color=color, alpha=0.15, lw=0,
+                    label=label)
     ax.plot(trend.efc, trend.level * scale, color=color, lw=1.2)
 
 

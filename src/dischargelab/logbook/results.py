@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import LogbookError
 from .health import EventHealth
-from .trend import Z95, Smoothed
+from .trend import Smoothed
 
 #: Default end of life: this share of the reference capacity.
 DEFAULT_EOL = 0.8
@@ -593,10 +593,11 @@ def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eo
     past = (trend.efc >= efc.min()) & (trend.efc <= fit.x_now)
     end = max(v for v in (interval[1], central, fit.x_now) if v is not None)
     future = (ahead.efc > fit.x_now) & (ahead.efc <= max(1.15 * end, 1.5 * fit.x_now))
+    lo_past, hi_past = trend.band()
     band = {"efc": [*trend.efc[past], *ahead.efc[future]],
             "capacity_Ah": [*trend.level[past], *ahead.median[future]],
-            "lo": [*(trend.level - Z95 * trend.level_sd)[past], *ahead.low[future]],
-            "hi": [*(trend.level + Z95 * trend.level_sd)[past], *ahead.high[future]]}
+            "lo": [*lo_past[past], *ahead.low[future]],
+            "hi": [*hi_past[past], *ahead.high[future]]}
     return Forecast(eol=eol, threshold_Ah=threshold, eol_efc=central,
                     eol_efc_interval95=interval, shape=fit.family, bend_odds=fit.bend_odds,
                     knee_efc=fit.knee_efc, knee_probability=fit.knee_probability,

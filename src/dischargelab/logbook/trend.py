@@ -20,7 +20,11 @@ spread of a real cell) are read from the likelihood over a grid (diffuse start, 
 two events left out); the smoother runs at the most likely pair, and the value at the
 last estimate mixes all pairs by their likelihood, so an uncertain drift widens today's
 interval. A Kalman filter and the Rauch-Tung-Striebel smoother give the level and its
-variance at every EFC, weighting each event by its interval.
+variance at every EFC, weighting each event by its interval; the band is Student's t
+with ``n - 2`` degrees of freedom (the nugget is measured from the estimates).
+Today's variance is scaled up when the latest estimates surprise the filter more than it
+expected (their mean squared standardised one-step-ahead error above 1, the covariance
+matching of adaptive Kalman filters, Mehra 1972): a knee that has just started.
 
 Outliers: the errors are taken as Student's t with :data:`T_DOF` degrees of freedom,
 fitted by iteratively reweighting each event's variance (the EM algorithm of the
@@ -37,6 +41,8 @@ References
    regression and spline smoothing", J. Am. Stat. Assoc. 78 (1983) 81-89.
 .. [4] K. L. Lange, R. J. A. Little, J. M. G. Taylor, "Robust statistical modeling
    using the t distribution", J. Am. Stat. Assoc. 84 (1989) 881-896.
+.. [5] R. K. Mehra, "Approaches to adaptive filtering", IEEE Trans. Automatic Control
+   17 (1972) 693-698.
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 
 #: Degrees of freedom of the Student's t errors (robust to a few outliers).
 T_DOF = 4.0
@@ -61,6 +68,10 @@ DEFAULT_NUGGET_SHARE = 0.005
 
 #: Estimates needed to measure the nugget and the rate drift from the data.
 MIN_FOR_NUGGET = 5
+
+#: Latest estimates whose one-step-ahead errors scale today's variance when they are
+#: larger than the filter expected (a knee starting: innovation-based adaptive estimation).
+RECENT_EVENTS = 6
 
 #: Points of the smoothed curve between the first and the last estimate.
 GRID_POINTS = 120
@@ -93,6 +104,9 @@ class Smoothed:
         not used): which events today's value comes from.
     n : int
         Estimates used.
+    quantile : float
+        Two-sided 95 % quantile of the band: Student's t with ``n - 2`` degrees of
+        freedom when the nugget was measured from the estimates, else normal.
     """
 
     efc: np.ndarray
@@ -106,6 +120,12 @@ class Smoothed:
     weights: np.ndarray
     influence: np.ndarray
     n: int
+    quantile: float = Z95
+
+    def band(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper 95 % band at :attr:`efc`."""
+        return (self.level - self.quantile * self.level_sd,
+                self.level + self.quantile * self.level_sd)
 
     def at(self, efc) -> tuple[np.ndarray, np.ndarray]:
         """Mean and standard deviation at ``efc`` (interpolated between points, carried
@@ -126,7 +146,7 @@ class Smoothed:
         """Value at ``efc`` with its 95 % interval ``[low, high]``."""
         mean, sd = self.at(efc)
         m, s = float(mean[0]), float(sd[0])
-        return m, [m - Z95 * s, m + Z95 * s]
+        return m, [m - self.quantile * s, m + self.quantile * s]
 
     def to_dict(self, points: int | None = None) -> dict:
         """``{"efc", "value", "sd", "lo", "hi"}`` lists (value, its standard deviation and
@@ -134,11 +154,10 @@ class Smoothed:
         idx = np.arange(self.efc.size)
         if points is not None and self.efc.size > points:
             idx = np.unique(np.linspace(0, self.efc.size - 1, points).round().astype(int))
-        lo = self.level - Z95 * self.level_sd
-        hi = self.level + Z95 * self.level_sd
+        lo, hi = self.band()
         return {"efc": self.efc[idx].tolist(), "value": self.level[idx].tolist(),
                 "sd": self.level_sd[idx].tolist(), "lo": lo[idx].tolist(),
-                "hi": hi[idx].tolist(), "drift": self.drift,
+                "hi": hi[idx].tolist(), "quantile": self.quantile, "drift": self.drift,
                 "nugget": self.nugget, "estimates": self.n}
 
     @classmethod
@@ -152,7 +171,8 @@ class Smoothed:
         return cls(efc=efc, level=level, level_sd=sd, rate=np.zeros_like(efc),
                    rate_sd=np.zeros_like(efc), last_cov=np.array([[var, 0.0], [0.0, 0.0]]),
                    drift=float(d.get("drift") or 0.0), nugget=float(d.get("nugget") or 0.0),
-                   weights=np.ones(0), influence=np.ones(0), n=int(d.get("estimates") or 0))
+                   weights=np.ones(0), influence=np.ones(0), n=int(d.get("estimates") or 0),
+                   quantile=float(d.get("quantile") or Z95))
 
 
 def sd_from_interval(low95, high95) -> np.ndarray:
@@ -225,6 +245,7 @@ def _smooth(x, y, r, w, q, nugget2, grid):
     p = np.diag([big, big_rate])
     c0, c1 = np.zeros(x.size), np.zeros(x.size)  # level and rate as weights of the y's
     c0[0] = 1.0
+    surprise = np.zeros(x.size)  # squared standardised one-step-ahead errors
     mf, pf, mp, pp = (np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)),
                       np.empty((n, 2, 2)))
     floor2, span = _floor2(x, y), max(float(np.ptp(x)), 1e-9)
@@ -241,6 +262,7 @@ def _smooth(x, y, r, w, q, nugget2, grid):
         j = obs.get(float(pts[k]))
         if j is not None:
             s = p[0, 0] + (r[j] + nugget2) / w[j]
+            surprise[j] = w[j] * (y[j] - m[0]) ** 2 / (p[0, 0] * w[j] + r[j] + nugget2)
             gain = p[:, 0] / s
             m = m + gain * (y[j] - m[0])
             innovation = -c0
@@ -255,7 +277,7 @@ def _smooth(x, y, r, w, q, nugget2, grid):
         c = pf[k] @ f.T @ np.linalg.pinv(pp[k + 1])
         ms[k] = mf[k] + c @ (ms[k + 1] - mp[k + 1])
         ps[k] = pf[k] + c @ (ps[k + 1] - pp[k + 1]) @ c.T
-    return pts, ms, ps, c0
+    return pts, ms, ps, c0, surprise
 
 
 #: Grid of the hyperparameters: log of q and of nugget^2 / scale^2 (``scale`` the spread
@@ -361,7 +383,7 @@ def _smooth_many(x, y, sd, level_scale, robust, grid_points) -> Smoothed:
         q_all, n2_all, ll, last = _hyper_grid(x, y, r0, weights, scale, span)
         best = int(np.argmax(ll))
         q, nugget2 = float(q_all[best]), float(n2_all[best])
-        pts, ms, ps, influence = _smooth(x, y, r0, weights, q, nugget2, grid)
+        pts, ms, ps, influence, surprise = _smooth(x, y, r0, weights, q, nugget2, grid)
         if not robust:
             break
         at_obs = np.searchsorted(pts, x)
@@ -371,13 +393,16 @@ def _smooth_many(x, y, sd, level_scale, robust, grid_points) -> Smoothed:
             break
         weights = new
     mean, cov = _mixture(ll, last)
+    recent = surprise[2:][-RECENT_EVENTS:]
+    cov = cov * max(1.0, float(np.mean(recent))) if recent.size else cov
     ms[-1], ps[-1] = mean, cov
     level_sd = np.sqrt(np.clip(ps[:, 0, 0], 0, None))
     drift = q * (mean[1] ** 2 + _floor2(x, y)) / span
     return Smoothed(efc=pts, level=ms[:, 0], level_sd=level_sd,
                     rate=ms[:, 1], rate_sd=np.sqrt(np.clip(ps[:, 1, 1], 0, None)),
                     last_cov=ps[-1], drift=float(drift), nugget=float(np.sqrt(nugget2)),
-                    weights=weights, influence=influence, n=n)
+                    weights=weights, influence=influence, n=n,
+                    quantile=float(stats.t.ppf(0.975, n - 2)))
 
 
 def _few(x, y, sd, nugget, n) -> Smoothed:
