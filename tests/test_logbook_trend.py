@@ -4,6 +4,7 @@ end-of-life forecast (forecast.py), on synthetic lives whose truth is known."""
 from __future__ import annotations
 
 import importlib.util
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,10 +18,12 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 def lives():
     """The seeded generator of capacity lives the forecast is calibrated on."""
-    spec = importlib.util.spec_from_file_location("bench_lives", BENCHMARKS / "_lives.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    if "bench_lives" not in sys.modules:  # a dataclass module must be known while it loads
+        spec = importlib.util.spec_from_file_location("bench_lives", BENCHMARKS / "_lives.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules["bench_lives"] = module
+        spec.loader.exec_module(module)
+    return sys.modules["bench_lives"]
 
 
 # --------------------------------------------------------------------------- smoother
