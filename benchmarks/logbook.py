@@ -6,14 +6,12 @@
    rows up to there, header kept), the others full; capacity of each cut one
    against the integral of its full file (goal: within 3 %), and how often its
    95 % interval holds that truth. Both parities, so every cycle is cut once.
-3. End-of-life forecast from the cycles up to 330 (and from other points of the
-   life, to show the interval's behaviour): does the 95 % interval of the EFC at
-   80 % of the reference capacity hold the observed crossing (first logged
-   capacity under the threshold, interpolated with the one before; outliers left
-   out)? And the share of the later capacities inside the simulated 95 % band.
-4. Speed: 300 copies of bench discharges of about 3,500 samples (header bytes
+3. Speed: 300 copies of bench discharges of about 3,500 samples (header bytes
    changed, so each has its own SHA-256) into a fresh SQLite logbook, in process
    (goal: <= 60 s on one core).
+
+The end-of-life forecast and the capacity today are measured by
+``benchmarks/forecast.py``.
 
 Usage: python benchmarks/logbook.py [--copies N] [--skip-speed]
 """
@@ -36,8 +34,6 @@ from dischargelab.logbook import Logbook
 ROOT = Path(__file__).resolve().parents[1]
 CELL_C = ROOT.parent / "shared" / "data" / "samsung30q_ageing_cellC"
 CUT_SHARE = 0.6
-FORECAST_FROM = 330
-ORIGINS = (150, 210, 270, 330, 390, 450)
 
 
 def lvm_rows(path: Path) -> tuple[list[str], list[str], np.ndarray]:
@@ -98,42 +94,6 @@ def full_and_partial(folder: Path, files: list[Path]) -> tuple[list, list]:
     return full_err, partial
 
 
-def observed_crossing(events, threshold: float) -> float | None:
-    usable = [e for e in events if e.capacity_Ah is not None and not e.outlier]
-    for a, b in zip(usable[:-1], usable[1:]):
-        if a.capacity_Ah > threshold >= b.capacity_Ah:
-            return a.efc + (a.capacity_Ah - threshold) / (a.capacity_Ah - b.capacity_Ah) \
-                * (b.efc - a.efc)
-    return None
-
-
-def forecasts(folder: Path, files: list[Path]) -> list[list]:
-    with Logbook(folder / "all.sqlite") as lb:
-        lb.add(files, pack="cell C")
-        everything = lb.health("cell C")
-    rows = []
-    for origin in ORIGINS:
-        with Logbook(folder / f"upto{origin}.sqlite") as lb:
-            lb.add([p for p in files if cycle_of(p) <= origin], pack="cell C")
-            h = lb.health("cell C")
-        f = h.forecast
-        threshold = f.threshold_Ah
-        seen = observed_crossing(everything.events, threshold)
-        lo, hi = f.eol_efc_interval95
-        covers = seen is not None and (lo is None or lo <= seen) and (hi is None or seen <= hi)
-        later = [e for e in everything.events if e.efc > f.capacity.last_efc + 1e-9
-                 and e.capacity_Ah is not None and not e.outlier]
-        grid, band_lo, band_hi = f.band
-        inside = [np.interp(e.efc, grid, band_lo) <= e.capacity_Ah <= np.interp(e.efc, grid,
-                                                                                  band_hi)
-                  for e in later if e.efc <= grid[-1]]
-        rows.append([origin, f"{f.capacity.last_efc:.0f}", f"{threshold:.3f}",
-                     f"{f.eol_efc:.0f}", f"[{lo:.0f}, {'open' if hi is None else f'{hi:.0f}'}]",
-                     "n/a" if seen is None else f"{seen:.0f}", "yes" if covers else "NO",
-                     f"{100 * np.mean(inside):.0f} % of {len(inside)}"])
-    return rows
-
-
 def speed(folder: Path, copies: int) -> tuple[int, int, float, float]:
     sources = [p for p in sorted(CELL_C.glob("DischargeCycle*.txt")) if cycle_of(p) <= 50]
     bench = folder / "speed"
@@ -176,10 +136,6 @@ def main() -> None:
                [len(partial), f"cut at {100 * CUT_SHARE:.0f} % (reference curve)", "<= 3 %",
                 f"{np.max(np.abs(errs)):.2f} %", f"{np.sqrt(np.mean(errs ** 2)):.2f} %",
                 f"{100 * cover:.0f} %", missing]])
-        table("End of life (80 % of the first full discharge) forecast from the cycles up to N",
-              ["N", "EFC then", "threshold Ah", "forecast EFC", "95 % interval",
-               "observed EFC", "covers", "later capacities in band"],
-              forecasts(folder, files))
         if not args.skip_speed:
             events, samples, wall, cpu = speed(folder, args.copies)
             table("Ingest speed (SQLite, in process, one core)",

@@ -35,12 +35,21 @@ def test_logbook_commands_end_to_end(capsys, tmp_path, shared_data):
     assert code == 0 and health["pack"] == "C" and len(health["events"]) == 7
     assert health["forecast"]["threshold_Ah"] == pytest.approx(0.8 * health["events"][0][
         "capacity_Ah"])
+    # today's figures with their intervals and the events they come from, the trends
+    lo, hi = health["capacity_now_interval95"]
+    assert lo < health["capacity_now_Ah"] < hi
+    assert health["capacity_from"][-1]["source"] == "DischargeCycle600.txt"
+    assert {"efc", "value", "lo", "hi"} <= set(health["trend"]["capacity"])
+    assert {"shape", "bend_odds", "knee_efc", "band"} <= set(health["forecast"])
     plot = tmp_path / "health.png"
     code, out, _ = run(capsys, "logbook", "health", "C", "--db", db, "--plot", plot)
     assert code == 0 and plot.stat().st_size > 10_000 and "end of life" in out
+    assert "capacity today (EFC" in out and "trend: " in out
 
     code, out, _ = run(capsys, "logbook", "packs", "--db", db, "--json")
-    assert [r["name"] for r in json.loads(out)["rows"]] == ["C"]
+    rows = json.loads(out)["rows"]
+    assert [r["name"] for r in rows] == ["C"]
+    assert rows[0]["capacity_interval95"] == pytest.approx(health["capacity_now_interval95"])
     code, out, _ = run(capsys, "logbook", "events", "C", "--db", db)
     assert code == 0 and "Events of C" in out
     code, out, _ = run(capsys, "logbook", "events", "C", "--db", db, "--json")
@@ -73,3 +82,38 @@ def test_unknown_pack_and_newer_database_are_one_line_errors(capsys, tmp_path):
     assert len(err.strip().splitlines()) == 1
     code, _, err = run(capsys, "endurance", "--pack", "nope", "--db", db, "a.toml", "b.toml")
     assert code == 2 and "MISSION alone" in err
+
+
+FLIGHTS = "flight_logs/ina3221_fpv_4s"
+
+
+def test_a_pack_that_only_flies_gets_endurance_and_autopilot_settings(capsys, tmp_path,
+                                                                      shared_data):
+    """No full discharge, no fitted model: the chemistry's prior at today's capacity and
+    resistance, said in the notes with the events those come from."""
+    db = tmp_path / "lb.sqlite"
+    flights = sorted((shared_data / FLIGHTS).glob("*.csv"))
+    code, _, err = run(capsys, "logbook", "add", *flights, "--pack", "fpv", "--db", db)
+    assert code == 0, err
+    code, _, err = run(capsys, "endurance", "--pack", "fpv", "--db", db, "multirotor-hover")
+    assert code == 2 and "no capacity estimate and no label capacity" in err
+    assert len(err.strip().splitlines()) == 1
+    code, _, err = run(capsys, "logbook", "add", flights[0], "--pack", "fpv", "--capacity",
+                       "1.5", "--db", db)
+    assert code == 0, err
+    code, out, err = run(capsys, "endurance", "--pack", "fpv", "--db", db, "multirotor-hover",
+                         "--draws", "0", "--json")
+    assert code == 0, err
+    note = next(n for n in json.loads(out)["notes"] if "logbook pack 'fpv'" in n)
+    assert "lipo prior" in note and "no fitted model" in note
+    assert "resistance" in note and flights[-1].name in note  # the events it comes from
+    code, out, err = run(capsys, "autopilot-params", "--pack", "fpv", "--db", db,
+                         "--firmware", "ardupilot", "--load", "15", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert any("logbook pack 'fpv'" in n for n in doc["notes"])
+    settings = doc["parameters"]
+    assert settings["BATT_CAPACITY"] == pytest.approx(1500)
+    assert 4 * 3.0 < settings["BATT_LOW_VOLT"] < 4 * 4.2  # a 4S pack, read from the logs
+    code, _, err = run(capsys, "autopilot-params", "--firmware", "px4")
+    assert code == 2 and "--pack NAME" in err

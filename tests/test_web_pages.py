@@ -348,7 +348,7 @@ def test_pack_page_plots_zoom_pan_and_read_out(server, browser, db):
     efc = [e["efc"] for e in events]
     assert full["x"][0] < min(efc) < max(efc) < full["x"][1]
     width, height = full["over"]
-    capacity = full["labels"].index("capacity")
+    capacity = full["labels"].index("full")  # the capacity tests' series, named by kind
 
     def at(x_value, y_value) -> tuple[int, int]:
         """Offset from the plot area's centre of a data point [CSS px]."""

@@ -152,10 +152,7 @@ def load(source: str | Path | Battery) -> Battery:
         Immutable: ``with_pack(...)`` and ``dataclasses.replace`` return copies, so a
         preset is never changed by its users.
     """
-    as_battery = getattr(source, "to_battery", None)
-    if callable(as_battery):  # a logbook pack: its model at today's health
-        return as_battery()
-    return load_battery(source)
+    return load_battery(source)  # a logbook pack gives its model at today's health
 
 
 def predict(battery: Battery | str | Path, *, current: float | None = None,

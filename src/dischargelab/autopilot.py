@@ -100,7 +100,8 @@ class AutopilotParams:
         return write_text(path, self.text())
 
 
-def autopilot_params(battery, *, firmware: str, cells: int, parallel: int | None = None,
+def autopilot_params(battery, *, firmware: str, cells: int | None = None,
+                     parallel: int | None = None,
                      load_current_A: float | None = None, reserve_s: float = DEFAULT_RESERVE_S,
                      critical_reserve_s: float | None = None, cutoff: float | None = None,
                      ambient: float | None = None) -> AutopilotParams:
@@ -108,11 +109,13 @@ def autopilot_params(battery, *, firmware: str, cells: int, parallel: int | None
 
     Parameters
     ----------
-    battery : Battery, preset name or battery-file path
-        The cell model (its pack configuration is replaced by ``cells``/``parallel``).
+    battery : Battery, preset name, battery-file path or logbook pack
+        The cell model (its pack configuration is replaced by ``cells``/``parallel``);
+        a logbook pack (:meth:`dischargelab.Logbook.pack`) gives its model at today's
+        capacity and resistance, and the notes say which events those come from.
     firmware : {"ardupilot", "px4"}
-    cells : int
-        Cells in series of the flight pack.
+    cells : int, optional
+        Cells in series of the flight pack (default: the battery's).
     parallel : int, optional
         Strings in parallel (default: as in the battery file).
     load_current_A : float, optional
@@ -136,6 +139,8 @@ def autopilot_params(battery, *, firmware: str, cells: int, parallel: int | None
 
     if firmware not in FIRMWARES:
         raise SimulationError(f"firmware must be one of {', '.join(FIRMWARES)}, got {firmware!r}")
+    battery = load_battery(battery)
+    cells = battery.cells_series if cells is None else int(cells)
     if cells < 1:
         raise SimulationError(f"cells must be at least 1, got {cells}")
     if not reserve_s > 0:
@@ -143,7 +148,7 @@ def autopilot_params(battery, *, firmware: str, cells: int, parallel: int | None
     critical = reserve_s / 3.0 if critical_reserve_s is None else float(critical_reserve_s)
     if not 0 < critical < reserve_s:
         raise SimulationError("critical_reserve_s must be between 0 and reserve_s")
-    bat: Battery = load_battery(battery).with_pack(cells, parallel)
+    bat: Battery = battery.with_pack(cells, parallel)
     cut = default_cutoff(bat, cutoff)["cutoff_cell_V"]
     capacity_mAh = bat.rated_capacity_Ah * 1000.0
     load = bat.rated_capacity_Ah if load_current_A is None else float(load_current_A)
@@ -173,6 +178,8 @@ def autopilot_params(battery, *, firmware: str, cells: int, parallel: int | None
     how = (f"{bat.model} model, {cells}S{bat.strings_parallel}P, at {load:g} A "
            f"({load / bat.rated_capacity_Ah:.2g}C): {total / 60:.1f} min to {cut:g} V/cell")
     notes = [how, f"reserve {reserve_s:g} s at the low level, {critical:g} s at the critical level"]
+    if bat.extra.get("logbook") and bat.extra.get("note"):  # a logbook pack, today
+        notes.append(str(bat.extra["note"]))
     if firmware == "ardupilot":
         settings = [
             Setting("BATT_CAPACITY", capacity_mAh, "mAh", "rated pack capacity", True),

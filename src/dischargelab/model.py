@@ -239,9 +239,14 @@ class Battery:
 
 
 def load_battery(source) -> Battery:
-    """Load a battery from a battery file path or a preset name (see :data:`PRESETS`)."""
+    """Load a battery from a battery file path or a preset name (see :data:`PRESETS`);
+    an object with ``to_battery()`` (a logbook pack: its model at today's health) gives
+    what that returns."""
     if isinstance(source, Battery):
         return source
+    as_battery = getattr(source, "to_battery", None)
+    if callable(as_battery):
+        return as_battery()
     text = str(source)
     if text in PRESETS:
         return PRESETS[text]

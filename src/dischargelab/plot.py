@@ -474,98 +474,185 @@ def _plot_replay(ax, replay: pd.DataFrame, label) -> float | None:
     return float(min(np.max(every), 2.0 * np.percentile(every, 75))) * 1.05
 
 
-def plot_health(health, axes=None):
-    """A pack's capacity and resistance against equivalent full cycles (logbook health).
+#: Marker and colour of each event kind in :func:`plot_health` (others: grey dots).
+KIND_STYLE = {"full": ("o", "C0", "capacity test (full discharge)"),
+              "partial": ("s", "C2", "partial discharge"),
+              "flight": ("^", "C4", "flight"),
+              "charge": ("v", "C5", "charge")}
 
-    Capacity per event with its 95 % interval (outliers hollow, left out of the
-    trend), the trend with its 95 % band through the forecast, the end-of-life
-    threshold and the EFC where it is crossed with its 95 % interval; below, the
-    resistance per event with its trend and band.
+
+def cell_figures(event: dict) -> tuple[float | None, float | None]:
+    """Rest-voltage spread [V] and weakest cell's share of the capacity of an event's
+    per-cell figures (``cells``), when it has them."""
+    cells = event.get("cells")
+    if not isinstance(cells, dict):
+        return None, None
+    spread = next((cells[k] for k in ("rest_spread_V", "spread_V", "rest_voltage_spread_V")
+                   if cells.get(k) is not None), None)
+    share = next((cells[k] for k in ("weakest_share", "weakest_capacity_share")
+                  if cells.get(k) is not None), None)
+    return spread, share
+
+
+def plot_health(health, axes=None):
+    """A pack's health against equivalent full cycles (``logbook health --plot``).
+
+    Capacity: each event's estimate with its 95 % interval, by kind (outliers
+    hollow, left out of the trend); the capacity trend with its 95 % band, carried
+    on by the forecast's futures; the knee when the data show one; the end-of-life
+    threshold, the EFC where it is reached and its 95 % interval; today's capacity.
+    Resistance: per event with its interval and its trend. Cells: the rest-voltage
+    spread between cells and the weakest cell's share, when cell voltages are logged.
 
     Parameters
     ----------
     health : dischargelab.logbook.Health
-    axes : sequence of two matplotlib Axes, optional
+    axes : sequence of matplotlib Axes, optional
+        Two (capacity, resistance), or three when events carry per-cell figures.
 
     Returns
     -------
     numpy.ndarray of Axes
     """
-    plt = pyplot()
-    if axes is None:
-        fig, axes = plt.subplots(2, 1, figsize=(8.5, 7.5), sharex=True, layout="constrained",
-                                 height_ratios=(3, 2))
+    rows = [(e, e.to_dict()) for e in health.events if e.efc is not None]
+    with_cells = [(d["efc"], *cell_figures(d)) for _, d in rows
+                  if any(v is not None for v in cell_figures(d))]
+    axes = _stacked_axes(axes, (9, 8.5) if with_cells else (9, 7.5),
+                         [3, 2, 1.5] if with_cells else [3, 2])
     ax_c, ax_r = axes[0], axes[1]
-    events = [e for e in health.events if e.efc is not None]
-    fc = health.forecast
-    caps = [e for e in events if e.capacity_Ah is not None]
+    fc, today = health.forecast, health.today
     if fc is not None:
-        band = fc.band_points(points=240)
-        ax_c.fill_between(band["efc"], band["lo"], band["hi"], color="C0", alpha=0.15, lw=0,
-                          label="trend, 95 % band")
-        ax_c.plot(band["efc"], band["capacity_Ah"], color="C0", lw=1.2, ls="--")
-        reference = health.reference_capacity_Ah
-        ax_c.axhline(fc.threshold_Ah, color="C3", lw=1, ls=":",
-                     label=f"end of life ({100 * fc.eol:.0f} % of {reference:.3g} Ah)")
-        lo, hi = fc.eol_efc_interval95
-        if fc.eol_efc is not None:
-            right = hi if hi is not None else max(band["efc"])
-            left = lo if lo is not None else min(band["efc"])
-            ax_c.axvspan(left, right, color="C3", alpha=0.08, lw=0)
-            how = "observed at" if fc.observed else "at"
-            span = "between events" if fc.observed else "95 %"
-            ax_c.axvline(fc.eol_efc, color="C3", lw=1.2,
-                         label=f"end of life {how} {fc.eol_efc:.0f} EFC ({span}: "
-                               f"{'?' if lo is None else f'{lo:.0f}'}-"
-                               f"{'open' if hi is None else f'{hi:.0f}'})")
-    for outlier, style in ((False, dict(color="C0", mfc="C0")),
-                           (True, dict(color="C1", mfc="white"))):
-        sel = [e for e in caps if e.outlier == outlier]
-        if not sel:
-            continue
-        x = np.array([e.efc for e in sel])
-        y = np.array([e.capacity_Ah for e in sel])
-        err = np.array([[e.capacity_Ah - e.capacity_interval95[0],
-                         e.capacity_interval95[1] - e.capacity_Ah] for e in sel]).T
-        ax_c.errorbar(x, y, yerr=err, fmt="o", ms=4, lw=0.8, capsize=0, zorder=3,
-                      label="outlier (left out of the trend)" if outlier else "capacity",
-                      **style)
-    if caps and fc is not None:  # the band may run far down: keep the events readable
-        values = [e.capacity_Ah for e in caps]
-        top, bottom = max(values), min(min(values), fc.threshold_Ah)
-        span = max(top - bottom, 1e-3)
-        ax_c.set_ylim(bottom - 0.6 * span, top + 0.15 * span)
-    ax_c.set_ylabel("capacity [Ah]")
-    ax_c.set_title(f"{health.pack}: capacity and resistance against equivalent full cycles")
-    ax_c.grid(alpha=0.3)
+        _plot_forecast(ax_c, fc, health.reference_capacity_Ah)
+    elif health.capacity_trend is not None and health.capacity_trend.efc.size > 1:
+        _plot_trend(ax_c, health.capacity_trend, 1.0, "C0", "capacity trend, 95 % band")
+    caps = [(e, d) for e, d in rows if e.capacity_Ah is not None]
+    _plot_estimates(ax_c, caps, "capacity_Ah", "capacity_interval95", 1.0)
+    if today.get("capacity_Ah") is not None and today.get("efc") is not None:
+        lo, hi = today["capacity_interval95"]
+        ax_c.errorbar([today["efc"]], [today["capacity_Ah"]],
+                      yerr=[[today["capacity_Ah"] - lo], [hi - today["capacity_Ah"]]],
+                      fmt="*", ms=11, color="k", mfc="gold", capsize=3, zorder=5,
+                      label=f"today: {today['capacity_Ah']:.3g} Ah ({lo:.3g}-{hi:.3g})")
     if caps:
-        ax_c.legend(loc="lower left", fontsize=8)
+        values = [e.capacity_Ah for e, _ in caps]
+        top = max(values)
+        bottom = min(values + ([fc.threshold_Ah] if fc is not None else []))
+        span = max(top - bottom, 1e-3)
+        ax_c.set_ylim(max(bottom - 0.35 * span, 0.0), top + 0.15 * span)
+        ax_c.legend(loc="upper right", fontsize=7.5, ncol=2)
     else:
-        ax_c.text(0.5, 0.5, "no capacity measured yet", transform=ax_c.transAxes,
-                  ha="center")
-    res = [e for e in events if e.resistance_ohm is not None]
+        ax_c.text(0.5, 0.5, "no capacity measured yet", transform=ax_c.transAxes, ha="center")
+    ax_c.set_ylabel("capacity [Ah]")
+    ax_c.set_title(_health_title(health), fontsize=10)
+    ax_c.grid(alpha=0.3)
+    basis = today.get("resistance_basis") or "as measured"
+    res = [(e, d) for e, d in rows if d.get("resistance_ref_ohm" if basis.startswith("ref")
+                                            else "resistance_ohm") is not None]
+    key = "resistance_ref_ohm" if basis.startswith("ref") else "resistance_ohm"
+    interval = "resistance_ref_interval95" if basis.startswith("ref") else \
+        "resistance_interval95"
+    if health.resistance_trend is not None and health.resistance_trend.efc.size > 1:
+        _plot_trend(ax_r, health.resistance_trend, 1000.0, "C2", "trend, 95 % band")
     if res:
-        x = np.array([e.efc for e in res])
-        y = np.array([e.resistance_ohm for e in res]) * 1000
-        err = np.array([[0.0, 0.0] if e.resistance_interval95 is None else
-                        [e.resistance_ohm - e.resistance_interval95[0],
-                         e.resistance_interval95[1] - e.resistance_ohm] for e in res]).T * 1000
-        ax_r.errorbar(x, y, yerr=err, fmt="s", ms=3.5, lw=0.8, color="C2", label="resistance")
-        if fc is not None and fc.resistance is not None:
-            grid = np.linspace(min(x), max(x), 100)
-            lo_r, hi_r = fc.resistance.band(grid)
-            ax_r.fill_between(grid, lo_r * 1000, hi_r * 1000, color="C2", alpha=0.15, lw=0,
-                              label="trend, 95 % band")
-            ax_r.plot(grid, fc.resistance.mean(grid) * 1000, color="C2", lw=1.2, ls="--")
-        ax_r.legend(loc="upper left", fontsize=8)
+        _plot_estimates(ax_r, res, key, interval, 1000.0)
+        ax_r.legend(loc="lower right", fontsize=7.5, ncol=2)
     else:
         ax_r.text(0.5, 0.5, "no load steps to measure the resistance", transform=ax_r.transAxes,
                   ha="center")
-    ax_r.set_ylabel("resistance [mOhm]")
-    ax_r.set_xlabel("equivalent full cycles [EFC]")
+    ax_r.set_ylabel(f"resistance [mOhm]\n({basis})")
     ax_r.grid(alpha=0.3)
+    last = axes[-1]
+    if len(axes) > 2 and with_cells:
+        _plot_cells(axes[2], with_cells)
+    last.set_xlabel("equivalent full cycles [EFC]")
     return np.asarray(axes)
 
+
+def _health_title(health) -> str:
+    fc = health.forecast
+    if fc is None:
+        return f"{health.pack}: capacity and resistance against equivalent full cycles"
+    shape = {"line": "no bend", "early": "a fast early fade, then a line",
+             "knee": "a knee", "early+knee": "a fast early fade and a knee"}.get(fc.shape,
+                                                                                fc.shape)
+    return (f"{health.pack}: the capacity trend has {shape} (odds against a straight "
+            f"line {fc.bend_odds:.3g}; {fc.estimates} estimates)")
+
+
+def _plot_trend(ax, trend, scale, color, label):
+    lo, hi = trend.band()
+    ax.fill_between(trend.efc, lo * scale, hi * scale, color=color, alpha=0.15, lw=0,
+                    label=label)
+    ax.plot(trend.efc, trend.level * scale, color=color, lw=1.2)
+
+
+def _plot_forecast(ax, fc, reference):
+    band = fc.band
+    efc = np.asarray(band["efc"], dtype=float)
+    mid = np.asarray(band["capacity_Ah"], dtype=float)
+    lo, hi = np.asarray(band["lo"], dtype=float), np.asarray(band["hi"], dtype=float)
+    past = efc <= fc.last_efc
+    ax.fill_between(efc[past], lo[past], hi[past], color="C0", alpha=0.18, lw=0,
+                    label="capacity trend, 95 % band")
+    ax.plot(efc[past], mid[past], color="C0", lw=1.2)
+    ahead = efc >= fc.last_efc
+    if ahead.any():
+        ax.fill_between(efc[ahead], lo[ahead], hi[ahead], color="C1", alpha=0.13, lw=0,
+                        label="forecast: median, 95 % of futures")
+        ax.plot(efc[ahead], mid[ahead], color="C1", lw=1.2, ls="--")
+    ax.axhline(fc.threshold_Ah, color="C3", lw=1, ls=":",
+               label=f"end of life ({100 * fc.eol:.0f} % of {reference:.3g} Ah)")
+    if fc.knee_efc is not None:
+        ax.axvline(fc.knee_efc, color="C5", lw=1.2, ls="-.",
+                   label=f"knee at {fc.knee_efc:.0f} EFC (probability "
+                         f"{fc.knee_probability:.2f})")
+    a, b = fc.eol_efc_interval95
+    if fc.eol_efc is not None:
+        ax.axvspan(a if a is not None else efc.min(), b if b is not None else efc.max(),
+                   color="C3", alpha=0.07, lw=0)
+        how = "observed at" if fc.observed else "at"
+        span = "between events" if fc.observed else "95 %"
+        ax.axvline(fc.eol_efc, color="C3", lw=1.2,
+                   label=f"end of life {how} {fc.eol_efc:.0f} EFC ({span}: "
+                         f"{'?' if a is None else f'{a:.0f}'}-"
+                         f"{'open' if b is None else f'{b:.0f}'})")
+
+
+def _plot_estimates(ax, rows, key, interval, scale):
+    """Per-event estimates with their 95 % intervals, one marker per kind; outliers hollow."""
+    kinds = sorted({d.get("kind") for _, d in rows}, key=lambda k: (k not in KIND_STYLE, k))
+    for kind in kinds:
+        marker, color, label = KIND_STYLE.get(kind, ("o", "0.5", str(kind)))
+        for outlier in (False, True):
+            sel = [(e, d) for e, d in rows if d.get("kind") == kind and bool(e.outlier) == outlier]
+            if not sel:
+                continue
+            x = np.array([d["efc"] for _, d in sel])
+            y = np.array([d[key] for _, d in sel], dtype=float) * scale
+            err = np.array([[0.0, 0.0] if not d.get(interval) or None in d[interval] else
+                            [d[key] - d[interval][0], d[interval][1] - d[key]]
+                            for _, d in sel], dtype=float).T * scale
+            ax.errorbar(x, y, yerr=np.clip(err, 0, None), fmt=marker, ms=4, lw=0.8, capsize=0,
+                        zorder=3, color=color, mfc="white" if outlier else color,
+                        label=f"{label} (outlier, left out)" if outlier else label)
+
+
+def _plot_cells(ax, with_cells):
+    efc = np.array([r[0] for r in with_cells], dtype=float)
+    spread = np.array([np.nan if r[1] is None else r[1] for r in with_cells], dtype=float)
+    share = np.array([np.nan if r[2] is None else r[2] for r in with_cells], dtype=float)
+    if np.isfinite(spread).any():
+        ax.plot(efc, spread * 1000, "o-", ms=3, lw=0.8, color="C6",
+                label="rest-voltage spread between cells")
+        ax.set_ylabel("cell spread [mV]")
+        ax.legend(loc="upper left", fontsize=7.5)
+    if np.isfinite(share).any():
+        twin = ax.twinx()
+        twin.plot(efc, share * 100, "s--", ms=3, lw=0.8, color="C7",
+                  label="weakest cell's share of the capacity")
+        twin.set_ylabel("weakest cell [%]")
+        twin.legend(loc="upper right", fontsize=7.5)
+    ax.grid(alpha=0.3)
 
 #: Shade of each kind of tester step in :func:`plot_tester_steps`.
 STEP_COLORS = {"charge": "C0", "discharge": "C3", "rest": "0.85"}

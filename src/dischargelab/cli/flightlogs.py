@@ -68,12 +68,18 @@ def fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, p
 
 
 @click.command("autopilot-params")
-@click.argument("battery")
+@click.argument("battery", required=False)
+@click.option("--pack", "pack_name", metavar="NAME",
+              help="A logbook pack: its model at today's capacity and resistance (then give "
+                   "no BATTERY).")
+@click.option("--db", metavar="URL|FILE",
+              help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's logbook).")
 @click.option("--firmware", required=True, type=click.Choice(["ardupilot", "px4"]),
               help="Autopilot firmware: ardupilot writes a .param file, px4 a QGroundControl "
                    ".params file.")
-@click.option("--cells", required=True, type=click.IntRange(1), help="Cells in series of the "
-              "flight pack.")
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series of the flight pack (required with a BATTERY; default "
+                   "with --pack: the pack's).")
 @click.option("--parallel", type=click.IntRange(1), default=None,
               help="Strings in parallel (default: as in the battery file).")
 @click.option("--load", "load_current", type=float, metavar="A", default=None,
@@ -90,13 +96,16 @@ def fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, p
               help="Parameter file to write (.param for ArduPilot, .params for PX4).")
 @force_option
 @json_option
-def autopilot_params_cmd(battery, firmware, cells, parallel, load_current, reserve_s,
-                         critical_reserve_s, cutoff, ambient, output, force, as_json):
+def autopilot_params_cmd(battery, pack_name, db, firmware, cells, parallel, load_current,
+                         reserve_s, critical_reserve_s, cutoff, ambient, output, force, as_json):
     """Battery failsafe and scaling settings for ArduPilot or PX4 from the model.
 
     The model is flown at the stated load; the low and critical voltages are the
     resting pack voltages at which --reserve-s and --critical-reserve-s of flight
     remain. Every value in the file carries a comment saying how it was derived.
+    With --pack the model is the logbook pack's at its capacity and resistance
+    today (its fitted model scaled, or for a pack that only flies the chemistry's
+    prior built to them), and a note names the events those come from.
 
     \b
     Examples:
@@ -104,10 +113,23 @@ def autopilot_params_cmd(battery, firmware, cells, parallel, load_current, reser
           -o battery.param
       dischargelab autopilot-params cell.json --firmware px4 --cells 6 --reserve-s 90 \\
           -o battery.params
+      dischargelab autopilot-params --pack zippy-a --firmware ardupilot --load 20 \\
+          -o zippy-a.param
     """
     from ..autopilot import autopilot_params
 
-    guard_outputs([output], battery_input(battery), force)
+    if battery is not None and pack_name is not None:
+        raise DischargelabError("give a BATTERY or --pack NAME, not both")
+    if battery is None and pack_name is None:
+        raise DischargelabError("give a BATTERY (battery file or preset) or --pack NAME")
+    if battery is not None and cells is None:
+        raise DischargelabError("give the flight pack's cells in series: --cells N")
+    guard_outputs([output], battery_input(battery or ""), force)
+    if pack_name is not None:
+        from ..logbook import Logbook
+
+        with Logbook(db, create=False) as lb:
+            battery = lb.pack(pack_name).battery()
     result = autopilot_params(load_battery_arg(battery), firmware=firmware, cells=cells,
                               parallel=parallel, load_current_A=load_current,
                               reserve_s=reserve_s, critical_reserve_s=critical_reserve_s,

@@ -169,7 +169,7 @@ def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
 @db_option
 @json_option
 def packs_cmd(eol, db, as_json):
-    """List the packs: events, EFC, capacity and resistance today, end of life.
+    """List the packs: events, EFC, capacity (95 % interval) and resistance today, end of life.
 
     \b
     Examples:
@@ -183,12 +183,13 @@ def packs_cmd(eol, db, as_json):
         print_json(result.to_dict())
         return
     rows = [[r["name"], r["events"], _num(r["efc"], 0), _num(r["capacity_Ah"]),
-             _num(r["capacity_fraction"], 1, 100), _num(r["resistance_ohm"], 1, 1000),
-             _num(r["eol_efc"], 0), _interval(r["eol_efc_interval95"])]
+             _interval(r["capacity_interval95"], 3), _num(r["capacity_fraction"], 1, 100),
+             _num(r["resistance_ohm"], 1, 1000), _num(r["eol_efc"], 0),
+             _interval(r["eol_efc_interval95"])]
             for r in result.rows]
-    out.print(table("Packs", ["pack", "events", "EFC", "capacity [Ah]", "of reference [%]",
-                              "resistance [mOhm]", "end of life [EFC]", "95 % interval"],
-                    rows))
+    out.print(table("Packs", ["pack", "events", "EFC", "capacity today [Ah]", "95 % interval",
+                              "of reference [%]", "resistance [mOhm]", "end of life [EFC]",
+                              "95 % interval"], rows))
 
 
 @logbook_group.command("health", context_settings=CONTEXT)
@@ -200,12 +201,19 @@ def packs_cmd(eol, db, as_json):
 @db_option
 @json_option
 def health_cmd(name, eol, plot_path, force, db, as_json):
-    """A pack's capacity, resistance and EFC per event, and its end of life.
+    """A pack's capacity and resistance per event, over its life, today, and its end of life.
 
-    Capacity: coulomb counting on full discharges; on partial ones and flights,
-    the charge drawn over the share of the capacity it used, read from the pack's
-    own full discharge. Outliers (over- or undercharged cycles) are flagged and left
-    out of the trend. The forecast is null until two capacities exist.
+    \b
+    Per event: capacity with its 95 % interval (a full discharge: the charge it
+    delivered; a partial event or a flight: the charge moved over the share of the
+    capacity it used), resistance from its load steps, EFC. Outliers (over- or
+    undercharged cycles) are flagged and left out of the trends.
+    Over the life: the estimates combined by their intervals (a smoother over EFC)
+    into the capacity today with its 95 % interval, and the events it comes from.
+    Ahead: a trend that may bend (fast early fade, a knee) chosen by evidence
+    against a straight line, and the EFC of end of life with a 95 % interval from
+    simulated futures (knees that have not shown yet included). No forecast until
+    three capacities exist.
 
     \b
     Examples:
@@ -224,30 +232,84 @@ def health_cmd(name, eol, plot_path, force, db, as_json):
     if as_json:
         print_json(health.to_dict())
         return
-    rows = [[e.source, (e.start or "-").replace("T", " "), e.health_kind,
-             _num(e.discharged_Ah), _num(e.capacity_Ah), _interval(e.capacity_interval95, 3),
-             _num(e.resistance_ohm, 1, 1000), _num(e.efc, 1), "outlier" if e.outlier else ""]
-            for e in health.events]
-    out.print(table(f"Health of {name}", ["source", "start", "kind", "discharged [Ah]",
-                                          "capacity [Ah]", "95 % interval", "R [mOhm]", "EFC",
-                                          ""], rows))
-    fc = health.forecast
-    ref = health.reference_capacity_Ah
-    out.print(f"reference capacity: {_num(ref)} Ah ({health.reference})", markup=False)
-    if ref is None:
-        out.print(f"  give its label capacity to count cycles: dischargelab logbook add FILE "
-                  f"--pack {name!r} --capacity AH (a file already there is skipped)",
-                  markup=False)
-    if fc is None:
-        out.print("end of life: no forecast yet (needs two capacities)", markup=False)
+    rows = [_health_row(e) for e in health.events]
+    head = ["source", "start", "kind", "discharged [Ah]", "capacity [Ah]", "95 % interval",
+            "R [mOhm]", "R ref [mOhm]", "EFC", "note"]
+    if any(r[-1] for r in rows):
+        head.append("cells")
     else:
-        how, span = ("observed at", "between events") if fc.observed else ("forecast at", "95 %")
-        out.print(f"end of life ({100 * fc.eol:.0f} % = {fc.threshold_Ah:.3f} Ah): {how} "
-                  f"{_num(fc.eol_efc, 0)} EFC ({span}: {_interval(fc.eol_efc_interval95)}); "
-                  f"capacity today {_num(health.capacity_now_Ah)} Ah, resistance "
-                  f"{_num(health.resistance_now_ohm, 1, 1000)} mOhm", markup=False)
+        rows = [r[:-1] for r in rows]
+    out.print(table(f"Health of {name}", head, rows))
+    for line in health_lines(health, name):
+        out.print(line, markup=False)
     if plot_path:
         out.print(f"plot: {plot_path}", markup=False)
+
+
+def _health_row(e) -> list:
+    d = e.to_dict()
+    note = "outlier" if e.outlier else (d.get("capacity_note") or "")
+    return [e.source, (e.start or "-").replace("T", " "), d.get("kind") or "-",
+            _num(e.discharged_Ah), _num(e.capacity_Ah), _interval(e.capacity_interval95, 3),
+            _num(e.resistance_ohm, 1, 1000), _num(d.get("resistance_ref_ohm"), 1, 1000),
+            _num(e.efc, 1), note, _cells(d.get("cells"))]
+
+
+def _cells(cells) -> str:
+    """An event's per-cell figures in a few words: rest spread, weakest cell, drift."""
+    if not isinstance(cells, dict):
+        return ""
+    from ..plot import cell_figures
+
+    spread, share = cell_figures({"cells": cells})
+    parts = [] if spread is None else [f"spread {1000 * spread:.0f} mV"]
+    if share is not None:
+        parts.append(f"weakest {100 * share:.0f} %")
+    if cells.get("drift"):
+        parts.append("a cell drifts")
+    return ", ".join(parts)
+
+
+def _from(sources) -> str:
+    if not sources:
+        return ""
+    names = [s["source"] for s in sources]
+    kinds = "/".join(sorted({str(s.get("kind")) for s in sources}))
+    shown = ", ".join(names) if len(names) <= 3 else f"{names[0]} ... {names[-1]}"
+    return f" from {len(names)} {kinds} event(s): {shown}"
+
+
+def health_lines(health, name: str) -> list[str]:
+    """The lines under the health table: reference, today, trend, end of life, notes."""
+    ref, fc, t = health.reference_capacity_Ah, health.forecast, health.today
+    lines = [f"reference capacity: {_num(ref)} Ah ({health.reference})"]
+    if ref is None:
+        lines.append(f"  give its label capacity to count cycles: dischargelab logbook add FILE "
+                     f"--pack {name!r} --capacity AH (a file already there is skipped)")
+    if t.get("capacity_Ah") is not None:
+        lines.append(f"capacity today (EFC {_num(t.get('efc'), 0)}): {_num(t['capacity_Ah'])} "
+                     f"Ah (95 %: {_interval(t.get('capacity_interval95'), 3)})"
+                     f"{_from(t.get('capacity_from'))}")
+    if t.get("resistance_ohm") is not None:
+        lines.append(f"resistance today ({t.get('resistance_basis')}): "
+                     f"{_num(t['resistance_ohm'], 1, 1000)} mOhm (95 %: "
+                     f"{_num(t['resistance_interval95'][0], 1, 1000)} - "
+                     f"{_num(t['resistance_interval95'][1], 1, 1000)})"
+                     f"{_from(t.get('resistance_from'))}")
+    if fc is None:
+        lines.append("end of life: no forecast yet (needs three capacities and a reference "
+                     "capacity)")
+        return lines + [f"note: {n}" for n in health.notes[1:]]
+    shape = {"line": "a straight line", "early": "a fast early fade, then a straight line",
+             "knee": "a knee", "early+knee": "a fast early fade and a knee"}[fc.shape]
+    knee = (f"knee at {fc.knee_efc:.0f} EFC" if fc.knee_efc is not None
+            else "no knee in the data yet (the forecast allows one ahead)")
+    lines.append(f"trend: {shape} (odds of a bend against a straight line {fc.bend_odds:.3g}); "
+                 f"{knee}")
+    how, span = ("observed at", "between events") if fc.observed else ("forecast at", "95 %")
+    lines.append(f"end of life ({100 * fc.eol:.0f} % = {fc.threshold_Ah:.3f} Ah): {how} "
+                 f"{_num(fc.eol_efc, 0)} EFC ({span}: {_interval(fc.eol_efc_interval95)})")
+    return lines + [f"note: {n}" for n in health.notes[1:]]
 
 
 @logbook_group.command("events", context_settings=CONTEXT)

@@ -460,7 +460,8 @@ class Logbook:
                            failed=sorted(failed))
 
     def pack(self, name: str) -> Pack:
-        """A pack with its health today; ``.battery()`` is its model scaled to it."""
+        """A pack with its health today; ``.battery()`` is its model at that health (its
+        fitted model scaled to today, else the chemistry's prior at today's figures)."""
         from . import store
         from .figures import make_pack
 
@@ -470,7 +471,8 @@ class Logbook:
             row = store.pack_row(conn, name)
             model = store.latest_model(conn, row["id"])
         return make_pack(row, stored["pack"]["events"], health, model,
-                         fit=lambda: self._fit(name, health))
+                         fit=lambda: self._fit(name, health),
+                         seen=stored["pack"].get("seen") or {})
 
     def raw(self, sha256: str) -> bytes:
         """The stored bytes of a source file, by its SHA-256."""
@@ -635,6 +637,7 @@ class Logbook:
             else:
                 table.to_parquet(tmp, index=False)
         return out
+
 
 
 

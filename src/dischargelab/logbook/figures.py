@@ -45,8 +45,8 @@ CURVE_C_RATES = (0.5, 1.0, 2.0)
 CURVE_POINTS = 200
 
 #: Keys of a pack's row in :meth:`dischargelab.Logbook.packs`.
-ROW_KEYS = ("name", "events", "efc", "capacity_Ah", "capacity_fraction", "resistance_ohm",
-            "eol_efc", "eol_efc_interval95")
+ROW_KEYS = ("name", "events", "efc", "capacity_Ah", "capacity_interval95", "capacity_fraction",
+            "resistance_ohm", "eol_efc", "eol_efc_interval95")
 
 
 def figures_key() -> str:
@@ -59,8 +59,9 @@ def figures_key() -> str:
 # --------------------------------------------------------------------------- the pure task
 
 def make_pack(row: dict, events: int, health: Health, model: dict | None,
-              fit=None) -> Pack:
-    """A pack with its health today (capacity today, else its latest capacity)."""
+              fit=None, seen: dict | None = None) -> Pack:
+    """A pack with its health today (capacity today, else its latest capacity);
+    ``seen``: :func:`seen_in`."""
     cap = health.capacity_now_Ah
     if cap is None:
         caps = [e.capacity_Ah for e in health.events if e.capacity_Ah is not None
@@ -69,8 +70,26 @@ def make_pack(row: dict, events: int, health: Health, model: dict | None,
     return Pack(name=row["name"], label_capacity_Ah=row["label_capacity_Ah"],
                 reference_capacity_Ah=health.reference_capacity_Ah,
                 chemistry=row["chemistry"], cells=row["cells"], events=events,
-                efc=health.efc_now, capacity_Ah=cap, resistance_ohm=health.resistance_now_ohm,
-                health=health, _model=model, _fit=fit)
+                efc=health.efc_now, capacity_Ah=cap,
+                capacity_interval95=health.capacity_now_interval95,
+                resistance_ohm=health.resistance_now_ohm, health=health, _model=model,
+                _fit=fit, _seen=seen or {})
+
+
+def seen_in(events: list[dict], row: dict) -> dict:
+    """Cells in series and chemistry as the events show them (for a pack whose settings
+    do not say): cells from the latest event, chemistry from the highest rest voltage
+    per cell (LiFePO4 below 3.75 V when full, else LiPo)."""
+    from ..thermalprior import chemistry_from_full_voltage
+    from .health import order_events, pack_cells
+
+    if not events:
+        return {}
+    ordered = order_events(events)
+    cells = pack_cells(ordered[-1], row["cells"], row["chemistry"])
+    rests = [e.get("rest_voltage_V") for e in ordered if e.get("rest_voltage_V")]
+    chemistry = chemistry_from_full_voltage(max(rests) / cells) if rests else None
+    return {"cells": cells, "chemistry": chemistry}
 
 
 def _thin(values, points: int = CURVE_POINTS) -> list:
@@ -86,8 +105,10 @@ def model_curves(pack: Pack) -> dict | None:
     """The pack's stored model scaled to today, as curves at :data:`CURVE_C_RATES`:
     ``{"name", "family", "cells_series", "strings_parallel", "capacity_Ah", "note",
     "curves": [{"c_rate", "current_A", "time_to_cutoff_s", "charge_Ah", "voltage_V"}]}``;
-    ``{"note": why}`` when it cannot be scaled; None without a stored model."""
-    if not pack.fitted:
+    ``{"note": why}`` when it cannot be scaled; None without a stored model when the pack
+    has a full discharge to fit one to. A pack that only flies gets its chemistry's prior
+    at today's capacity and resistance (:mod:`.today`)."""
+    if not pack.fitted and pack.has_full_discharge:
         return None
     try:
         battery = pack.battery()
@@ -131,9 +152,11 @@ def pack_figures(job: dict) -> dict:
     row, events, model = job["row"], job["events"], job["model"]
     health = build_health(row, events, model, DEFAULT_EOL)
     fleet = fleet_row(health, row)
-    pack = make_pack(row, len(events), health, model)
+    seen = seen_in(events, row)
+    pack = make_pack(row, len(events), health, model, seen=seen)
     return _clean({"name": row["name"], "version": row["version"],
-                   "row": {k: fleet[k] for k in ROW_KEYS}, "pack": pack.to_dict(),
+                   "row": {k: fleet[k] for k in ROW_KEYS},
+                   "pack": {**pack.to_dict(), "seen": seen},
                    "fleet": fleet, "health": health.to_dict(), "model": model_curves(pack)})
 
 
@@ -260,5 +283,5 @@ class PackFigures:
 
 
 __all__ = ["PackFigures", "FIGURES_VERSION", "figures_key", "pack_figures", "make_pack",
-           "model_curves", "read_job", "read_stored", "stale_names", "store_figures", "Stored",
-           "ROW_KEYS", "CURVE_C_RATES", "CURVE_POINTS"]
+           "seen_in", "model_curves", "read_job", "read_stored", "stale_names", "store_figures",
+           "Stored", "ROW_KEYS", "CURVE_C_RATES", "CURVE_POINTS"]

@@ -27,12 +27,14 @@ def pack_summary(job: tuple) -> dict:
     Returns
     -------
     dict
-        ``name``, ``events``, ``efc``, ``capacity_Ah``, ``reference_capacity_Ah``,
-        ``capacity_fraction``, ``resistance_ohm``, ``eol_efc``, ``eol_efc_interval95``,
-        ``efc_left`` (EFC from today to the forecast end of life), ``observed`` (end of
-        life already logged), ``threshold_Ah`` and ``points`` (per event: efc,
-        capacity_Ah, resistance_ohm, outlier) and ``band`` (the capacity trend's 95 %
-        band, or None).
+        ``name``, ``events``, ``efc``, ``capacity_Ah`` and ``capacity_interval95``
+        (today, from the capacity trend), ``reference_capacity_Ah``,
+        ``capacity_fraction``, ``resistance_ohm`` (today) and ``resistance_basis``,
+        ``eol_efc``, ``eol_efc_interval95``, ``efc_left`` (EFC from today to the
+        forecast end of life), ``observed`` (end of life already logged),
+        ``threshold_Ah``, ``shape`` and ``knee_efc`` of the trend, ``points`` (per
+        event: efc, kind, capacity_Ah, capacity_interval95, resistance_ohm, outlier)
+        and ``band`` (the capacity trend's 95 % band and the forecast's, or None).
     """
     row, events, model, eol = job
     return fleet_row(build_health(row, events, model, eol), row)
@@ -45,17 +47,21 @@ def fleet_row(h, row: dict) -> dict:
     left = None
     if f is not None and f.eol_efc is not None and efc is not None:
         left = f.eol_efc - efc
-    points = [{"efc": e.efc, "capacity_Ah": e.capacity_Ah, "resistance_ohm": e.resistance_ohm,
-               "outlier": e.outlier} for e in h.events if e.efc is not None]
+    points = [{"efc": e.efc, "kind": e.to_dict().get("kind"), "capacity_Ah": e.capacity_Ah,
+               "capacity_interval95": e.capacity_interval95,
+               "resistance_ohm": e.resistance_ohm, "outlier": e.outlier}
+              for e in h.events if e.efc is not None]
     return _clean({
         "name": row["name"], "events": len(h.events), "efc": efc, "capacity_Ah": cap,
-        "reference_capacity_Ah": ref,
+        "capacity_interval95": h.capacity_now_interval95, "reference_capacity_Ah": ref,
         "capacity_fraction": cap / ref if cap is not None and ref else None,
         "resistance_ohm": h.resistance_now_ohm,
+        "resistance_basis": h.today.get("resistance_basis"),
         "eol_efc": None if f is None else f.eol_efc,
         "eol_efc_interval95": None if f is None else list(f.eol_efc_interval95),
         "efc_left": left, "observed": bool(f is not None and f.observed),
         "threshold_Ah": None if f is None else f.threshold_Ah,
+        "shape": None if f is None else f.shape, "knee_efc": None if f is None else f.knee_efc,
         "points": points, "band": None if f is None else f.band_points(points=60)})
 
 
@@ -100,9 +106,9 @@ class FleetReport:
         from ..report import CSS
 
         now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
-        head = ["pack", "events", "EFC", "capacity today", "of reference", "resistance",
-                "end of life [EFC]", "95 % interval", "EFC left", "capacity against EFC",
-                "resistance against EFC"]
+        head = ["pack", "events", "EFC", "capacity today (95 %)", "of reference", "resistance",
+                "trend", "end of life [EFC]", "95 % interval", "EFC left",
+                "capacity against EFC", "resistance against EFC"]
         body = []
         due = set(self.retire_soon(within_efc))
         for r in self.rows:
@@ -112,9 +118,11 @@ class FleetReport:
             cls = ' class="due"' if r["name"] in due else ""
             body.append(
                 f"<tr{cls}><td>{_e(r['name'])}</td><td>{r['events']}</td>"
-                f"<td>{_n(r['efc'], 0)}</td><td>{_n(r['capacity_Ah'], 3)} Ah</td>"
+                f"<td>{_n(r['efc'], 0)}</td><td>{_n(r['capacity_Ah'], 3)} Ah "
+                f"({_span_of(r.get('capacity_interval95'))})</td>"
                 f"<td>{_n(r['capacity_fraction'], 1, 100)} %</td>"
                 f"<td>{_n(r['resistance_ohm'], 1, 1000)} m&Omega;</td>"
+                f"<td>{_e(_shape(r))}</td>"
                 f"<td>{_n(r['eol_efc'], 0)}</td><td>{_interval(r['eol_efc_interval95'])}</td>"
                 f"<td>{status}</td><td>{_spark_capacity(r)}</td><td>{_spark_resistance(r)}</td>"
                 "</tr>")
@@ -130,7 +138,8 @@ class FleetReport:
                 "<table><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>"
                 + "".join(body) + "</table>" + failed +
                 '<p class="sub">Capacity: dots per event (hollow: outliers, left out of the '
-                "trend), shaded: the trend's 95 % band, red line: end of life. Rows in red "
+                "trend), shaded: the trend's 95 % band, then the forecast's (95 % of the "
+                "simulated futures), red line: end of life. Rows in red "
                 f"reached end of life or have at most {within_efc:g} EFC left.</p></main>"
                 "</body></html>")
 
@@ -140,6 +149,24 @@ class FleetReport:
 
         out = check_outputs([path], force=force)[0]
         return write_text(out, self.to_html(within_efc=within_efc))
+
+
+#: How each trend shape reads in the report.
+SHAPES = {"line": "straight", "early": "early fade, then straight", "knee": "knee",
+          "early+knee": "early fade and knee"}
+
+
+def _shape(row: dict) -> str:
+    if row.get("shape") is None:
+        return "-"
+    knee = row.get("knee_efc")
+    return SHAPES.get(row["shape"], row["shape"]) + ("" if knee is None else f" at {knee:.0f}")
+
+
+def _span_of(pair) -> str:
+    if not pair or None in pair:
+        return "-"
+    return f"{pair[0]:.3f}-{pair[1]:.3f}"
 
 
 def _e(text) -> str:
@@ -183,9 +210,11 @@ def _spark_capacity(row: dict) -> str:
     pts = [p for p in row["points"] if p["capacity_Ah"] is not None]
     band = row.get("band")
     xs = [p["efc"] for p in pts] + (band["efc"] if band else [])
-    ys = [p["capacity_Ah"] for p in pts] + ((band["lo"] + band["hi"]) if band else [])
+    # the scale holds the events and the threshold; the band's far edge is cut at the frame
+    ys = [p["capacity_Ah"] for p in pts]
     if row.get("threshold_Ah") is not None:
         ys.append(row["threshold_Ah"])
+        ys.append(row["threshold_Ah"] - 0.25 * (max(ys) - row["threshold_Ah"]))
     x, y = _scale(xs, 2, SPARK_W - 2), _scale(ys, SPARK_H - 2, 2)
     if x is None or y is None:
         return "-"

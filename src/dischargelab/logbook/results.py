@@ -8,11 +8,14 @@ from typing import Any
 import numpy as np
 
 from ..errors import LogbookError
-from .forecast import Trend
 from .health import EventHealth
+from .trend import Smoothed
 
 #: Default end of life: this share of the reference capacity.
 DEFAULT_EOL = 0.8
+
+#: Points of each trend kept in ``Health.to_dict()``.
+TREND_POINTS = 160
 
 
 def _clean(value):
@@ -32,7 +35,7 @@ def _clean(value):
 
 @dataclass
 class Forecast:
-    """End of life of one pack.
+    """End of life of one pack (:mod:`.forecast`).
 
     Attributes
     ----------
@@ -41,98 +44,111 @@ class Forecast:
     threshold_Ah : float
         ``eol`` times the reference capacity [Ah].
     eol_efc : float or None
-        EFC at which the capacity trend reaches the threshold (median of the
-        simulated futures; None when no fade is seen).
+        EFC at which the capacity reaches the threshold: the median of the simulated
+        futures, or where the logged capacities fell through it (``observed``).
     eol_efc_interval95 : list
-        ``[low, high]``; an end is None when the band does not bound it.
-    capacity : Trend
-        Capacity trend [Ah] against EFC (outliers left out).
-    resistance : Trend or None
-        Resistance trend [ohm] against EFC.
-    band : tuple or None
-        ``(efc, low, high)`` of the capacity's simulated futures past the last event.
+        ``[low, high]``; an end is None when the futures do not bound it within
+        :data:`~dischargelab.logbook.forecast.HORIZON_FACTOR` times today's EFC.
+    shape : str
+        The most probable trend shape: ``"line"``, ``"early"`` (fast early fade,
+        then a line), ``"knee"`` or ``"early+knee"``.
+    bend_odds : float
+        Bayes factor of a bent trend against the straight line.
+    knee_efc : float or None
+        EFC of the knee seen in the data (when more probable than not).
+    knee_probability : float
+        Posterior probability of a knee already in the data.
+    band : dict
+        ``{"efc", "capacity_Ah", "lo", "hi"}``: the smoothed capacity with its 95 %
+        band up to the last estimate, then the futures' median and 2.5-97.5 %.
+    last_efc : float
+        EFC of the last capacity estimate (where the futures start).
+    estimates : int
+        Capacity estimates used.
     observed : bool
-        The logged capacities already fell below the threshold: ``eol_efc`` is where
-        (interpolated), the interval the two events around it.
+        The logged capacities already fell below the threshold (two in a row).
     """
 
     eol: float
     threshold_Ah: float
     eol_efc: float | None
     eol_efc_interval95: list
-    capacity: Trend
-    resistance: Trend | None = None
-    band: tuple | None = None
-    first_efc: float = 0.0
+    shape: str
+    bend_odds: float
+    knee_efc: float | None
+    knee_probability: float
+    band: dict
+    last_efc: float
+    estimates: int
     observed: bool = False
 
     def band_points(self, points: int = 120) -> dict:
-        """The capacity trend and its 95 % band from the first event to the forecast's end:
-        ``{"efc", "capacity_Ah", "lo", "hi"}`` (lists; for plots and pages)."""
-        trend = self.capacity
-        past = np.linspace(self.first_efc, trend.last_efc, points // 2)
-        lo_p, hi_p = trend.band(past)
-        efc, lo, hi = list(past), list(lo_p), list(hi_p)
-        mean = list(trend.mean(past))
-        if self.band is not None:
-            grid, blo, bhi = self.band
-            end = self.eol_efc_interval95[1] or self.eol_efc or grid[-1]
-            stop = max(int(np.searchsorted(grid, 1.1 * end)), 2)
-            idx = np.unique(np.linspace(1, min(stop, grid.size - 1), points // 2).astype(int))
-            efc += list(grid[idx])
-            lo += list(blo[idx])
-            hi += list(bhi[idx])
-            mean += list(trend.mean(grid[idx]))
-        return _clean({"efc": efc, "capacity_Ah": mean, "lo": lo, "hi": hi})
+        """:attr:`band` thinned to about ``points`` points (for plots and pages)."""
+        efc = np.asarray(self.band["efc"], dtype=float)
+        idx = np.arange(efc.size)
+        if efc.size > points:
+            idx = np.unique(np.linspace(0, efc.size - 1, points).round().astype(int))
+        return _clean({k: [self.band[k][i] for i in idx] for k in ("efc", "capacity_Ah", "lo",
+                                                                     "hi")})
 
     def to_dict(self) -> dict:
-        """The forecast for pages and JSON (``band``: :meth:`band_points`) with what
-        :meth:`from_dict` needs to rebuild it (the trends' coefficients, the simulated
-        band)."""
-        future = None if self.band is None else {
-            k: np.asarray(v, dtype=float).tolist() for k, v in zip(("efc", "lo", "hi"), self.band)}
         return _clean({"eol": self.eol, "threshold_Ah": self.threshold_Ah,
                        "eol_efc": self.eol_efc,
                        "eol_efc_interval95": list(self.eol_efc_interval95),
-                       "observed": self.observed, "first_efc": self.first_efc,
-                       "band": self.band_points(),
-                       "capacity_trend": _trend_state(self.capacity),
-                       "resistance_trend": _trend_state(self.resistance),
-                       "future_band": future})
+                       "observed": self.observed, "shape": self.shape,
+                       "bend_odds": self.bend_odds, "knee_efc": self.knee_efc,
+                       "knee_probability": self.knee_probability, "last_efc": self.last_efc,
+                       "estimates": self.estimates, "band": self.band_points()})
 
     @classmethod
-    def from_dict(cls, data: dict) -> Forecast:
-        """The forecast :meth:`to_dict` describes."""
-        future = data.get("future_band")
-        band = None if future is None else tuple(
-            np.asarray(future[k], dtype=float) for k in ("efc", "lo", "hi"))
-        return cls(eol=data["eol"], threshold_Ah=data["threshold_Ah"], eol_efc=data["eol_efc"],
-                   eol_efc_interval95=list(data["eol_efc_interval95"]),
-                   capacity=_trend_from(data["capacity_trend"]),
-                   resistance=_trend_from(data.get("resistance_trend")), band=band,
-                   first_efc=data["first_efc"], observed=data["observed"])
+    def from_dict(cls, d: dict) -> Forecast:
+        band = d["band"]
+        nan = float("nan")
+        band = {k: [nan if v is None else v for v in band[k]]
+                for k in ("efc", "capacity_Ah", "lo", "hi")}
+        return cls(eol=d["eol"], threshold_Ah=d["threshold_Ah"], eol_efc=d["eol_efc"],
+                   eol_efc_interval95=list(d["eol_efc_interval95"]), shape=d["shape"],
+                   bend_odds=d["bend_odds"], knee_efc=d["knee_efc"],
+                   knee_probability=d["knee_probability"], band=band,
+                   last_efc=d["last_efc"], estimates=d["estimates"], observed=d["observed"])
 
 
-def _trend_state(trend: Trend | None) -> dict | None:
-    """Every field of a trend (what :func:`_trend_from` rebuilds it from)."""
-    if trend is None:
-        return None
-    return {f.name: np.asarray(getattr(trend, f.name)).tolist() for f in fields(trend)}
+def _event_to_dict(e: EventHealth) -> dict:
+    """An event's ``to_dict()`` plus every other field of it (``event_kind``: its stored
+    kind), so that :meth:`Health.from_dict` rebuilds it."""
+    out = e.to_dict()
+    for f in fields(e):
+        key = "event_kind" if f.name == "kind" else f.name
+        out.setdefault(key, getattr(e, f.name))
+    return out
 
 
-def _trend_from(state: dict | None) -> Trend | None:
-    if state is None:
-        return None
-    values = {f.name: state[f.name] for f in fields(Trend)}
-    values["covariance"] = np.asarray(values["covariance"], dtype=float)
-    return Trend(**values)
+def _event_from_dict(d: dict) -> EventHealth:
+    values = {f.name: d.get("event_kind" if f.name == "kind" else f.name)
+              for f in fields(EventHealth)}
+    values["notes"] = list(values.get("notes") or [])
+    values["outlier"] = bool(values.get("outlier"))
+    return EventHealth(**values)
 
 
 @dataclass
 class Health:
-    """A pack's health over its life: one row per event, and the forecast.
+    """A pack's health over its life: one row per event, today's figures, the trends
+    and the forecast.
 
-    ``to_dict()`` is the JSON of ``dischargelab logbook health NAME --json``.
+    ``to_dict()`` is the JSON of ``dischargelab logbook health NAME --json``;
+    :meth:`from_dict` rebuilds the object from it (figures stored once per change).
+
+    Attributes
+    ----------
+    today : dict
+        ``efc``, ``capacity_Ah`` and ``capacity_interval95`` [Ah] (the capacity
+        trend at today's EFC), ``resistance_ohm`` and ``resistance_interval95``
+        [ohm], ``resistance_basis`` (``"reference conditions"`` or ``"as
+        measured"``), ``capacity_from`` and ``resistance_from`` (the events that
+        carry most of today's value: source, start, kind, efc, share).
+    capacity_trend, resistance_trend : Smoothed or None
+        The smoothed capacity [Ah] and resistance [ohm] over EFC (:mod:`.trend`).
     """
 
     pack: str
@@ -141,22 +157,50 @@ class Health:
     reference: str
     forecast: Forecast | None
     notes: list[str] = field(default_factory=list)
+    today: dict = field(default_factory=dict)
+    capacity_trend: Smoothed | None = None
+    resistance_trend: Smoothed | None = None
 
     def to_dict(self) -> dict:
-        return _clean({"pack": self.pack, "reference_capacity_Ah": self.reference_capacity_Ah,
-                       "reference": self.reference, "notes": list(self.notes),
-                       "events": [e.to_dict() for e in self.events],
-                       "forecast": None if self.forecast is None else self.forecast.to_dict()})
+        t = self.today
+        return _clean({
+            "pack": self.pack, "events": [_event_to_dict(e) for e in self.events],
+            "forecast": None if self.forecast is None else self.forecast.to_dict(),
+            "reference_capacity_Ah": self.reference_capacity_Ah, "reference": self.reference,
+            "efc_now": t.get("efc"), "capacity_now_Ah": t.get("capacity_Ah"),
+            "capacity_now_interval95": t.get("capacity_interval95"),
+            "resistance_now_ohm": t.get("resistance_ohm"),
+            "resistance_now_interval95": t.get("resistance_interval95"),
+            "resistance_basis": t.get("resistance_basis"),
+            "capacity_from": t.get("capacity_from", []),
+            "resistance_from": t.get("resistance_from", []),
+            "trend": {"capacity": None if self.capacity_trend is None
+                      else self.capacity_trend.to_dict(points=TREND_POINTS),
+                      "resistance": None if self.resistance_trend is None
+                      else self.resistance_trend.to_dict(points=TREND_POINTS)},
+            "notes": list(self.notes)})
 
     @classmethod
-    def from_dict(cls, data: dict) -> Health:
-        """The health :meth:`to_dict` describes (how the logbook's stored figures are read)."""
-        forecast = data.get("forecast")
-        return cls(pack=data["pack"], events=[EventHealth.from_dict(e) for e in data["events"]],
-                   reference_capacity_Ah=data.get("reference_capacity_Ah"),
-                   reference=data.get("reference", ""),
-                   forecast=None if forecast is None else Forecast.from_dict(forecast),
-                   notes=list(data.get("notes", [])))
+    def from_dict(cls, d: dict) -> Health:
+        """The Health of :meth:`to_dict` back (trends as their stored bands)."""
+        trend = d.get("trend") or {}
+        today = {"efc": d.get("efc_now"), "capacity_Ah": d.get("capacity_now_Ah"),
+                 "capacity_interval95": d.get("capacity_now_interval95"),
+                 "resistance_ohm": d.get("resistance_now_ohm"),
+                 "resistance_interval95": d.get("resistance_now_interval95"),
+                 "resistance_basis": d.get("resistance_basis"),
+                 "capacity_from": list(d.get("capacity_from") or []),
+                 "resistance_from": list(d.get("resistance_from") or [])}
+        return cls(pack=d["pack"], events=[_event_from_dict(e) for e in d["events"]],
+                   reference_capacity_Ah=d.get("reference_capacity_Ah"),
+                   reference=d.get("reference") or "",
+                   forecast=None if d.get("forecast") is None
+                   else Forecast.from_dict(d["forecast"]),
+                   notes=list(d.get("notes") or []), today=today,
+                   capacity_trend=None if trend.get("capacity") is None
+                   else Smoothed.from_dict(trend["capacity"]),
+                   resistance_trend=None if trend.get("resistance") is None
+                   else Smoothed.from_dict(trend["resistance"]))
 
     def to_pandas(self):
         """Events with every health column (capacity method, full, cycle, notes...)."""
@@ -171,36 +215,33 @@ class Health:
                        capacity_low_Ah=lo, capacity_high_Ah=hi, resistance_low_ohm=rlo,
                        resistance_high_ohm=rhi, notes="; ".join(e.notes))
             row.pop("capacity_interval95")
-            row.pop("resistance_interval95")
-            rows.append(_clean(row))
+            rows.append({k: v for k, v in _clean(row).items()
+                         if not isinstance(v, (list, dict))})
         return pd.DataFrame(rows)
 
     @property
     def capacity_now_Ah(self) -> float | None:
-        """Capacity today [Ah]: robust line through the latest capacities (outliers left
-        out), at the last one (:func:`~dischargelab.logbook.health.value_today`)."""
-        from .health import value_today
+        """Capacity today [Ah]: the capacity trend at today's EFC (:mod:`.trend`)."""
+        return self.today.get("capacity_Ah")
 
-        sel = [e for e in self.events if e.capacity_Ah is not None and not e.outlier]
-        return value_today([e.efc if e.efc is not None else k for k, e in enumerate(sel)],
-                           [e.capacity_Ah for e in sel])
+    @property
+    def capacity_now_interval95(self) -> list | None:
+        """95 % interval of :attr:`capacity_now_Ah` [Ah]."""
+        return self.today.get("capacity_interval95")
 
     @property
     def resistance_now_ohm(self) -> float | None:
-        """Resistance today [ohm], read like :attr:`capacity_now_Ah`."""
-        from .health import value_today
-
-        sel = [e for e in self.events if e.resistance_ohm is not None and not e.outlier]
-        return value_today([e.efc if e.efc is not None else k for k, e in enumerate(sel)],
-                           [e.resistance_ohm for e in sel])
+        """Resistance today [ohm]: the resistance trend at today's EFC (at reference
+        conditions when the events give it there, see ``today["resistance_basis"]``)."""
+        return self.today.get("resistance_ohm")
 
     @property
     def efc_now(self) -> float | None:
-        values = [e.efc for e in self.events if e.efc is not None]
-        return values[-1] if values else None
+        return self.today.get("efc")
 
     def plot(self, axes=None):
-        """Capacity and resistance against EFC, trend, 95 % band, forecast, outliers.
+        """Capacity and resistance against EFC: estimates by kind with their intervals,
+        the trends with their bands, the knee and the end of life.
 
         Returns the two Axes.
         """
@@ -279,44 +320,86 @@ class Pack:
     capacity_Ah: float | None
     resistance_ohm: float | None
     health: Health | None = None
+    capacity_interval95: list | None = None
     _model: Any = None
     _fit: Any = None
+    _seen: dict = field(default_factory=dict)
 
     @property
     def fitted(self) -> bool:
         """A fitted model of the pack is stored (without one, :meth:`battery` fits and
-        stores one first: a write)."""
+        stores one first when the pack has a full discharge: a write)."""
         return self._model is not None
 
-    def battery(self):
-        """The pack's fitted model scaled to today's capacity and resistance.
+    @property
+    def has_full_discharge(self) -> bool:
+        """The pack has a full discharge (not an outlier) a model can be fitted to."""
+        return self.health is not None and any(e.full and not e.outlier
+                                               for e in self.health.events)
 
-        Capacity: every charge parameter times ``capacity today / capacity at the
-        fit``; resistance: the series resistance plus the change of the measured step
-        resistance since the fit (per cell). The returned Battery's
-        ``extra["note"]`` says so; ``dl.endurance`` repeats it in its result's notes.
+    def battery(self):
+        """The pack's model at today's capacity and resistance.
+
+        With a fitted model (stored, or fitted and stored now from the latest full
+        discharge): every charge parameter times ``capacity today / capacity at the
+        fit``, the series resistance plus the change of the resistance trend since
+        the fit (per cell). A pack without a full discharge (flights only): the
+        chemistry's prior built to today's figures (:mod:`.today`). The returned
+        Battery's ``extra["note"]`` says which, and which events today's figures come
+        from; ``dl.endurance`` and ``autopilot_params`` repeat it in their notes.
 
         Raises
         ------
         LogbookError
-            No model can be fitted (no full discharge) or no capacity today.
+            No capacity today (and no label capacity for a pack that only flies).
         """
-        from ..model import Battery
-
         model = self._model
-        if model is None and self._fit is not None:
+        if model is None and self._fit is not None and self.has_full_discharge:
             model = self._fit()
         if model is None:
-            raise LogbookError(f"pack {self.name!r} has no fitted model; it needs a full "
-                               "discharge in the logbook (Logbook.fit)")
+            return self._prior()
+        return self._scaled(model)
+
+    def _note(self) -> str:
+        from .today import figures_note
+
+        if self.health is None:
+            return f"logbook pack {self.name!r}"
+        return figures_note(self.health, self.name)
+
+    def _prior(self):
+        from ..ocv import DEFAULT_CHEMISTRY
+        from .today import prior_battery
+
+        capacity, note = self.capacity_Ah, self._note()
+        if capacity is None and self.label_capacity_Ah:
+            capacity = self.label_capacity_Ah
+            note += f", no capacity estimate yet: its label capacity {capacity:.3g} Ah"
+        if capacity is None:
+            raise LogbookError(f"pack {self.name!r} has no capacity estimate and no label "
+                               "capacity; set one with --capacity AH (Logbook.set_pack)")
+        chemistry = self.chemistry or self._seen.get("chemistry")
+        if chemistry is None:
+            chemistry = DEFAULT_CHEMISTRY
+            note += f"; chemistry unknown, {chemistry} assumed (set it with --chemistry)"
+        elif self.chemistry is None:
+            note += f"; chemistry taken as {chemistry} from its full rest voltage"
+        cells = self.cells or self._seen.get("cells") or 1
+        return prior_battery(self.name, chemistry, int(cells), float(capacity),
+                             self.resistance_ohm, note)
+
+    def _scaled(self, model: dict):
+        from ..cell import CellParameters
+        from ..model import Battery
+
         bat = Battery.from_dict(model["battery"])
         if self.capacity_Ah is None or not model.get("capacity_Ah"):
             raise LogbookError(f"pack {self.name!r} has no capacity estimate yet")
         factor = float(self.capacity_Ah) / float(model["capacity_Ah"])
         shift = 0.0
-        if self.resistance_ohm is not None and model.get("resistance_ohm") is not None:
-            shift = (self.resistance_ohm - model["resistance_ohm"]) * bat.strings_parallel \
-                / bat.cells_series
+        at_fit = self._resistance_at_fit(model)
+        if self.resistance_ohm is not None and at_fit is not None:
+            shift = (self.resistance_ohm - at_fit) * bat.strings_parallel / bat.cells_series
         fam = bat.family
         units = {p.name: p.unit for p in fam.parameters}
         params = scale_parameters({n: float(bat.parameters[n]) for n in fam.names}, units,
@@ -333,8 +416,8 @@ class Pack:
                         for n in fam.names])
         cov = None if bat.covariance is None else \
             np.asarray(bat.covariance) * np.outer(jac, jac)
-        note = (f"battery model of logbook pack {self.name!r} scaled to its health today "
-                f"(EFC {self.efc:.0f}): capacity x{factor:.3f} ({self.capacity_Ah:.3g} Ah), "
+        note = (f"{self._note()}; its fitted model scaled to its health today: capacity "
+                f"x{factor:.3f}, "
                 f"series resistance {shift * 1000:+.1f} mOhm per cell")
         extra["logbook"] = {"pack": self.name, "capacity_factor": factor,
                             "resistance_shift_cell_ohm": shift}
@@ -342,10 +425,20 @@ class Pack:
         for key in ("measured_capacity_Ah", "nominal_capacity_Ah"):
             if extra.get(key):
                 extra[key] = float(extra[key]) * factor
-        from ..cell import CellParameters
-
         return replace(bat, parameters=CellParameters.from_dict(params, fam.names),
                        covariance=cov, extra=extra, name=f"{self.name} (today)")
+
+    def _resistance_at_fit(self, model: dict) -> float | None:
+        """The resistance trend at the EFC of the event the model was fitted to (same
+        basis as today's), else the resistance measured on that event."""
+        h = self.health
+        trend = None if h is None else h.resistance_trend
+        ref = model.get("reference_event_id")
+        if trend is not None and ref is not None:
+            for e in h.events:
+                if e.event_id == ref and e.efc is not None:
+                    return float(trend.at(e.efc)[0][0])
+        return model.get("resistance_ohm")
 
     def to_battery(self):
         """:meth:`battery` (what ``dl.load``, ``dl.endurance`` and ``dl.predict`` call)."""
@@ -356,50 +449,160 @@ class Pack:
                        "reference_capacity_Ah": self.reference_capacity_Ah,
                        "chemistry": self.chemistry, "cells": self.cells, "events": self.events,
                        "efc": self.efc, "capacity_Ah": self.capacity_Ah,
+                       "capacity_interval95": self.capacity_interval95,
                        "resistance_ohm": self.resistance_ohm})
 
 
 def build_health(row: dict, events: list[dict], model: dict | None, eol: float) -> Health:
     """Health of one pack from its stored rows ``(pack row, event rows, model row or None)``
-    (pure; see :mod:`.health` and :mod:`.forecast`)."""
-    import numpy as np
+    (pure; per event :mod:`.health`, over the life :mod:`.trend`, ahead :mod:`.forecast`).
 
+    This is the one place that makes a pack's figures; everything that shows them
+    (``logbook health``, ``packs``, the fleet report, the pack page, ``endurance
+    --pack``) reads them from the :class:`Health` it returns.
+    """
     from ..model import Battery
-    from .forecast import crossing, fit_trend
-    from .health import observed_crossing, pack_health
+    from .health import pack_health
 
     battery = Battery.from_dict(model["battery"]) if model else None
     per_event, reference, how = pack_health(
         events, label_capacity_Ah=row["label_capacity_Ah"], cells=row["cells"],
         chemistry=row["chemistry"], model=battery)
     notes = [f"reference capacity: {how}"]
-    usable = [e for e in per_event if e.capacity_Ah is not None and not e.outlier
-              and e.efc is not None]
+    if reference is None:
+        reference, fallback = _reference_from_estimates(per_event)
+        if reference is not None:
+            how = fallback
+            notes = [f"reference capacity: {fallback}"]
+    with_cap = [e for e in per_event if e.capacity_Ah is not None and not e.outlier
+                and e.efc is not None]
+    capacity_trend = _trend(with_cap, [e.capacity_Ah for e in with_cap],
+                            [e.capacity_interval95 for e in with_cap])
+    r_values, r_intervals, basis, with_r = _resistances(per_event)
+    resistance_trend = _trend(with_r, r_values, r_intervals,
+                              nugget_share=RESISTANCE_SCATTER_SHARE)
+    efcs = [e.efc for e in per_event if e.efc is not None]
+    today: dict = {"efc": efcs[-1] if efcs else None, "resistance_basis": basis}
+    if capacity_trend is not None:
+        value, interval = capacity_trend.interval95(today["efc"])
+        today.update(capacity_Ah=value, capacity_interval95=interval,
+                     capacity_from=_sources(with_cap, capacity_trend.influence))
+    if resistance_trend is not None:
+        value, interval = resistance_trend.interval95(today["efc"])
+        today.update(resistance_ohm=value, resistance_interval95=interval,
+                     resistance_from=_sources(with_r, resistance_trend.influence))
     forecast = None
-    if reference and len(usable) >= 2:
-        efc = np.array([e.efc for e in usable])
-        cap = np.array([e.capacity_Ah for e in usable])
-        sd = np.array([(e.capacity_interval95[1] - e.capacity_interval95[0]) / 3.92
-                       for e in usable])
-        trend = fit_trend(efc, cap, sd)
-        if trend is not None:
-            threshold = eol * reference
-            central, interval, band = crossing(trend, threshold, first_efc=float(efc.min()))
-            seen = observed_crossing(efc, cap, threshold)
-            if seen is not None:
-                central, interval = seen
-                notes.append(f"end of life observed: the capacity fell below {threshold:.3g} Ah "
-                             f"between {interval[0]:.0f} and {interval[1]:.0f} EFC")
-            with_r = [e for e in per_event if e.resistance_ohm is not None and not e.outlier
-                      and e.efc is not None]
-            r_trend = fit_trend([e.efc for e in with_r], [e.resistance_ohm for e in with_r]) \
-                if len(with_r) >= 2 else None
-            forecast = Forecast(eol=eol, threshold_Ah=threshold, eol_efc=central,
-                                eol_efc_interval95=interval, capacity=trend,
-                                resistance=r_trend, band=band, first_efc=float(efc.min()),
-                                observed=seen is not None)
+    if reference and capacity_trend is not None:
+        forecast = _forecast(with_cap, capacity_trend, reference, eol, notes)
     return Health(pack=row["name"], events=per_event, reference_capacity_Ah=reference,
-                  reference=how, forecast=forecast, notes=notes)
+                  reference=how, forecast=forecast, notes=notes, today=today,
+                  capacity_trend=capacity_trend, resistance_trend=resistance_trend)
+
+
+def _reference_from_estimates(per_event: list[EventHealth]) -> tuple[float | None, str]:
+    """Without a label capacity or a full discharge: the median of the pack's first three
+    capacity estimates as the reference, and each event's EFC counted against it."""
+    from .health import equivalent_full_cycles
+
+    first = [e.capacity_Ah for e in per_event if e.capacity_Ah is not None and not e.outlier]
+    if not first:
+        return None, ""
+    reference = float(np.median(first[:3]))
+    rows = [{"discharged_Ah": e.discharged_Ah, "cycle": e.cycle} for e in per_event]
+    for e, efc in zip(per_event, equivalent_full_cycles(rows, reference)):
+        e.efc = float(efc)
+    return reference, (f"median of the first {min(len(first), 3)} capacity estimate(s) (no "
+                       "label capacity and no full discharge)")
+
+
+def _resistances(per_event: list[EventHealth]):
+    """Each event's resistance at reference conditions when the events give it, else as
+    measured: (values, intervals, basis, events)."""
+    rows = [(e, e.to_dict()) for e in per_event if not e.outlier and e.efc is not None]
+    ref = [(e, d) for e, d in rows if d.get("resistance_ref_ohm") is not None]
+    if ref:
+        return ([d["resistance_ref_ohm"] for _, d in ref],
+                [d.get("resistance_ref_interval95") for _, d in ref], "reference conditions",
+                [e for e, _ in ref])
+    got = [e for e, _ in rows if e.resistance_ohm is not None]
+    return ([e.resistance_ohm for e in got], [e.resistance_interval95 for e in got],
+            "as measured", got)
+
+
+#: Scatter of a pack's resistance between events beyond their intervals, as a share,
+#: assumed while fewer than five events can measure it: temperature and state of charge
+#: move a load-step resistance by tens of per cent (Plett 2015, ch. 2), so 10 %.
+RESISTANCE_SCATTER_SHARE = 0.1
+
+
+def _trend(chosen: list[EventHealth], values: list, intervals: list,
+           **options) -> Smoothed | None:
+    from .trend import smooth
+
+    if not chosen:
+        return None
+    lo = [np.nan if iv is None or iv[0] is None else iv[0] for iv in intervals]
+    hi = [np.nan if iv is None or iv[1] is None else iv[1] for iv in intervals]
+    return smooth([e.efc for e in chosen], values, lo, hi, **options)
+
+
+#: Events listed as the source of a figure today: those carrying this share of it.
+SOURCE_SHARE = 0.9
+#: ... and at most this many.
+SOURCE_EVENTS = 8
+
+
+def _sources(chosen: list[EventHealth], influence) -> list[dict]:
+    """The events that carry most of today's value (by their weight in it), in order."""
+    share = np.abs(np.nan_to_num(np.asarray(influence, dtype=float)))
+    if share.sum() <= 0:
+        return []
+    share = share / share.sum()
+    top = np.argsort(-share, kind="stable")
+    cut = int(np.searchsorted(np.cumsum(share[top]), SOURCE_SHARE)) + 1
+    keep = sorted(top[:min(cut, SOURCE_EVENTS)])
+    return [{"source": chosen[k].source, "start": chosen[k].start,
+             "kind": chosen[k].to_dict().get("kind"), "efc": chosen[k].efc,
+             "share": float(share[k])} for k in keep]
+
+
+def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eol: float,
+              notes: list[str]) -> Forecast | None:
+    """End of life from the capacity estimates (:mod:`.forecast`), or where the logged
+    capacities already fell through it."""
+    from .forecast import forecast_capacity
+    from .health import observed_crossing
+
+    efc = np.array([e.efc for e in with_cap])
+    cap = np.array([e.capacity_Ah for e in with_cap])
+    lo = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[0]
+          for e in with_cap]
+    hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1]
+          for e in with_cap]
+    threshold = eol * reference
+    made = forecast_capacity(efc, cap, lo, hi, reference, threshold, weights=trend.weights)
+    if made is None:
+        return None
+    fit, ahead = made
+    central, interval = ahead.eol_efc, list(ahead.interval95)
+    seen = observed_crossing(efc, cap, threshold)
+    if seen is not None:
+        central, interval = seen
+        notes.append(f"end of life observed: the capacity fell below {threshold:.3g} Ah "
+                     f"between {interval[0]:.0f} and {interval[1]:.0f} EFC")
+    past = (trend.efc >= efc.min()) & (trend.efc <= fit.x_now)
+    end = max(v for v in (interval[1], central, fit.x_now) if v is not None)
+    future = (ahead.efc > fit.x_now) & (ahead.efc <= max(1.15 * end, 1.5 * fit.x_now))
+    lo_past, hi_past = trend.band()
+    band = {"efc": [*trend.efc[past], *ahead.efc[future]],
+            "capacity_Ah": [*trend.level[past], *ahead.median[future]],
+            "lo": [*lo_past[past], *ahead.low[future]],
+            "hi": [*hi_past[past], *ahead.high[future]]}
+    return Forecast(eol=eol, threshold_Ah=threshold, eol_efc=central,
+                    eol_efc_interval95=interval, shape=fit.family, bend_odds=fit.bend_odds,
+                    knee_efc=fit.knee_efc, knee_probability=fit.knee_probability,
+                    band=_clean(band), last_efc=fit.x_now, estimates=fit.n,
+                    observed=seen is not None)
 
 
 __all__ = ["Health", "Forecast", "PackTable", "EventTable", "Pack", "scale_parameters",

@@ -248,7 +248,7 @@ class PackPages:
             raise RequestRefused(400, f"unknown mission {mission!r}; choose one of "
                                       f"{', '.join(sorted(bundled_missions()))}")
         pack = self.logbook().pack(name)
-        if not pack.fitted:      # flying would fit and store one: only the refit writes
+        if not pack.fitted and pack.has_full_discharge:  # flying would fit and store one
             raise RequestRefused(409, f"pack {name!r} has no fitted model yet; refit it first "
                                       f"(Refit, or POST /api/packs/{name}/fit)")
         return dl.endurance(pack, mission).to_dict()

@@ -7,6 +7,37 @@
   const name = decodeURIComponent(location.pathname.replace(/^\/packs\//, ""));
   const api = "/api/packs/" + encodeURIComponent(name);
   const COLORS = ["#2563eb", "#059669", "#d97706", "#7c3aed"];
+  // marker colour of each event kind on the capacity and resistance plots
+  const KIND_COLORS = {full: "#1d4ed8", partial: "#059669", flight: "#7c3aed", charge: "#0891b2"};
+  const SHAPES = {line: "a straight line", early: "a fast early fade, then a line",
+                  knee: "a knee", "early+knee": "a fast early fade and a knee"};
+
+  // a number to draw (isFinite(null) is true: null would land at 0)
+  const has = v => typeof v === "number" && isFinite(v);
+
+  function fromEvents(list) {
+    if (!list || !list.length) return "";
+    const kinds = [...new Set(list.map(s => s.kind))].join("/");
+    const names = list.map(s => s.source);
+    return list.length + " " + kinds + " event" + (list.length === 1 ? "" : "s") + ": " +
+      (names.length <= 3 ? names.join(", ") : names[0] + " … " + names[names.length - 1]);
+  }
+
+  function byKind(list, value, interval, scale) {
+    // one marker series per event kind, its 95 % intervals as vertical segments
+    const series = [];
+    for (const kind of [...new Set(list.map(e => e.kind))]) {
+      const color = KIND_COLORS[kind] || "#6b7280";
+      for (const odd of [false, true]) {
+        const sel = list.filter(e => e.kind === kind && !!e.outlier === odd);
+        if (!sel.length) continue;
+        for (const e of sel) if (e[interval]) series.push({x: [e.efc, e.efc], y: e[interval].map(v => v * scale), color: "#cbd5e1", width: 1});
+        series.push({x: sel.map(e => e.efc), y: sel.map(e => e[value] * scale), color: odd ? "#d97706" : color, points: true,
+                     hollow: odd, label: odd ? kind + " (outlier)" : kind});
+      }
+    }
+    return series;
+  }
 
   const RELOAD_MS = 2000;
   let again = null;
@@ -26,8 +57,11 @@
     const s = d.summary || {};
     const events = (d.health && d.health.events) || [];
     const fc = d.health && d.health.forecast;
-    const withCap = events.filter(e => e.capacity_Ah !== null && e.capacity_Ah !== undefined);
-    const withR = events.filter(e => e.resistance_ohm !== null && e.resistance_ohm !== undefined);
+    const h = d.health || {};
+    const withCap = events.filter(e => e.capacity_Ah !== null && e.capacity_Ah !== undefined && e.efc !== null);
+    const refR = h.resistance_basis === "reference conditions";
+    const rKey = refR ? "resistance_ref_ohm" : "resistance_ohm";
+    const withR = events.filter(e => e[rKey] !== null && e[rKey] !== undefined && e.efc !== null);
     $("pack-summary").textContent = [s.events + (s.events === 1 ? " event" : " events"),
       s.chemistry, s.cells ? s.cells + (s.cells === 1 ? " cell" : " cells") + " in series" : null].filter(Boolean).join(" · ");
     $("m-capacity").textContent = DL.num(s.capacity_Ah, 3);
@@ -37,8 +71,15 @@
     $("m-resistance").textContent = s.resistance_ohm === null || s.resistance_ohm === undefined ? "–" : DL.num(s.resistance_ohm * 1000, 1);
     $("m-eol").textContent = fc ? DL.num(fc.eol_efc, 0) : "–";
     $("m-eol-iv").textContent = fc && fc.eol_efc_interval95 ? "EFC (95 %: " + DL.num(fc.eol_efc_interval95[0], 0) + "–" + DL.num(fc.eol_efc_interval95[1], 0) + ")" : "EFC";
+    const civ = h.capacity_now_interval95;
+    $("m-capacity-iv").textContent = civ ? "95 %: " + DL.num(civ[0], 3) + "–" + DL.num(civ[1], 3) : "";
+    const lines = [];
+    if (h.capacity_now_Ah !== null && h.capacity_now_Ah !== undefined) lines.push("Capacity today from " + fromEvents(h.capacity_from) + ".");
+    if (h.resistance_now_ohm !== null && h.resistance_now_ohm !== undefined) lines.push("Resistance today (" + h.resistance_basis + ") from " + fromEvents(h.resistance_from) + ".");
+    if (fc) lines.push("Trend: " + (SHAPES[fc.shape] || fc.shape) + " (odds of a bend against a straight line " + Number(fc.bend_odds).toPrecision(3) + "); " +
+                       (has(fc.knee_efc) ? "knee at " + DL.num(fc.knee_efc, 0) + " EFC." : "no knee in the data yet (the forecast allows one ahead)."));
+    $("health-note").textContent = lines.join(" ");
 
-    const normal = withCap.filter(e => !e.outlier), odd = withCap.filter(e => e.outlier);
     const bands = [], series = [], vlines = [], hlines = [];
     const band = fc && fc.band;
     if (band && band.efc) {
@@ -46,23 +87,40 @@
       bands.push({x: band.efc, lo: band.lo, hi: band.hi, color: "rgba(37,99,235,0.13)", yFit: false});
       series.push({x: band.efc, y: band.capacity_Ah, color: "#2563eb", width: 1.2, dash: [5, 3], label: "trend and 95 % band", yFit: false});
     }
-    const ivs = withCap.filter(e => e.capacity_interval95);
-    for (const e of ivs) series.push({x: [e.efc, e.efc], y: e.capacity_interval95, color: "#93c5fd", width: 1});
-    series.push({x: normal.map(e => e.efc), y: normal.map(e => e.capacity_Ah), color: "#1d4ed8", points: true, label: "capacity"});
-    if (odd.length) series.push({x: odd.map(e => e.efc), y: odd.map(e => e.capacity_Ah), color: "#d97706", points: true, hollow: true, label: "outlier"});
-    if (fc && isFinite(fc.threshold_Ah)) hlines.push({y: fc.threshold_Ah, color: "#dc2626", label: "end of life " + DL.num(fc.threshold_Ah, 2) + " Ah"});
-    if (fc && isFinite(fc.eol_efc)) {
+    series.push(...byKind(withCap, "capacity_Ah", "capacity_interval95", 1));
+    if (civ && has(h.efc_now)) {
+      series.push({x: [h.efc_now, h.efc_now], y: civ, color: "#111827", width: 2});
+      series.push({x: [h.efc_now], y: [h.capacity_now_Ah], color: "#111827", points: true, label: "today"});
+    }
+    if (fc && has(fc.knee_efc)) vlines.push({x: fc.knee_efc, color: "#7c3aed", label: "knee " + DL.num(fc.knee_efc, 0)});
+    if (fc && has(fc.threshold_Ah)) hlines.push({y: fc.threshold_Ah, color: "#dc2626", label: "end of life " + DL.num(fc.threshold_Ah, 2) + " Ah"});
+    if (fc && has(fc.eol_efc)) {
       vlines.push({x: fc.eol_efc, color: "#dc2626", label: "EOL " + DL.num(fc.eol_efc, 0) + " EFC"});
       if (fc.eol_efc_interval95) {
         const [a, b] = fc.eol_efc_interval95;
-        if (isFinite(a) && isFinite(b) && fc.threshold_Ah) bands.push({x: [a, b], lo: [fc.threshold_Ah * 0.98, fc.threshold_Ah * 0.98], hi: [fc.threshold_Ah * 1.02, fc.threshold_Ah * 1.02], color: "rgba(220,38,38,0.18)"});
+        if (has(a) && has(b) && fc.threshold_Ah) bands.push({x: [a, b], lo: [fc.threshold_Ah * 0.98, fc.threshold_Ah * 0.98], hi: [fc.threshold_Ah * 1.02, fc.threshold_Ah * 1.02], color: "rgba(220,38,38,0.18)"});
       }
     }
     new LinePlot($("plot-capacity"), {xLabel: "equivalent full cycles [EFC]", yLabel: "capacity [Ah]"})
       .draw({series, bands, hlines, vlines, xMin: 0, empty: "no capacity measured yet"});
-    new LinePlot($("plot-resistance"), {xLabel: "equivalent full cycles [EFC]", yLabel: "resistance [mΩ]"})
-      .draw({series: [{x: withR.map(e => e.efc), y: withR.map(e => e.resistance_ohm * 1000), color: "#059669", points: true, label: "resistance"}],
+    const rt = h.trend && h.trend.resistance;
+    const rBands = rt && rt.efc.length > 1 ? [{x: rt.efc, lo: rt.lo.map(v => v * 1000), hi: rt.hi.map(v => v * 1000), color: "rgba(5,150,105,0.13)"}] : [];
+    const rSeries = rt && rt.efc.length > 1 ? [{x: rt.efc, y: rt.value.map(v => v * 1000), color: "#059669", width: 1.2, label: "trend and 95 % band"}] : [];
+    new LinePlot($("plot-resistance"), {xLabel: "equivalent full cycles [EFC]", yLabel: "resistance [mΩ]" + (refR ? " at reference conditions" : "")})
+      .draw({series: rSeries.concat(byKind(withR, rKey, refR ? "resistance_ref_interval95" : "resistance_interval95", 1000)), bands: rBands,
              xMin: 0, empty: "no load steps to measure resistance yet"});
+
+    const cells = events.filter(e => e.cells && e.efc !== null);
+    $("cells-card").hidden = !cells.length;
+    if (cells.length) {
+      const spread = e => [e.cells.rest_spread_V, e.cells.spread_V].find(v => v !== null && v !== undefined);
+      const withSpread = cells.filter(e => spread(e) !== undefined);
+      new LinePlot($("plot-cells"), {xLabel: "equivalent full cycles [EFC]", yLabel: "rest-voltage spread between cells [mV]"})
+        .draw({series: [{x: withSpread.map(e => e.efc), y: withSpread.map(e => spread(e) * 1000), color: "#7c3aed", points: true, label: "cell spread"}],
+               xMin: 0, empty: "no rest voltages per cell yet"});
+      const drifting = cells.filter(e => e.cells.drift);
+      $("cells-note").textContent = drifting.length ? "A cell drifts away from the others in " + drifting.length + " event(s), latest " + drifting[drifting.length - 1].source + "." : "No cell drifts away from the others.";
+    }
 
     const m = d.model;
     if (m && m.curves) {
@@ -88,7 +146,8 @@
         DL.el("td", {class: "num", text: DL.num(e.capacity_Ah, 3)}),
         DL.el("td", {class: "num", text: e.capacity_interval95 ? DL.num(e.capacity_interval95[0], 3) + " – " + DL.num(e.capacity_interval95[1], 3) : "–"}),
         DL.el("td", {class: "num", text: e.resistance_ohm === null || e.resistance_ohm === undefined ? "–" : DL.num(e.resistance_ohm * 1000, 1)}),
-        DL.el("td", {class: "num", text: DL.num(e.efc, 1)}), DL.el("td", {text: e.outlier ? "outlier" : ""}),
+        DL.el("td", {class: "num", text: DL.num(e.efc, 1)}), DL.el("td", {text: e.outlier ? "outlier" : (e.capacity_note || "")}),
+        DL.el("td", {class: "num", text: e.resistance_ref_ohm === null || e.resistance_ref_ohm === undefined ? "–" : DL.num(e.resistance_ref_ohm * 1000, 1)}),
       ]));
     }
   }
