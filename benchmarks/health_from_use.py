@@ -10,10 +10,10 @@ Every figure goes through the logbook as a user meets it (``Logbook.add`` of the
    ("with the first test"), or all of them with the label capacity 3.0 Ah ("label
    only"). Each test's capacity is its delivered charge (trapezoid from the sample
    before to the sample after it). After each block of missions (between two tests),
-   the capacity now -- :func:`capacity_now` over the block's estimates, the stand-in for
-   the life trend -- against the next test (goal: within 2 %); with the label only, the
-   fade between the first and the last block against the tests' fade (goal: within 1.5
-   points).
+   the capacity today -- :func:`capacity_now`: the life trend over every estimate up to
+   the block's end, as the logbook would have said it then -- against the next test
+   (goal: within 2 %); with the label only, the fade between the first and the last
+   block against the tests' fade (goal: within 1.5 points).
 2. **Synthetic lives** (``tests/synthetic_life.py``: the project's engine, a known
    capacity law with a knee, missions, rests, charges and C/5 tests, 1 and 10 Hz). The
    same cut and the same comparison (goal: within 2 %), how often the capacity now's
@@ -78,24 +78,22 @@ CMU_LABEL_AH = 3.0
 
 # --------------------------------------------------------------------------- the combiner
 
-def capacity_now(efc, capacity, low, high) -> tuple[float, float]:
-    """Capacity now [Ah] and its standard deviation from a block's per-event estimates.
+def capacity_now(events) -> tuple[float | None, float | None]:
+    """Capacity today [Ah] and its standard deviation as the logbook would have said it
+    when ``events`` were all it held: the life trend (:func:`dischargelab.logbook.trend.
+    smooth`, as ``Logbook.health`` makes it) over their non-outlier estimates, read at
+    the last one's EFC (no later event informs it)."""
+    from dischargelab.logbook.trend import smooth
 
-    The stand-in for the life trend until it lands: an inverse-variance weighted straight
-    line through the estimates against EFC (standard deviations from each 95 % interval,
-    log-normal), read at the block's last EFC -- the weighted mean itself stands for the
-    middle of the block and lags a fading pack by half a block (:func:`block_mean`, shown
-    beside it). Swap this one function for the trend's "capacity now".
-    """
-    x = np.asarray(efc, dtype=float)
-    c = np.asarray(capacity, dtype=float)
-    w = 1.0 / _sd(c, low, high) ** 2
-    if c.size < 3 or np.ptp(x) <= 0:
-        return block_mean(capacity, low, high)
-    design = np.column_stack([np.ones_like(x), x - x.max()])
-    cov = np.linalg.inv(design.T @ (w[:, None] * design))
-    coef = cov @ (design.T @ (w * c))
-    return float(coef[0]), float(np.sqrt(cov[0, 0]))
+    est = [e for e in events if e.capacity_Ah is not None and not e.outlier
+           and e.efc is not None]
+    if not est:
+        return None, None
+    lo = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[0] for e in est]
+    hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1] for e in est]
+    trend = smooth([e.efc for e in est], [e.capacity_Ah for e in est], lo, hi)
+    value, interval = trend.interval95(max(e.efc for e in est))
+    return float(value), float((interval[1] - interval[0]) / 3.92)
 
 
 def block_mean(capacity, low, high) -> tuple[float, float]:
@@ -168,20 +166,25 @@ def cut_copy(frame: pd.DataFrame, tests: list[dict], keep_first: bool, out: Path
     frame[keep].to_csv(out, index=False)
 
 
-def blocks_of(health) -> list[list]:
-    """The events of each block of missions: split where a cut test left a gap; blocks
-    without a mission (the log's start) left out."""
+def blocks_of(health) -> list[tuple[list, list]]:
+    """The events of each block of missions (split where a cut test left a gap; blocks
+    without a mission, the log's start, left out), each with every event up to its end."""
     blocks: list[list] = [[]]
-    for e in health.events:
+    upto: list[list] = [[]]
+    for k, e in enumerate(health.events):
         if e.kind == "gap":
             blocks.append([])
+            upto.append(health.events[:k])
         else:
             blocks[-1].append(e)
-    return [b for b in blocks if any(e.health_kind in ("partial", "flight") for e in b)]
+            upto[-1] = health.events[:k + 1]
+    return [(b, u) for b, u in zip(blocks, upto)
+            if any(e.health_kind in ("partial", "flight") for e in b)]
 
 
-def block_now(block) -> tuple:
-    """``(capacity now, its sd, weighted mean, estimates)`` of a block's events."""
+def block_now(block, so_far) -> tuple:
+    """``(capacity today at the block's end, its sd, the block's weighted mean, the
+    block's estimates)``."""
     est = [e for e in block if e.capacity_Ah is not None and not e.outlier
            and e.capacity_method != "coulomb count" and e.efc is not None]
     if not est:
@@ -189,7 +192,7 @@ def block_now(block) -> tuple:
     cap = [e.capacity_Ah for e in est]
     low = [e.capacity_interval95[0] for e in est]
     high = [e.capacity_interval95[1] for e in est]
-    now, sd = capacity_now([e.efc for e in est], cap, low, high)
+    now, sd = capacity_now(so_far)
     return now, sd, block_mean(cap, low, high)[0], len(est)
 
 
@@ -210,12 +213,12 @@ def life_blocks(path: Path, tests: list[dict], folder: Path, *, keep_first: bool
     took = time.perf_counter() - started
     rows = []
     blocks = blocks_of(health)
-    for k, block in enumerate(blocks):
+    for k, (block, so_far) in enumerate(blocks):
         nxt = k + 1  # block k lies between test k and test k+1 (the first test kept or not)
         if nxt >= len(tests):
             break
         missions = sum(1 for e in block if e.health_kind in ("partial", "flight"))
-        now, sd, mean, n = block_now(block)
+        now, sd, mean, n = block_now(block, so_far)
         rows.append((k + 1, missions, n, now, sd, tests[nxt]["Ah"], mean))
     return rows, took
 

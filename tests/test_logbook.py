@@ -419,7 +419,7 @@ def test_every_ageing_file_and_a_test_cut_short_by_the_logger_go_in(tmp_path, sh
     by_name = {e.source: e for e in events}
     cut_event = by_name["DischargeCycle345.txt"]
     assert cut_event.health_kind == "partial" and cut_event.capacity_Ah is None
-    assert any("too little" in note for note in cut_event.notes)
+    assert "too little" in (cut_event.capacity_note or "")
     raw = np.array([[float(x) for x in line.split("\t")[:2]] for line in cut[start:-1]])
     load = raw[:, 1] < -1.0
     charge = float(np.trapezoid(-raw[load, 1], raw[load, 0]) / 3600.0)

@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+import dischargelab as dl
 from cli_run import run
 
 pytest.importorskip("sqlalchemy")
@@ -89,31 +90,30 @@ FLIGHTS = "flight_logs/ina3221_fpv_4s"
 
 def test_a_pack_that_only_flies_gets_endurance_and_autopilot_settings(capsys, tmp_path,
                                                                       shared_data):
-    """No full discharge, no fitted model: the chemistry's prior at today's capacity and
-    resistance, said in the notes with the events those come from."""
+    """No full discharge, no fitted model: the chemistry's prior at today's capacity (from
+    the flights themselves, between their rests) and resistance, said in the notes with
+    the events those come from."""
     db = tmp_path / "lb.sqlite"
     flights = sorted((shared_data / FLIGHTS).glob("*.csv"))
     code, _, err = run(capsys, "logbook", "add", *flights, "--pack", "fpv", "--db", db)
     assert code == 0, err
-    code, _, err = run(capsys, "endurance", "--pack", "fpv", "--db", db, "multirotor-hover")
-    assert code == 2 and "no capacity estimate and no label capacity" in err
-    assert len(err.strip().splitlines()) == 1
-    code, _, err = run(capsys, "logbook", "add", flights[0], "--pack", "fpv", "--capacity",
-                       "1.5", "--db", db)
-    assert code == 0, err
+    with dl.Logbook(db) as lb:
+        today = lb.pack("fpv").capacity_Ah
+    assert 1.0 < today < 1.6                        # a 1.5 Ah 4S pack, from its flights
     code, out, err = run(capsys, "endurance", "--pack", "fpv", "--db", db, "multirotor-hover",
                          "--draws", "0", "--json")
     assert code == 0, err
     note = next(n for n in json.loads(out)["notes"] if "logbook pack 'fpv'" in n)
     assert "lipo prior" in note and "no fitted model" in note
-    assert "resistance" in note and flights[-1].name in note  # the events it comes from
+    assert "capacity today" in note and "resistance" in note
+    assert flights[-1].name in note                 # the events it comes from
     code, out, err = run(capsys, "autopilot-params", "--pack", "fpv", "--db", db,
                          "--firmware", "ardupilot", "--load", "15", "--json")
     assert code == 0, err
     doc = json.loads(out)
     assert any("logbook pack 'fpv'" in n for n in doc["notes"])
     settings = doc["parameters"]
-    assert settings["BATT_CAPACITY"] == pytest.approx(1500)
+    assert settings["BATT_CAPACITY"] == pytest.approx(1000 * today, abs=1)
     assert 4 * 3.0 < settings["BATT_LOW_VOLT"] < 4 * 4.2  # a 4S pack, read from the logs
     code, _, err = run(capsys, "autopilot-params", "--firmware", "px4")
     assert code == 2 and "--pack NAME" in err

@@ -263,7 +263,9 @@ def strings(value):
 
 def test_answers_carry_what_the_page_shows_and_no_server_path(server, db):
     detail = server.get_json("/api/packs/cell%20C")
-    assert set(detail) == {"name", "summary", "health", "model", "model_note"}
+    assert set(detail) == {"name", "summary", "health", "model", "model_note", "recomputing",
+                           "error"}
+    assert detail["recomputing"] is False and detail["error"] is None
     assert [e["source"] for e in detail["health"]["events"]] == [
         f"DischargeCycle{c:03d}.txt" for c in CYCLES]
     for answer in (detail, server.get_json("/api/packs"), server.get_json("/api/missions"),
