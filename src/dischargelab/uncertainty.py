@@ -89,7 +89,7 @@ PRIOR_EXTRAPOLATION_GROWTH = 2.0
 #: overpotential grows as the curve flattens. A flat curve (plateau ratio below
 #: :data:`dischargelab.onerate.FLAT_PLATEAU_RATIO`: LiFePO4) takes the whole
 #: :data:`MAX_PLATEAU_FACTOR`: there the end is a steep knee (a 0.05 V shift of the
-#: cutoff moves it by 0.2-1 %), so the slope argument no longer sets the error; the
+#: cutoff moves it by 0.2-2 %), so the slope argument no longer sets the error; the
 #: time to cutoff is where the knee falls, which moves with the rate-dependent accessible
 #: capacity (solid diffusion, the two-phase front) that one rate cannot show. The two
 #: flat cells measured by ``benchmarks/one_rate_errors.py`` (a LiFePO4 and a flat LCO)
