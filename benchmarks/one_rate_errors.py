@@ -165,16 +165,55 @@ def covariates(battery, one_rate: bool = True) -> dict:
             "class": onerate.one_rate_class(battery, one_rate)}
 
 
+#: Raise of the cutoff [V per cell] whose effect on the predicted time is kept per row.
+FEATURE_SHIFT_V = 0.05
+
+#: Folder of fitted battery files reused between runs (``--cache``), or None.
+CACHE: list = []
+
+
+def code_version() -> str:
+    """Hash of the package's model and fit sources: a cached fit is reused only by the
+    code that made it."""
+    import hashlib
+
+    root = Path(dl.__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted([*root.glob("models/*.py"), *root.glob("fit/*.py"),
+                        root / "thermalprior.py", root / "discharge.py"]):
+        h.update(path.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def cached_fit(key: str, data, **options):
+    """The battery of ``dischargelab.fit(data, **options)``, from the ``--cache`` folder
+    when it holds one made by this code; ``(battery, model)``."""
+    if not CACHE:
+        res = dl.fit(data, **options)
+        return res.battery, res.model
+    import hashlib
+
+    path = CACHE[0] / code_version() / (hashlib.sha256(key.encode()).hexdigest()[:20]
+                                        + ".json")
+    if path.is_file():
+        bat = dl.load(path)
+        return bat, bat.model
+    res = dl.fit(data, **options)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    res.battery.save(path)
+    return res.battery, res.model
+
+
 def one_rate_rows(series: Series, family: str):
     """Fit each run alone, predict the others (point values): one row per pair."""
     rows = []
     for key, run in series.runs.items():
         try:
-            res = dl.fit(run.discharge, model=family, bootstrap=BOOTSTRAP, seed=0)
+            bat, model = cached_fit(f"one|{series.title}|{key}|{family}|{BOOTSTRAP}",
+                                    run.discharge, model=family, bootstrap=BOOTSTRAP, seed=0)
         except dl.DischargelabError as exc:
             print(f"  ({series.title} {key} {family}: fit failed: {exc})")
             continue
-        bat = res.battery
         cov = covariates(bat)
         most = max(delivered_Ah(r) for r in series.runs.values())
         for target_key, target in series.runs.items():
@@ -183,15 +222,24 @@ def one_rate_rows(series: Series, family: str):
             load = dict(current=target.current_A, cutoff=target.cutoff_V,
                         ambient=target.ambient_C)
             try:
-                t = predict_point(bat, interval=False, **load).time_to_cutoff_s
+                sim = predict_point(bat, interval=False, **load).simulation
+                t = sim.time_to_cutoff_s
+                feat = {"peak_rise_K": (sim.peak_temperature_C - target.ambient_C
+                                        if sim.peak_temperature_C is not None else 0.0),
+                        "capacity_Ah": sim.capacity_Ah}
+                up = predict_point(bat, interval=False, **dict(
+                    load, cutoff=load["cutoff"] + FEATURE_SHIFT_V)).time_to_cutoff_s
+                feat["shift"] = 1.0 - up / t
             except dl.DischargelabError:
-                t = float("nan")
+                t, feat = float("nan"), {}
             rows.append(dict(cell=series.cell, series=series.title, family=family,
-                             model=res.model, fitted=key, target=target_key,
+                             model=model, fitted=key, target=target_key,
                              ratio=target.current_A / run.current_A,
                              error=t / target.measured_s - 1.0, predicted_s=t,
                              measured_s=target.measured_s, load=load, battery=bat,
-                             collapse=delivered_Ah(target) < COLLAPSE_FRACTION * most, **cov))
+                             fit_rise_K=bat.extra.get("fit_temperature_rise_K"),
+                             collapse=delivered_Ah(target) < COLLAPSE_FRACTION * most,
+                             **feat, **cov))
     return rows
 
 
@@ -264,16 +312,18 @@ def two_rate_rows(series: Series, family: str):
     for _, a, b in sorted(pairs)[:TWO_RATE_PAIRS]:
         ra, rb = series.runs[keys[a]], series.runs[keys[b]]
         try:
-            res = dl.fit([ra.discharge, rb.discharge], model=family, bootstrap=0, seed=0)
+            bat, model = cached_fit(f"two|{series.title}|{keys[a]}|{keys[b]}|{family}",
+                                    [ra.discharge, rb.discharge], model=family, bootstrap=0,
+                                    seed=0)
         except dl.DischargelabError:
             continue
-        err = res.model_error or {}
+        err = bat.extra.get("model_error") or {}
         if "relative_sd" not in err:
             continue
         rows.append(dict(cell=series.cell, series=series.title, family=family,
-                         model=res.model, fitted=f"{keys[a]} + {keys[b]}",
+                         model=model, fitted=f"{keys[a]} + {keys[b]}",
                          sd=float(err["relative_sd"]), dof=float(err.get("dof") or 0),
-                         **covariates(res.battery, one_rate=False)))
+                         **covariates(bat, one_rate=False)))
     return rows
 
 
@@ -383,6 +433,10 @@ def main(argv=None):
     parser.add_argument("--cells", default=None,
                         help="only series whose title contains one of these (comma list)")
     parser.add_argument("--no-two-rate", action="store_true", help="skip the two-rate fits")
+    parser.add_argument("--cache", type=Path,
+                        help="keep the fitted battery files here and reuse those made by the "
+                             "same model and fit code (a law can then be measured again "
+                             "without fitting again)")
     parser.add_argument("--write", action="store_true",
                         help=f"write the law from all cells to {TABLE_PATH.name}")
     parser.add_argument("--json", type=Path, help="write every one-rate row here")
@@ -395,6 +449,8 @@ def main(argv=None):
     if args.merge:
         return merge(args.merge)
     families = [f for f in args.families.split(",") if f]
+    if args.cache:
+        CACHE[:] = [args.cache]
     t0 = time.perf_counter()
     series = real_series(args.data) if (args.data / "samsung30q_S001").is_dir() else []
     series += virtual_series()
@@ -448,7 +504,9 @@ def main(argv=None):
         write_table(doc)
     if args.json:
         keep = ("cell", "series", "family", "model", "fitted", "target", "ratio", "error",
-                "class", "plateau", "temperature", "covered", "half_width_pct", "collapse")
+                "class", "plateau", "temperature", "covered", "half_width_pct", "collapse",
+                "shift", "peak_rise_K", "capacity_Ah", "fit_rise_K", "predicted_s",
+                "measured_s")
         args.json.write_text(json.dumps([{k: r.get(k) for k in keep} for r in rows],
                                         indent=1, default=str), encoding="utf-8")
     print(f"\nRun time {time.perf_counter() - t0:.0f} s. Machine: {machine_line()}; load "

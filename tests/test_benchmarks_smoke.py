@@ -78,3 +78,20 @@ def test_one_rate_law_from_rows():
     assert table["up"] == np.quantile(k, 0.95) / 1.959964
     assert table["up_pairs"] == 20 and table["down_pairs"] == 1      # the collapse left out
     assert table["cells"] == ["0", "1", "2", "a"]
+
+
+def test_one_rate_cache_reuses_a_fit_of_the_same_code(tmp_path):
+    """``--cache``: a fit is made once, then read back (same parameters) under a folder named
+    by the hash of the model and fit sources."""
+    bench = _load("one_rate_errors")
+    curve = dl.read(BENCHMARKS.parent / "tests" / "data" / "virtual" / "lfp-spme-2.5V_2C_25C.csv")
+    bench.CACHE[:] = [tmp_path]
+    try:
+        first, model = bench.cached_fit("k", curve, model="shepherd", bootstrap=0, seed=0)
+        files = list((tmp_path / bench.code_version()).glob("*.json"))
+        assert model == "shepherd" and len(files) == 1
+        again, _ = bench.cached_fit("k", curve, model="shepherd", bootstrap=0, seed=0)
+    finally:
+        bench.CACHE[:] = []
+    assert again.to_dict()["parameters"] == first.to_dict()["parameters"]
+    assert len(list(tmp_path.rglob("*.json"))) == 1

@@ -79,10 +79,12 @@ def test_model_error_prior_grows_with_the_extrapolation_ratio():
 
 
 def test_one_rate_growth_widens_on_a_flat_plateau():
-    """Without a measured one-rate law (an empty table): a flat curve (the middle 60 % of
-    the charge holds a tenth of the drop, LiFePO4) multiplies the one-rate growth by
-    (1/3) / ratio, at most 4; a sloped one keeps it; ecm (its dynamics held absent on one
-    steady rate) has the same growth as eq. 6."""
+    """Without a measured one-rate law (an empty table): a flatter curve multiplies the
+    one-rate growth by (1/3) / ratio, at most 4; a flat one (the middle 60 % of the charge
+    holds less than a fifth of the drop, LiFePO4) by 4, whatever its ratio (its time to
+    cutoff is set by the knee's rate-dependent position, not by the slope); a sloped one
+    keeps it; ecm (its dynamics held absent on one steady rate) has the same growth as
+    eq. 6."""
     with one_rate_table_override({}):
         _check_fallback_one_rate_growth()
 
@@ -91,13 +93,14 @@ def _check_fallback_one_rate_growth():
     four = PRIOR_RELATIVE_SD * (1 + 2.0 * math.log(4.0))
     sloped = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.35})
     assert model_error_sd(sloped, 12.0) == pytest.approx(four, rel=1e-12)
-    flat = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.1})
-    growth = 2.0 * (1 / 3) / 0.1
-    assert model_error_sd(flat, 12.0) == pytest.approx(
+    flatter = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.25})
+    growth = 2.0 * (1 / 3) / 0.25
+    assert model_error_sd(flatter, 12.0) == pytest.approx(
         PRIOR_RELATIVE_SD * (1 + growth * math.log(4.0)), rel=1e-12)
-    flattest = replace(ONE_RATE, extra={"fit_plateau_ratio": 0.0})
-    assert model_error_sd(flattest, 12.0) == pytest.approx(
-        PRIOR_RELATIVE_SD * (1 + 8.0 * math.log(4.0)), rel=1e-12)
+    for ratio in (0.15, 0.1, 0.0):  # flat: the whole factor 4
+        flat = replace(ONE_RATE, extra={"fit_plateau_ratio": ratio})
+        assert model_error_sd(flat, 12.0) == pytest.approx(
+            PRIOR_RELATIVE_SD * (1 + 8.0 * math.log(4.0)), rel=1e-12)
     ecm = Battery(CellParameters(get_family("ecm").defaults()), fit_currents_A=(3.0,),
                   model="ecm")
     assert model_error_sd(ecm, 12.0) == pytest.approx(four, rel=1e-12)
