@@ -193,9 +193,17 @@ def _by_steps(i, steps, cycles, idle) -> list[tuple]:
     if cycles is not None:
         change |= np.diff(np.asarray(cycles).astype(np.int64)) != 0
     bounds = [0, *(np.flatnonzero(change) + 1).tolist(), key.size]
+    # the tester says where its steps are: a step rests when its mean current is within
+    # the testers' rest share of the file's largest current, however small that is (a coin
+    # cell at 80 uA), as the tester-file readers class them
+    from ..io.cyclers.steps import REST_FRACTION
+
+    largest = float(np.max(np.abs(i))) if i.size else 0.0
+    if largest > 0:
+        idle = min(idle, REST_FRACTION * largest)
     pieces: list[list] = []
     for a, b in zip(bounds[:-1], bounds[1:]):
-        m = float(np.median(i[a:b]))
+        m = float(np.mean(i[a:b]))
         code = 1 if m > idle else -1 if m < -idle else 0
         step = int(key[a])
         if pieces and pieces[-1][0] == code:
@@ -578,9 +586,12 @@ def log_events(frame, spans: list[Span], *, start_time_of=None, cells: int | Non
     -------
     list of dict
         Event dicts (the keys of :func:`load_figures` or :func:`quiet_figures`, plus
-        ``index``, ``kind``, ``start_time``, ``cycle`` (None), ``cells``, ``details``).
+        ``index``, ``kind``, ``start_time``, ``cycle`` (the tester's cycle number at the
+        event's start when the log has ``cycle_index``, else None), ``cells``,
+        ``details``).
     """
     log = LogArrays.from_frame(frame)
+    cycle_index = frame["cycle_index"].to_numpy() if "cycle_index" in frame else None
     t = log.time_s
     ambient = frame["ambient_temperature_C"].to_numpy(dtype=float) \
         if "ambient_temperature_C" in frame else None
@@ -614,7 +625,8 @@ def log_events(frame, spans: list[Span], *, start_time_of=None, cells: int | Non
             if k in rests:
                 details["reading"] = rests[k].reading
         row = min(sp.start, t.size - 1)
-        event.update(index=k, kind=sp.kind, cycle=None, cells=cells, details=details,
+        cycle = None if cycle_index is None else int(cycle_index[row])
+        event.update(index=k, kind=sp.kind, cycle=cycle, cells=cells, details=details,
                      start_time=None if start_time_of is None else start_time_of(float(t[row])))
         events.append(event)
     return events
