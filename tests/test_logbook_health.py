@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import pickle
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,22 +23,9 @@ from dischargelab.logbook.health import (
 )
 from dischargelab.logbook.results import scale_parameters
 from dischargelab.logbook.summarise import knee_ratio, step_resistance, summarise_source
+from lvm_cut import lvm_cut
 
 CELL_C = "samsung30q_ageing_cellC"
-
-
-def lvm_cut(path: Path, out: Path, share: float) -> float:
-    """Write the file up to ``share`` of its discharge charge; return the full charge [Ah]."""
-    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
-    start = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 1
-    data = [line for line in lines[start:] if line.strip()]
-    cols = np.array([[float(x) for x in line.split("\t")[:2]] for line in data])
-    current = np.where(cols[:, 1] < -1.0, -cols[:, 1], 0.0)
-    charge = np.concatenate(([0.0], np.cumsum(0.5 * (current[1:] + current[:-1])
-                                                * np.diff(cols[:, 0])))) / 3600.0
-    stop = int(np.searchsorted(charge, share * charge[-1])) + 1
-    out.write_text("".join(lines[:start] + data[:stop]), encoding="utf-8")
-    return float(charge[-1])
 
 
 def stored(summary, source_id: int) -> list[dict]:

@@ -4,36 +4,19 @@ wherever they sit in the pack's life, long logs through the logbook, flights and
 from __future__ import annotations
 
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from dischargelab.logbook.health import pack_health
 from dischargelab.logbook.summarise import summarise_source
+from lvm_cut import lvm_cut
 
 CELL_C = "samsung30q_ageing_cellC"
 
 #: Full discharges of cell C given to the pack, and the cycles cut at 60 % of their charge.
 FULL_CYCLES = (1, 100, 200, 300, 400, 500, 600, 660)
 CUT_CYCLES = (110, 310, 510)
-
-
-def lvm_cut(path: Path, out: Path, share: float, dated: bool = True) -> float:
-    """Write the file up to ``share`` of its discharge charge (without its clock time when
-    ``dated`` is false); return the full file's discharge charge [Ah] (numpy, raw columns)."""
-    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
-    start = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 1
-    data = [line for line in lines[start:] if line.strip()]
-    cols = np.array([[float(x) for x in line.split("\t")[:2]] for line in data])
-    current = np.where(cols[:, 1] < -1.0, -cols[:, 1], 0.0)
-    charge = np.concatenate(([0.0], np.cumsum(0.5 * (current[1:] + current[:-1])
-                                                * np.diff(cols[:, 0])))) / 3600.0
-    stop = int(np.searchsorted(charge, share * charge[-1])) + 1
-    header = [line for line in lines[:start]
-              if dated or not line.startswith(("Date\t", "Time\t"))]
-    out.write_text("".join(header + data[:stop]), encoding="utf-8")
-    return float(charge[-1])
 
 
 def as_stored(summary, source_id: int, name: str | None = None) -> list[dict]:
