@@ -59,7 +59,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import dischargelab as dl  # noqa: E402
-from _machine import machine_line  # noqa: E402
+from _machine import machine_line, shared_data  # noqa: E402
 from dischargelab.models import FAMILIES  # noqa: E402
 from dischargelab.predict import predict as predict_no_interval  # noqa: E402
 from dischargelab.validate import measured_time_to_cutoff  # noqa: E402
@@ -89,13 +89,8 @@ class Run:
 
 
 def default_data_dir() -> Path:
-    env = os.environ.get("DISCHARGELAB_SHARED_DATA")
-    if env:
-        return Path(env)
-    for parent in HERE.parents:
-        if (parent / "shared" / "data").is_dir():
-            return parent / "shared" / "data"
-    return HERE.parents[1] / "shared" / "data"
+    """The shared data sets (:func:`_machine.shared_data`)."""
+    return shared_data()
 
 
 
