@@ -99,6 +99,18 @@ LEARNED_CURVE_SD_CELL_V = 0.005
 FULL_SOC = 1.0
 FULL_SOC_SD = 0.01
 
+#: Standard deviation of a capacity read through an open-circuit voltage curve, as a share
+#: of the pack's fade since the curve was learned (a relative error per unit of fade). An
+#: aged cell's curve against its own state of charge is not the fresh one: the two
+#: bounding degradation modes are a curve that holds against the state of charge scaled
+#: to today's capacity (loss of active material of both electrodes alike: no error) and a
+#: curve that holds against the charge drawn from full (loss of lithium inventory, the
+#: negative electrode limiting the end: the readings then give the fresh capacity, an
+#: error of the whole fade, whatever the depth of the swing). Real cells age between the
+#: two (Dubarry et al. 2012; Birkl et al. 2017); this share of the fade is the standard
+#: deviation, and the error is shared by every estimate read through the curve.
+OCV_AGEING_SD = 0.15
+
 #: Smallest change in state of charge that gives a capacity (smaller swings carry too
 #: little information: TI's gauges wait for far more).
 MIN_SWING = 0.1
@@ -232,6 +244,9 @@ class OcvCurve:
         Where it comes from (for notes).
     temperature_C : float or None
         Temperature it was measured at [degC].
+    capacity_Ah : float or None
+        Capacity its state of charge is scaled to [Ah] (the slow discharge's), None for a
+        generic curve.
     """
 
     soc: np.ndarray
@@ -239,6 +254,7 @@ class OcvCurve:
     sd_V: float
     source: str
     temperature_C: float | None = None
+    capacity_Ah: float | None = None
 
     @classmethod
     def prior(cls, chemistry: str | None) -> OcvCurve:
@@ -284,7 +300,7 @@ class OcvCurve:
         grid_v = np.maximum.accumulate(grid_v)
         return cls(soc=CURVE_GRID.copy(), cell_V=grid_v, sd_V=LEARNED_CURVE_SD_CELL_V,
                    source=source or "the pack's slow full discharge",
-                   temperature_C=temperature_C)
+                   temperature_C=temperature_C, capacity_Ah=float(q[-1]))
 
     def soc_at(self, cell_V: float) -> float:
         """State of charge where the curve reads ``cell_V`` [V] (clipped to 0-1)."""
@@ -463,6 +479,37 @@ def capacity_between_rests(charge_Ah: float, charge_sd_Ah: float, soc_start: flo
         "rests before and after"
 
 
+def systematic_share(curve: OcvCurve, soc_read: list[float], swing: float,
+                     fade: float | None) -> float:
+    """Relative standard deviation of a capacity between two rests that every estimate read
+    through the same curve shares [-] (it does not average out over many events).
+
+    The curve's own error at each reading not anchored full (``curve.sd_V`` through its
+    slope) over the swing, and :data:`OCV_AGEING_SD` times the pack's ``fade`` since the
+    curve was learned (the aged curve's drift, see there), in quadrature.
+
+    Parameters
+    ----------
+    curve : OcvCurve
+    soc_read : list of float
+        The states of charge read through the curve (those read as full left out).
+    swing : float
+        Change in state of charge between the two rests [-].
+    fade : float or None
+        Capacity lost since the curve was learned, as a share of its capacity [-].
+    """
+    var = sum((curve.sd_V / max(curve.slope(s), 1e-6)) ** 2 for s in soc_read)
+    rel = np.sqrt(var) / max(abs(swing), 1e-9)
+    return float(np.hypot(rel, OCV_AGEING_SD * max(0.0, fade or 0.0)))
+
+
+def widen(capacity_Ah: float, interval95: list, extra_share: float) -> list:
+    """A log-normal 95 % interval with ``extra_share`` (relative sd) added in quadrature."""
+    lo, hi = interval95
+    rel = float(np.hypot(np.log(hi / lo) / (2 * Z95), extra_share))
+    return [float(capacity_Ah * np.exp(-Z95 * rel)), float(capacity_Ah * np.exp(Z95 * rel))]
+
+
 # --------------------------------------------------------------------------- resistance
 
 def sample_noise(x) -> float:
@@ -636,6 +683,7 @@ def _model_soc_ratio(model, soc: float, current_A: float) -> float | None:
 
 __all__ = ["relaxation", "step_resistance", "sample_noise", "regression_resistance", "OcvCurve",
            "soc_reading",
-           "counted_charge", "sampling_figures", "capacity_between_rests",
+           "counted_charge", "sampling_figures", "capacity_between_rests", "systematic_share",
+           "widen", "OCV_AGEING_SD",
            "resistance_at_reference", "MIN_SWING",
            "REFERENCE_TEMPERATURE_C", "REFERENCE_SOC", "FULL_SOC", "FULL_SOC_SD"]
