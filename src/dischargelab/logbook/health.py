@@ -528,8 +528,7 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     if cap is None:
         return how
     sampling = details.get("sampling") or {}
-    scale = curve.capacity_Ah or ctx.label_Ah
-    fade = None if not scale else max(0.0, 1.0 - abs(cap) / scale)
+    fade = _fade_since(curve, cap, ctx)
     read = [s for s, anchored in ((soc_a, begins_full), (soc_b, ends_full)) if not anchored]
     h.capacity_systematic = systematic_share(curve, read, soc_a - soc_b, fade)
     if fade:
@@ -542,6 +541,13 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
                        " % (1 sd), and the interval widened")
     h.notes.append(f"state of charge through {curve.source}")
     return None
+
+
+def _fade_since(curve: OcvCurve, capacity_Ah: float, ctx: PackContext) -> float | None:
+    """Capacity lost since ``curve`` was learned, as a share of the capacity its state of
+    charge is scaled to (a generic curve: the label capacity), or None."""
+    scale = curve.capacity_Ah or ctx.label_Ah
+    return None if not scale else max(0.0, 1.0 - abs(capacity_Ah) / scale)
 
 
 def _full_after(charge: dict | None, n_cells: int, ctx: PackContext) -> bool:
@@ -596,6 +602,8 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
                                                 soc_a, sd_a, soc_b, sd_b)
     if cap is None:
         return how + " (read from its loaded end: no rest after it)"
+    h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b,
+                                             _fade_since(curve, cap, ctx))
     h.capacity_Ah, h.capacity_interval95 = cap, interval
     h.capacity_method = "rest before, loaded end"
     h.notes.append(f"no rest after it: its end is the last loaded voltage plus the resistive "
