@@ -17,6 +17,9 @@
   sample-to-sample change), so each interval adds ``dt * max(|di|, typical) /
   sqrt(12)`` to the standard deviation. A take-off seen by two samples 167 s apart
   makes a mission uncountable; a charge's smooth current does not.
+* **The error estimates share.** :func:`systematic_share`: what every capacity read
+  through one curve shares (the curve's error, its drift as the cell ages), which many
+  estimates do not average out.
 * **Capacity between two rests.** :func:`capacity_between_rests`: the charge counted
   between the two readings divided by the change in state of charge they read.
   Small swings carry little information, as in a fuel gauge's learning rule
@@ -44,6 +47,11 @@ References
 .. [4] V. Pop, H. J. Bergveld, P. H. L. Notten, P. P. L. Regtien, "State-of-the-art
    of battery state-of-charge determination", Meas. Sci. Technol. 16 (2005)
    R93-R110 (EMF from relaxation, extrapolated).
+.. [5] M. Dubarry, C. Truchot, B. Y. Liaw, "Synthesize battery degradation modes via a
+   diagnostic and prognostic model", J. Power Sources 219 (2012) 204-216; C. R. Birkl
+   et al., "Degradation diagnostics for lithium ion cells", J. Power Sources 341 (2017)
+   373-386 (an aged cell's open-circuit voltage curve under loss of lithium inventory
+   and of active material: :data:`OCV_AGEING_SD`).
 """
 
 from __future__ import annotations
