@@ -83,6 +83,7 @@ def capacity_now(events) -> tuple[float | None, float | None]:
     when ``events`` were all it held: the life trend (:func:`dischargelab.logbook.trend.
     smooth`, as ``Logbook.health`` makes it) over their non-outlier estimates, read at
     the last one's EFC (no later event informs it)."""
+    from dischargelab.logbook.results import shared_errors
     from dischargelab.logbook.trend import smooth
 
     est = [e for e in events if e.capacity_Ah is not None and not e.outlier
@@ -91,7 +92,8 @@ def capacity_now(events) -> tuple[float | None, float | None]:
         return None, None
     lo = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[0] for e in est]
     hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1] for e in est]
-    trend = smooth([e.efc for e in est], [e.capacity_Ah for e in est], lo, hi)
+    trend = smooth([e.efc for e in est], [e.capacity_Ah for e in est], lo, hi,
+                   systematic=shared_errors(est))
     value, interval = trend.interval95(max(e.efc for e in est))
     return float(value), float((interval[1] - interval[0]) / 3.92)
 

@@ -10,6 +10,7 @@ import pytest
 from dischargelab.logbook.cells import cell_figures, drift_flags, weakest_share
 from dischargelab.logbook.estimates import (
     MIN_SWING,
+    OCV_AGEING_SD,
     OcvCurve,
     capacity_between_rests,
     counted_charge,
@@ -18,6 +19,8 @@ from dischargelab.logbook.estimates import (
     resistance_at_reference,
     sampling_figures,
     soc_reading,
+    systematic_share,
+    widen,
 )
 from dischargelab.logbook.events import charge_figures, split_log
 from dischargelab.logbook.health import order_events
@@ -202,6 +205,28 @@ def test_regression_resistance_of_a_sparse_log():
     r, (lo, hi) = regression_resistance(t, voltage, current)
     assert r == pytest.approx(0.05, rel=0.1) and lo < 0.05 < hi
     assert regression_resistance(t, voltage, np.full(t.size, 15.0)) == (None, None)
+    # a steady cruise with two climbs (telemetry every 4 s): its quartiles hardly differ
+    t = np.arange(0.0, 200.0, 4.0)
+    current = 11.0 + rng.normal(0, 0.5, t.size)
+    current[[25, 26, 40]] += 4.0
+    q = np.concatenate(([0.0], np.cumsum(0.5 * (current[1:] + current[:-1]) * np.diff(t))))
+    voltage = 15.6 - 0.6 * q / 3600 - 0.025 * current + rng.normal(0, 0.005, t.size)
+    r, (lo, hi) = regression_resistance(t, voltage, current)
+    assert lo < 0.025 < hi and hi - lo < 0.025
+
+
+def test_capacity_read_through_a_curve_shares_its_error_and_its_ageing():
+    """The error shared by every estimate read through one curve: the curve's own over the
+    swing, and a share of the fade since it was learned."""
+    curve = OcvCurve.prior("li-ion")
+    fresh = systematic_share(curve, [0.4], 0.6, 0.0)
+    assert 0.002 < fresh < 0.05
+    assert systematic_share(curve, [0.4], 0.6, None) == fresh
+    aged = systematic_share(curve, [0.4], 0.6, 0.2)
+    assert aged == pytest.approx(np.hypot(fresh, OCV_AGEING_SD * 0.2))
+    assert systematic_share(curve, [], 0.6, 0.2) == pytest.approx(OCV_AGEING_SD * 0.2)
+    lo, hi = widen(3.0, [2.9, 3.1], 0.05)
+    assert lo < 2.9 and hi > 3.1 and lo * hi == pytest.approx(9.0, rel=1e-3)
 
 
 # --------------------------------------------------------------------------- cells

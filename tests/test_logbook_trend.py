@@ -60,6 +60,26 @@ def test_estimates_are_weighted_by_their_intervals():
     assert ignored == pytest.approx(3.0 - 0.18, abs=0.015)
 
 
+def test_an_error_the_estimates_share_does_not_average_out():
+    """A thousand estimates read through one curve that is 3 % off: alone they make a band
+    far narrower than the error; their shared standard deviation keeps it honest."""
+    rng = np.random.default_rng(4)
+    x = np.linspace(0, 200, 1000)
+    truth = 3.0 - 0.002 * x
+    y = 1.03 * truth + rng.normal(0, 0.06, x.size)
+    half = np.full(x.size, 0.12)
+    naive = smooth(x, y, y - half, y + half)
+    value, (lo, hi) = naive.interval95(200.0)
+    assert not lo < truth[-1] < hi and naive.systematic == 0.0
+    honest = smooth(x, y, y - half, y + half, systematic=0.02 * y)
+    value, (lo, hi) = honest.interval95(200.0)
+    assert lo < truth[-1] < hi and hi - lo < 0.2 * truth[-1]
+    assert honest.systematic == pytest.approx(0.02 * value, rel=0.05)
+    band_lo, band_hi = honest.band()
+    assert np.all(band_hi - band_lo > 3.5 * 0.02 * truth.min())  # all along the life
+    assert Smoothed.from_dict(honest.to_dict()).systematic == pytest.approx(honest.systematic)
+
+
 def test_few_estimates_and_the_band_ahead():
     one = smooth([50.0], [2.5], [2.49], [2.51])
     value, (lo, hi) = one.interval95(50.0)

@@ -73,10 +73,13 @@ import numpy as np
 from .estimates import (
     FULL_SOC_SD,
     MIN_SWING,
+    OCV_AGEING_SD,
     OcvCurve,
     capacity_between_rests,
     resistance_at_reference,
     soc_reading,
+    systematic_share,
+    widen,
 )
 from .references import (
     RELAXED_S,
@@ -151,6 +154,7 @@ class EventHealth:
     efc: float | None = None
     outlier: bool = False
     notes: list[str] = field(default_factory=list)
+    capacity_systematic: float | None = None
 
     @property
     def health_kind(self) -> str:
@@ -177,7 +181,8 @@ class EventHealth:
                 "resistance_ref_ohm": self.resistance_ref_ohm,
                 "resistance_ref_interval95": self.resistance_ref_interval95,
                 "charged_Ah": self.charged_Ah, "soc_start": self.soc_start,
-                "soc_end": self.soc_end, "cells": self.cells, "notes": list(self.notes)}
+                "soc_end": self.soc_end, "cells": self.cells, "notes": list(self.notes),
+                "capacity_systematic": self.capacity_systematic}
 
     @classmethod
     def from_dict(cls, data: dict) -> EventHealth:
@@ -195,7 +200,8 @@ class EventHealth:
                    resistance_ref_interval95=data.get("resistance_ref_interval95"),
                    charged_Ah=data.get("charged_Ah"), soc_start=data.get("soc_start"),
                    soc_end=data.get("soc_end"), cells=data.get("cells"), efc=data["efc"],
-                   outlier=data["outlier"], notes=list(data["notes"]))
+                   outlier=data["outlier"], notes=list(data["notes"]),
+                   capacity_systematic=data.get("capacity_systematic"))
 
 
 # --------------------------------------------------------------------------- order
@@ -484,6 +490,7 @@ class PackContext:
     curves: list[tuple[int, OcvCurve]]            # (position, learned curve)
     prior: OcvCurve
     full_cell_V: float
+    label_Ah: float | None = None
 
     def curve_at(self, position: int) -> OcvCurve:
         """The learned curve nearest in the pack's life (before preferred), else the prior."""
@@ -505,7 +512,8 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
         return "no rest after it"
     curve = ctx.curve_at(position)
     r = e.get("resistance_ohm")
-    if _full_after(before.get("after_charge"), n_cells, ctx):
+    begins_full = _full_after(before.get("after_charge"), n_cells, ctx)
+    if begins_full:
         soc_a, sd_a = 1.0, FULL_SOC_SD
     else:
         soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
@@ -520,6 +528,11 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     if cap is None:
         return how
     sampling = details.get("sampling") or {}
+    fade = _fade_since(curve, cap, ctx)
+    read = [s for s, anchored in ((soc_a, begins_full), (soc_b, ends_full)) if not anchored]
+    h.capacity_systematic = systematic_share(curve, read, soc_a - soc_b, fade)
+    if fade:
+        interval = widen(cap, interval, OCV_AGEING_SD * fade)
     h.capacity_Ah, h.capacity_interval95 = cap, interval
     h.capacity_method = "rests before and after" + (" (charge ends full)" if ends_full else "")
     if not sampling.get("resolved", True):
@@ -528,6 +541,13 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
                        " % (1 sd), and the interval widened")
     h.notes.append(f"state of charge through {curve.source}")
     return None
+
+
+def _fade_since(curve: OcvCurve, capacity_Ah: float, ctx: PackContext) -> float | None:
+    """Capacity lost since ``curve`` was learned, as a share of the capacity its state of
+    charge is scaled to (a generic curve: the label capacity), or None."""
+    scale = curve.capacity_Ah or ctx.label_Ah
+    return None if not scale else max(0.0, 1.0 - abs(capacity_Ah) / scale)
 
 
 def _full_after(charge: dict | None, n_cells: int, ctx: PackContext) -> bool:
@@ -582,6 +602,8 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
                                                 soc_a, sd_a, soc_b, sd_b)
     if cap is None:
         return how + " (read from its loaded end: no rest after it)"
+    h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b,
+                                             _fade_since(curve, cap, ctx))
     h.capacity_Ah, h.capacity_interval95 = cap, interval
     h.capacity_method = "rest before, loaded end"
     h.notes.append(f"no rest after it: its end is the last loaded voltage plus the resistive "
@@ -641,8 +663,8 @@ def _cells(e: dict, h: EventHealth, ctx: PackContext, position: int) -> None:
     h.cells = out
 
 
-def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, model
-             ) -> PackContext:
+def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, model,
+             label_Ah: float | None = None) -> PackContext:
     fulls = [(k, e, health[k].capacity_Ah) for k, e in enumerate(ordered) if health[k].full]
     if chemistry is None and fulls:
         e = fulls[0][1]
@@ -666,7 +688,8 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
         if e.get("rest_voltage_V"):
             full_cell = float(e["rest_voltage_V"]) / pack_cells(e, cells, chemistry)
     return PackContext(cells=cells, chemistry=chemistry, model=model, fulls=fulls,
-                       curves=curves, prior=OcvCurve.prior(chemistry), full_cell_V=full_cell)
+                       curves=curves, prior=OcvCurve.prior(chemistry), full_cell_V=full_cell,
+                       label_Ah=label_Ah)
 
 
 def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
@@ -710,7 +733,7 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
             h.capacity_method = "coulomb count"
             h.soc_start, h.soc_end = 1.0, 0.0
         out.append(h)
-    ctx = _context(ordered, out, cells, chemistry, model)
+    ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah)
     if ctx.chemistry != chemistry:
         counts = _cell_counts(ordered, cells, ctx.chemistry)
     for k, (e, h) in enumerate(zip(ordered, out)):

@@ -477,7 +477,8 @@ def build_health(row: dict, events: list[dict], model: dict | None, eol: float) 
     with_cap = [e for e in per_event if e.capacity_Ah is not None and not e.outlier
                 and e.efc is not None]
     capacity_trend = _trend(with_cap, [e.capacity_Ah for e in with_cap],
-                            [e.capacity_interval95 for e in with_cap])
+                            [e.capacity_interval95 for e in with_cap],
+                            systematic=shared_errors(with_cap))
     r_values, r_intervals, basis, with_r = _resistances(per_event)
     resistance_trend = _trend(with_r, r_values, r_intervals,
                               nugget_share=RESISTANCE_SCATTER_SHARE)
@@ -544,6 +545,12 @@ def _trend(chosen: list[EventHealth], values: list, intervals: list,
     lo = [np.nan if iv is None or iv[0] is None else iv[0] for iv in intervals]
     hi = [np.nan if iv is None or iv[1] is None else iv[1] for iv in intervals]
     return smooth([e.efc for e in chosen], values, lo, hi, **options)
+
+
+def shared_errors(events: list[EventHealth]) -> list[float]:
+    """The part of each capacity estimate's error [Ah] that every estimate read through the
+    same open-circuit voltage curve shares (``capacity_systematic``; 0 when none)."""
+    return [float(e.capacity_systematic or 0.0) * float(e.capacity_Ah) for e in events]
 
 
 #: Events listed as the source of a figure today: those carrying this share of it.
