@@ -48,22 +48,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from _machine import machine_line  # noqa: E402
+from _machine import machine_line, shared_data  # noqa: E402
 from dischargelab.logbook import Logbook  # noqa: E402
 
-
-def _shared_data() -> Path:
-    """``../shared/data`` beside the checkout or above it ($DISCHARGELAB_SHARED_DATA first)."""
-    env = os.environ.get("DISCHARGELAB_SHARED_DATA")
-    if env:
-        return Path(env)
-    for parent in ROOT.parents:
-        if (parent / "shared" / "data").is_dir():
-            return parent / "shared" / "data"
-    return ROOT.parent / "shared" / "data"
-
-
-DATA = _shared_data()
+DATA = shared_data()
 CMU = DATA / "cmu_evtol"
 DJI = DATA / "dji_m100_flights"
 CELL_C = DATA / "samsung30q_ageing_cellC"
