@@ -534,7 +534,11 @@ def plot_health(health, axes=None):
                       fmt="*", ms=11, color="k", mfc="gold", capsize=3, zorder=5,
                       label=f"today: {today['capacity_Ah']:.3g} Ah ({lo:.3g}-{hi:.3g})")
     if caps:
-        values = [e.capacity_Ah for e, _ in caps]
+        # the scale holds the estimates that tell the capacity to within +-PRECISE_SHARE
+        # (all when none do) and the threshold: a long log's coarse estimates would else
+        # stretch it far beyond the capacity
+        values = [e.capacity_Ah for e, _ in caps if _precise(e)] or \
+            [e.capacity_Ah for e, _ in caps]
         top = max(values)
         bottom = min(values + ([fc.threshold_Ah] if fc is not None else []))
         span = max(top - bottom, 1e-3)
@@ -607,7 +611,10 @@ def _plot_forecast(ax, fc, reference):
                    label=f"knee at {fc.knee_efc:.0f} EFC (probability "
                          f"{fc.knee_probability:.2f})")
     a, b = fc.eol_efc_interval95
-    if fc.eol_efc is not None:
+    if fc.reached:
+        ax.axvline(fc.last_efc, color="C3", lw=1.2,
+                   label=f"end of life reached: the trend is below it at {fc.last_efc:.0f} EFC")
+    elif fc.eol_efc is not None:
         ax.axvspan(a if a is not None else efc.min(), b if b is not None else efc.max(),
                    color="C3", alpha=0.07, lw=0)
         how = "observed at" if fc.observed else "at"
@@ -618,10 +625,28 @@ def _plot_forecast(ax, fc, reference):
                          f"{'open' if b is None else f'{b:.0f}'})")
 
 
+#: An estimate whose 95 % interval is within this share of its value on each side sets the
+#: capacity scale of :func:`plot_health`.
+PRECISE_SHARE = 0.15
+#: A kind with more estimates than this is drawn faint and under the trend's band (a long
+#: log's thousands of missions would hide it).
+CROWDED = 150
+
+
+def _precise(e) -> bool:
+    iv = e.capacity_interval95
+    return (iv is not None and None not in iv
+            and iv[1] - iv[0] <= 2 * PRECISE_SHARE * e.capacity_Ah)
+
+
 def _plot_estimates(ax, rows, key, interval, scale):
-    """Per-event estimates with their 95 % intervals, one marker per kind; outliers hollow."""
+    """Per-event estimates with their 95 % intervals, one marker per kind; outliers hollow;
+    a kind with more than :data:`CROWDED` estimates faint, under the trend."""
     kinds = sorted({d.get("kind") for _, d in rows}, key=lambda k: (k not in KIND_STYLE, k))
     for kind in kinds:
+        crowded = sum(1 for _, d in rows if d.get("kind") == kind) > CROWDED
+        look = dict(ms=2, lw=0.4, alpha=0.25, zorder=0.5) if crowded else \
+            dict(ms=4, lw=0.8, zorder=3)
         marker, color, label = KIND_STYLE.get(kind, ("o", "0.5", str(kind)))
         for outlier in (False, True):
             sel = [(e, d) for e, d in rows if d.get("kind") == kind and bool(e.outlier) == outlier]
@@ -632,8 +657,8 @@ def _plot_estimates(ax, rows, key, interval, scale):
             err = np.array([[0.0, 0.0] if not d.get(interval) or None in d[interval] else
                             [d[key] - d[interval][0], d[interval][1] - d[key]]
                             for _, d in sel], dtype=float).T * scale
-            ax.errorbar(x, y, yerr=np.clip(err, 0, None), fmt=marker, ms=4, lw=0.8, capsize=0,
-                        zorder=3, color=color, mfc="white" if outlier else color,
+            ax.errorbar(x, y, yerr=np.clip(err, 0, None), fmt=marker, capsize=0, **look,
+                        color=color, mfc="white" if outlier else color,
                         label=f"{label} (outlier, left out)" if outlier else label)
 
 

@@ -306,9 +306,15 @@ def health_lines(health, name: str) -> list[str]:
             else "no knee in the data yet (the forecast allows one ahead)")
     lines.append(f"trend: {shape} (odds of a bend against a straight line {fc.bend_odds:.3g}); "
                  f"{knee}")
-    how, span = ("observed at", "between events") if fc.observed else ("forecast at", "95 %")
-    lines.append(f"end of life ({100 * fc.eol:.0f} % = {fc.threshold_Ah:.3f} Ah): {how} "
-                 f"{_num(fc.eol_efc, 0)} EFC ({span}: {_interval(fc.eol_efc_interval95)})")
+    head = f"end of life ({100 * fc.eol:.0f} % = {fc.threshold_Ah:.3f} Ah): "
+    if fc.reached:
+        lines.append(head + f"reached: the capacity trend is below it today (EFC "
+                            f"{_num(fc.last_efc, 0)})")
+    else:
+        how, span = ("observed at", "between events") if fc.observed else ("forecast at",
+                                                                           "95 %")
+        lines.append(head + f"{how} {_num(fc.eol_efc, 0)} EFC ({span}: "
+                            f"{_interval(fc.eol_efc_interval95)})")
     return lines + [f"note: {n}" for n in health.notes[1:]]
 
 

@@ -82,6 +82,13 @@ class Forecast:
     estimates: int
     observed: bool = False
 
+    @property
+    def reached(self) -> bool:
+        """The capacity trend is already at or below the threshold today (the futures
+        start below it), while no two logged capacities have fallen through it yet."""
+        return (not self.observed and self.eol_efc is not None
+                and self.eol_efc <= self.last_efc * (1 + 1e-9))
+
     def band_points(self, points: int = 120) -> dict:
         """:attr:`band` thinned to about ``points`` points (for plots and pages)."""
         efc = np.asarray(self.band["efc"], dtype=float)
