@@ -16,6 +16,7 @@ from dask_cluster import Cluster
 from dischargelab.errors import LogbookError
 from dischargelab.fleet import DaskExecutor, InProcessExecutor
 from dischargelab.logbook import Logbook
+from dischargelab.logbook.figures import pack_figures
 from fleet_tasks import crash_on_file
 
 CELL_C = "samsung30q_ageing_cellC"
@@ -167,6 +168,8 @@ def test_a_file_that_kills_workers_twice_is_rejected_and_the_rest_goes_in(packs,
 
     class Crashing(DaskExecutor):
         def map_unordered(self, func, items, per_task=1):
+            if func is pack_figures:     # the packs' figures after the files: no crash
+                return super().map_unordered(func, items, per_task=per_task)
             assert per_task > 1          # the crashing file first fails with its batch
             return super().map_unordered(functools.partial(crash_on_file, func, victim), items,
                                          per_task=per_task)
