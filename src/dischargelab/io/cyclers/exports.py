@@ -155,10 +155,23 @@ def text_header(lines: list[str]) -> tuple[int, str] | None:
     """
     for k, line in enumerate(lines[:HEADER_LINES]):
         for delimiter in ("\t", ",", ";"):
+            if line.count(delimiter) < 3:
+                continue
             names = line.rstrip("\r\n").split(delimiter)
-            if line.count(delimiter) >= 3 and is_tester_table(names):
+            if _words(names) >= 3 and is_tester_table(names):
                 return (k, delimiter) if _holds_steps(lines[k:k + 201], delimiter) else None
     return None
+
+
+def _words(fields: list[str]) -> int:
+    """How many fields are not numbers (a data row has none or few: no header)."""
+    count = 0
+    for field in fields:
+        try:
+            float(field.strip().replace(",", "."))
+        except ValueError:
+            count += 1
+    return count
 
 
 def _holds_steps(lines: list[str], delimiter: str) -> bool:
