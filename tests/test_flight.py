@@ -103,6 +103,7 @@ def test_29_capacity_held_near_the_label_and_said_so(fit29):
     assert result.rmse_V < 0.03  # per cell
 
 
+@pytest.mark.slow
 def test_29_replay_at_mid_flight_against_the_truth(fit29, logs):
     _, result = fit29
     report = analyse_flight(logs / INA29, result.battery, capacity_Ah=LABEL_29_AH, cutoff=3.3)
@@ -167,6 +168,7 @@ def _spiky_drain_log(path, battery, cutoff_cell_V):
     return rest_s
 
 
+@pytest.mark.slow
 def test_replay_of_a_drain_to_the_cutoff_by_the_true_model(tmp_path):
     """A log made by a known pack under a spiky load down to its cutoff: the peaks dip
     under the cutoff early, the pack reaches it for good later; the model at the recent
@@ -280,6 +282,7 @@ def test_validate_flies_a_flight_from_its_charge_at_take_off_at_the_ambient(fit2
     assert row["voltage_rmse_V"] < 0.15
 
 
+@pytest.mark.slow
 def test_validate_a_spiky_drain_by_when_the_pack_stays_under_the_cutoff(tmp_path):
     """Under a varying current the measured and predicted times are both when the voltage
     stays under the cutoff for the low-voltage timer, not the first peak's dip."""

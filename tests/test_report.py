@@ -247,15 +247,6 @@ def test_cli_report(fitted, tmp_path, capsys):
     assert ".html" in capsys.readouterr().err
 
 
-def test_report_example_script_runs(tmp_path):
-    import sys
-
-    done = subprocess.run([sys.executable, str(REPO / "examples" / "endurance_report.py"),
-                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=180)
-    assert done.returncode == 0, done.stderr
-    assert (tmp_path / "report.html").stat().st_size > 50_000
-
-
 def test_one_rate_report_names_the_next_test(bundled_data):
     """A battery fitted on one rate: the report says which run would narrow its
     predictions, and to about what."""

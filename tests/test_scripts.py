@@ -11,10 +11,12 @@ EXAMPLES = sorted((REPO / "examples").glob("*.py"))
 
 #: benchmark -> (quick arguments, text the output must contain)
 BENCHMARKS = {
-    "fit_speed.py": (["--repeats", "1", "--large-rows", "50000"], "speed-up"),
+    "fit_speed.py": (["--repeats", "1", "--large-rows", "50000", "--families", "shepherd"],
+                     "speed-up"),
     "fit_latency.py": (["--repeats", "1", "--bootstrap", "10"], "x the baseline"),
     "slow_to_fast.py": (["--cells", "enertech"], "endurance error"),
-    "accuracy.py": (["--sets", "enertech"], "endurance error"),
+    "accuracy.py": (["--sets", "enertech", "--families", "auto", "--bootstrap", "5"],
+                    "endurance error"),
     "one_rate_errors.py": (["--cells", "enertech", "--families", "shepherd", "--no-two-rate"],
                            "leave one cell out"),
     "next_test.py": (["--cells", "enertech"], "Predicted within a factor"),
@@ -44,6 +46,7 @@ def run(args, timeout=300):
                           timeout=timeout, cwd=REPO)
 
 
+@pytest.mark.slow      # `make docs` runs every example too (the gallery)
 @pytest.mark.parametrize("script", EXAMPLES, ids=[p.name for p in EXAMPLES])
 def test_example_runs(script, tmp_path):
     done = run([script, "--out", tmp_path])
