@@ -28,7 +28,7 @@ BENCHMARKS = {
                                 "peak RSS MB"),
     "logbook.py": (["--copies", "20"], "95 % interval holds truth"),
     "forecast.py": (["--lives", "2", "--skip-cell-c"], "Calibration of the end-of-life interval"),
-    "fleet.py": (["--packs", "1", "--repeats", "1"], "One file's task"),
+    "fleet.py": (["--packs", "1", "--repeats", "1", "--no-formats"], "the whole command"),
     "server_load.py": (["--readers", "4", "--seconds", "3", "--idle", "10", "--uploads", "2",
                         "--cell-c", "3"], "uploads stored exactly once"),
     # needs Debian's chromium and chromium-driver (make browser), as the web page tests do
