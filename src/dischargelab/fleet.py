@@ -63,6 +63,20 @@ START_TIMEOUT_S = 60.0
 PRELOAD = ("dischargelab.io", "dischargelab.logbook.summarise", "dischargelab.logbook.figures")
 
 
+#: Dask settings of a local cluster's workers: no statistical profiler (it samples the task's
+#: stack every 10 ms), and the event loop's watchdog and system and memory monitors woken
+#: every second or more instead of every 20-500 ms. Each wake-up takes the interpreter lock
+#: from the task; on the logbook's tasks (pure Python and pandas) they cost 10-15 % of a
+#: worker's speed (``benchmarks/fleet.py``). A worker still reports a blocked loop, and
+#: its memory is still watched, only less often.
+QUIET_WORKERS = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+
 class FleetError(DischargelabError):
     """The cluster cannot be started or reached, or it lost every worker."""
 
@@ -168,7 +182,10 @@ class DaskExecutor:
                 # was running with it (queued ones would count a death too)
                 with dask.config.set({"distributed.scheduler.allowed-failures":
                                       WORKER_DEATHS_ALLOWED,
-                                      "distributed.scheduler.worker-saturation": 1.0}):
+                                      "distributed.scheduler.worker-saturation": 1.0,
+                                      "distributed.worker.multiprocessing-method":
+                                      _start_method(),
+                                      **QUIET_WORKERS}):
                     # no dashboard; the status servers Dask always runs listen on
                     # loopback only, on free ports
                     self.cluster = LocalCluster(
@@ -390,6 +407,32 @@ def executor(workers: int | None = None, scheduler: str | None = None,
     if background:
         return StartingExecutor(on_ready=on_ready, **options)
     return DaskExecutor(**options)
+
+
+def _start_method() -> str:
+    """How a local cluster starts its worker processes: ``"forkserver"`` with the workers'
+    modules (:data:`PRELOAD`) imported once, in the fork server, where the platform has one;
+    else ``"spawn"`` (Dask's default), where every worker imports them itself.
+
+    Forked from a server that holds the modules, a worker is up in a fraction of a second
+    and ends without unwinding its interpreter; two spawned workers import pandas, scipy and
+    the readers twice (about 3 s of CPU each) and take about 1 s to end. The preload list is
+    given to the fork server before Dask names its own (Dask's would import every optional
+    package it knows into this process). Where Dask has no such flag (a version that starts
+    its fork server differently), the workers are spawned.
+    """
+    import multiprocessing
+
+    from distributed import utils as dask_utils
+
+    if ("forkserver" not in multiprocessing.get_all_start_methods()
+            or not hasattr(dask_utils, "_forkserver_preload_set")):
+        return "spawn"
+    if not dask_utils._forkserver_preload_set:
+        multiprocessing.get_context("forkserver").set_forkserver_preload(
+            ["distributed", *PRELOAD])
+        dask_utils._forkserver_preload_set = True
+    return "forkserver"
 
 
 def run_batch(func: Callable[[Any], Any], items: list) -> list:
