@@ -49,6 +49,11 @@ POLARISATION_TAU_S = 30.0
 #: (a logger that starts later has already seen the polarisation build).
 STEP_WINDOW_S = 5.0
 
+#: A curve whose current varies by this coefficient of variation or more shows the time
+#: constant (a flight, pulses); a resistor drain (its current falling with the voltage by
+#: about a quarter over the run) does not.
+VARYING_CV = 0.25
+
 #: Bounds of the filtered current's time constant [s] when it is fitted.
 TAU_BOUNDS_S = (1.0, 600.0)
 
@@ -187,15 +192,14 @@ def step_resistance(data: Samples, beta_K: float) -> float | None:
 
 
 def varying_current(data: Samples) -> bool:
-    """True when the load current of ``data`` shows a time constant: several curves at
-    different rates, or a current that varies within a curve (coefficient of variation
-    of the load samples above 0.25)."""
+    """True when the load current of ``data`` can show a time constant: several curves at
+    different rates, or a current that varies within a curve (coefficient of variation of
+    its samples, pauses at zero included, at least :data:`VARYING_CV`)."""
     means, varies = [], False
     for k in range(data.n_curves):
         i = data.current[(data.curve == k) & ~data.is_rest]
-        if i.size < 2:
+        if i.size < 2 or not np.mean(i) > 0:
             continue
-        load = i[i > 0.5 * np.median(i)]
-        means.append(float(np.mean(load)))
-        varies |= bool(np.std(load) >= 0.25 * np.mean(load))
+        means.append(float(np.mean(i)))
+        varies |= bool(np.std(i) >= VARYING_CV * np.mean(i))
     return varies or (len(means) >= 2 and max(means) >= 1.2 * min(means))
