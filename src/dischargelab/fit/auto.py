@@ -8,7 +8,6 @@ import time
 import numpy as np
 
 from ..errors import FitError
-from ..models import get_family
 from .family import fit_family, several_rates
 from .heldout import held_out_error
 from .result import FitResult
