@@ -46,8 +46,9 @@ writes it). The bench path is shown as ``auto`` picks it now (shepherd-dynamic) 
 it picked it before (shepherd-thermal).
 
 **Real logs** (``../shared/data/flight_logs/ina3221_fpv_4s``): the 29.csv flight (a
-Dinogy 1600 mAh 4S, 24 A mean) is fitted as a flight log, with and without the thermal
-prior, and flies its own log and the 28.csv flight (a CNHL 1500 mAh 4S, 28 A mean, another
+Dinogy 1600 mAh 4S, 24 A mean) is fitted as a flight log (``auto``: ecm; and forced to
+shepherd-dynamic, whose time constant the varying current shows, and to shepherd-thermal)
+and flies its own log and the 28.csv flight (a CNHL 1500 mAh 4S, 28 A mean, another
 pack): voltage RMS in % of the mean pack voltage. Neither log is a slow full drain, so
 the slow -> fast figure itself is measured on the synthetic pack only.
 
@@ -379,9 +380,11 @@ def main(argv=None):
         print("|---|---|---:|---:|")
         from dischargelab.flight import fit_flights
 
-        for label, kw in (("thermal prior (airflow)", {}),):
+        for label, model in (("auto, thermal prior (airflow)", "auto"),
+                             ("shepherd-dynamic (tau from the flight)", "shepherd-dynamic"),
+                             ("shepherd-thermal", "shepherd-thermal")):
             flights = flight_curves(folder / "29.csv", capacity_Ah=1.6)
-            res = fit_flights(flights, model="auto", **kw)
+            res = fit_flights(flights, model=model)
             cells = []
             for name, cap in (("29.csv", 1.6), ("28.csv", 1.5)):
                 from dischargelab.flight import analyse_flight
