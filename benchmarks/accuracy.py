@@ -452,10 +452,10 @@ def acceptance(rows, families):
         return [r for r in rows if r["set"] == set_name and r["family"] == fam
                 and r["train"] == train]
 
-    # 1. Samsung 1C-only -> 2C, 3C, 4C (auto: shepherd-thermal with the logged temperature)
+    # 1. Samsung 1C-only -> 2C, 3C, 4C (auto: shepherd-dynamic with the logged temperature)
     for fam in families:
         sel = [r for r in pick("samsung", fam, ("1C",)) if r["test"] in ("2C", "3C", "4C")]
-        if sel and fam in ("shepherd-thermal", "auto"):
+        if sel and fam in ("shepherd-thermal", "shepherd-dynamic", "auto"):
             ok = ok_rows(sel)
             errs = ", ".join(f"{r['test']} {fmt_err(r)}" for r in sel)
             good = len(ok) == 3 and all(abs(r["error_pct"]) <= SAMSUNG_1C_LIMIT for r in ok)

@@ -67,11 +67,12 @@ import accuracy  # noqa: E402
 import dischargelab as dl  # noqa: E402
 from _machine import machine_line  # noqa: E402
 from dischargelab import onerate, uncertainty  # noqa: E402
+from dischargelab.fit.auto import ONE_RATE_FAMILY  # noqa: E402
 from dischargelab.predict import predict as predict_point  # noqa: E402
 
 VIRTUAL = accuracy.VIRTUAL
 TABLE_PATH = HERE.parent / "src" / "dischargelab" / "data" / "one_rate_error.json"
-FAMILIES = ("shepherd", "shepherd-thermal", "ecm")
+FAMILIES = ("shepherd", "shepherd-thermal", "shepherd-dynamic", "ecm")
 BOOTSTRAP = 30
 #: Extrapolations by less than this ratio do not set the growth (``e / ln r`` is noisy).
 MIN_GROWTH_RATIO = 1.5
@@ -466,8 +467,8 @@ def main(argv=None):
                 two += two_rate_rows(s, fam)
         print(f"  {s.title}: {len(s.runs)} runs, {time.perf_counter() - t0:.0f} s",
               file=sys.stderr)
-    # auto on one rate is shepherd-thermal (choose_model): its rows are that family's
-    rows += [dict(r, family="auto") for r in rows if r["family"] == "shepherd-thermal"]
+    # auto on one rate is ONE_RATE_FAMILY (choose_model): its rows are that family's
+    rows += [dict(r, family="auto") for r in rows if r["family"] == ONE_RATE_FAMILY]
     tables = loco_tables([r for r in rows if r["family"] != "auto"], families)
     for r in rows:
         r["loco"] = tables[r["cell"]]

@@ -18,15 +18,18 @@ voltages, current; no temperature):
   pack stays under 3.3 V/cell for 10 s, in flight, 10 Hz;
 * **27 A flight**: 200 s around 27 A (+-8 A, bursts to 60 A) from full, in flight, 10 Hz.
 
-The slow drain is fitted (``dischargelab.fit``) four ways: as a flight log (``auto``:
+The slow drain is fitted (``dischargelab.fit``) five ways: as a flight log (``auto``:
 ecm with its RC pairs held absent and its diffusion lead at the steady prior, the thermal
 prior for airflow), the same with ecm's RC
 pairs and diffusion state fitted anyway (their bounds given), as a bench discharge
-(``auto``: shepherd-thermal with the thermal prior for still air), and as a bench
-discharge with the cell held at the ambient (``cooling=None``: the behaviour without a
-thermal prior: eq. 6). Each fit is checked with ``dischargelab.validate`` on the fast
-drain (endurance to 3.3 V/cell held 10 s, its 95 % interval, the extrapolation warning)
-and on the 27 A flight (voltage RMS in % of the mean pack voltage).
+(``auto``: shepherd-dynamic, eq. 6 with Tremblay's filtered current and the load step's
+series resistance, with the thermal prior for still air), as a bench discharge forced to
+shepherd-thermal (what ``auto`` chose before: eq. 6, its polarisation present at once with
+the current, the series resistance left to the fit), and as a bench discharge with the
+cell held at the ambient (``cooling=None``: the behaviour without a thermal prior: eq. 6).
+Each fit is checked with ``dischargelab.validate`` on the fast drain (endurance to
+3.3 V/cell held 10 s, its 95 % interval, the extrapolation warning) and on the 27 A
+flight (voltage RMS in % of the mean pack voltage).
 
 **Slow drains of measured and virtual cells** (no model writes them; the truth at every
 faster rate is measured): the slowest run of each cell with a rate series, its temperature
@@ -34,18 +37,25 @@ column dropped, is fitted three of the ways above (``ecm`` on one steady rate ho
 RC pairs absent and its diffusion lead at the prior, with the airflow prior, as the
 flight-log path does; ``ecm`` with them
 fitted anyway; ``auto`` as a bench discharge) and predicts every faster run's time to its
-cutoff (``Battery.predict`` at its mean current and ambient): Samsung 30Q C/10, Enertech LCO
-0.1C, the PyBaMM NMC, LCO and LFP cells at 0.1C (``benchmarks/accuracy.py`` loads them).
+cutoff (``Battery.predict`` at its mean current and ambient) and flies each faster run
+from its rest (``dischargelab.validate``: voltage RMS in % of the run's mean voltage,
+the knee included): Samsung 30Q C/10, Enertech LCO 0.1C, the PyBaMM NMC, LCO and LFP
+cells at 0.1C (``benchmarks/accuracy.py`` loads them), and the PyBaMM NMC cell's mission
+(3C take-off, then 2C with 3.5C bursts: a DFN model's flight, no dischargelab model
+writes it). The bench path is shown as ``auto`` picks it now (shepherd-dynamic) and as
+it picked it before (shepherd-thermal).
 
 **Real logs** (``../shared/data/flight_logs/ina3221_fpv_4s``): the 29.csv flight (a
-Dinogy 1600 mAh 4S, 24 A mean) is fitted as a flight log, with and without the thermal
-prior, and flies its own log and the 28.csv flight (a CNHL 1500 mAh 4S, 28 A mean, another
+Dinogy 1600 mAh 4S, 24 A mean) is fitted as a flight log (``auto``: ecm; and forced to
+shepherd-dynamic, whose time constant the varying current shows, and to shepherd-thermal)
+and flies its own log and the 28.csv flight (a CNHL 1500 mAh 4S, 28 A mean, another
 pack): voltage RMS in % of the mean pack voltage. Neither log is a slow full drain, so
 the slow -> fast figure itself is measured on the synthetic pack only.
 
 Goals (issue): endurance within 5 %, voltage RMS <= 1.3 % on ~27 A flights.
 
 Usage: python benchmarks/slow_to_fast.py [--data DIR] [--cells samsung,enertech,...|none]
+       [--plot FIGURE.png]
 """
 
 import os
@@ -205,17 +215,22 @@ def slow_cells(data: Path, names):
     print("\n## Slow drains of measured and virtual cells (temperature dropped): the "
           "faster runs predicted\n")
     print("| cell | fitted on | way | model | faster runs: endurance error (in / OUT: "
-          "the 95 % interval covers / misses) |")
-    print("|---|---|---|---|---|")
+          "the 95 % interval covers / misses) | faster runs flown from rest: voltage RMS |")
+    print("|---|---|---|---|---|---|")
     for name in names:
         title, runs, _ = accuracy.SETS[name](data)
         slow_key, fast_keys = SLOW_CELLS[name]
         drain = replace(runs[slow_key].discharge, temperature_C=None)
+        flown = [(key, runs[key].discharge, runs[key].cutoff_V) for key in fast_keys]
+        if name == "nmc":  # the virtual cell's mission: a DFN model's flight
+            flown.append(("mission", dl.read(accuracy.VIRTUAL / "nmc_mission_25C.csv"), 2.5))
         for way, kw in (("flight-log rule: ecm, airflow prior", dict(model="ecm",
                                                                     cooling="airflow")),
                         ("ecm, dynamics fitted anyway, airflow prior",
                          dict(model="ecm", cooling="airflow", bounds=dynamics_free())),
-                        ("bench: auto, still-air prior", {})):
+                        ("bench: auto, still-air prior", {}),
+                        ("bench before: shepherd-thermal, still-air prior",
+                         dict(model="shepherd-thermal"))):
             res = dl.fit(drain, bootstrap=20, **kw)
             cells = []
             for key in fast_keys:
@@ -226,7 +241,53 @@ def slow_cells(data: Path, names):
                 err = 100.0 * (out["time_to_cutoff_s"] / run.measured_s - 1.0)
                 cells.append(f"{key} {err:+.1f} % "
                              f"({'in' if lo <= run.measured_s <= hi else 'OUT'})")
-            print(f"| {title} | {slow_key} | {way} | {res.model} | {', '.join(cells)} |")
+            rms = []
+            for key, discharge, cutoff in flown:
+                (case,) = dl.validate(res.battery, discharge, cutoff=cutoff)
+                rms.append(f"{key} {case.to_dict()['voltage_rmse_pct']:.2f} %")
+            print(f"| {title} | {slow_key} | {way} | {res.model} | {', '.join(cells)} | "
+                  f"{', '.join(rms)} |")
+
+
+def plot_flight(path: Path, flown) -> None:
+    """The truth and the models of the slow drain flying the 27 A flight: pack voltage,
+    model minus truth, current (the flight-log and bench ``auto`` paths, the bench path
+    before)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    keep = [(label, model, case) for label, model, case in flown
+            if "auto" in label and "cooling=None" not in label]
+    fig, (ax_v, ax_e, ax_i) = plt.subplots(3, 1, figsize=(9, 8.5), sharex=True)
+    truth = keep[0][2]
+    flying = truth.current_A > 1.0
+    t = truth.time_s[flying] - truth.time_s[flying][0]
+    mean_v = float(np.mean(truth.voltage_measured_V[flying]))
+    ax_v.plot(t, truth.voltage_measured_V[flying], color="black", lw=1.2,
+              label="truth (synthetic pack)")
+    for label, model, case in keep:
+        way = "flight-log fit" if label.startswith("flight log") else (
+            "bench fit, before" if "before" in label else "bench fit")
+        line, = ax_v.plot(t, case.voltage_predicted_V[flying], lw=1,
+                          label=f"{way}: {model} ({pct_rms(case.to_dict(), mean_v):.2f} % RMS)")
+        ax_e.plot(t, case.voltage_predicted_V[flying] - case.voltage_measured_V[flying], lw=1,
+                  color=line.get_color(), label=f"{way}: {model}")
+    ax_e.axhline(0.0, color="0.6", lw=0.8)
+    ax_i.plot(t, truth.current_A[flying], color="black", lw=1)
+    ax_v.set_ylabel("pack V")
+    ax_e.set_ylabel("model - truth [V]")
+    ax_i.set_ylabel("current [A]")
+    ax_i.set_xlabel("time from take-off [s]")
+    ax_v.set_title("Synthetic 3S 12 Ah pack: models of its slow drain flying a 27 A flight",
+                   fontsize=10)
+    ax_v.legend(fontsize=8)
+    ax_e.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    print(f"\nFigure: {path}")
 
 
 def pct_rms(row, pack_mean_V):
@@ -240,6 +301,9 @@ def main(argv=None):
                         help="shared data folder (default: ../shared/data beside the repo)")
     parser.add_argument("--cells", default=",".join(SLOW_CELLS),
                         help="cells whose slowest run is fitted alone (default all; 'none')")
+    parser.add_argument("--plot", type=Path, default=None,
+                        help="draw the auto paths (and the bench path before) flying the 27 A "
+                             "flight to this PNG")
     args = parser.parse_args(argv)
     data = args.data
     if data is None:
@@ -274,8 +338,12 @@ def main(argv=None):
             ("flight log, ecm with its dynamics fitted anyway (bounds given)",
              lambda: dl.fit(flight_curves(folder / "slow.csv"), model="ecm",
                             bounds=dynamics_free(), bootstrap=0)),
-            ("bench discharge, auto (shepherd-thermal, thermal prior: still air)",
+            ("bench discharge, auto (shepherd-dynamic: R from the load step, Tremblay's "
+             "filtered current; thermal prior: still air)",
              lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30)),
+            ("bench discharge, shepherd-thermal (auto before; thermal prior: still air)",
+             lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30,
+                            model="shepherd-thermal")),
             ("bench discharge, auto, cooling=None (held at the ambient: eq. 6)",
              lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30, cooling=None)),
         ]
@@ -283,12 +351,14 @@ def main(argv=None):
               "interval [s] (truth) | warnings | voltage RMS, fast drain | voltage RMS, "
               "27 A flight |")
         print("|---|---|---:|---|---|---:|---:|")
+        flown = []
         for label, fit in fits:
             res = fit()
             (case,) = dl.validate(res.battery, [fast_log], cutoff=3.3)
             row = case.to_dict()
             (case27,) = dl.validate(res.battery, [flight_log], cutoff=3.3)
             row27 = case27.to_dict()
+            flown.append((label, res.model, case27))
             iv = row.get("interval_s")
             ivs = "-" if not iv else f"{iv[0]:.0f} - {iv[1]:.0f} ({true_s:.0f})"
             warn = "; ".join(w for w in row.get("warnings", []) if "extrapolat" in w
@@ -297,6 +367,8 @@ def main(argv=None):
             print(f"| {label} | {res.model} | {row['endurance_error_pct']:+.1f} % | {ivs} | "
                   f"{warn} | {pct_rms(row, fast_mean):.2f} % | "
                   f"{pct_rms(row27, mean_27):.2f} % |")
+        if args.plot is not None:
+            plot_flight(args.plot, flown)
     names = [n for n in args.cells.split(",") if n and n != "none"]
     if names and data is not None and (data / "samsung30q_S001").is_dir():
         slow_cells(data, names)
@@ -308,9 +380,11 @@ def main(argv=None):
         print("|---|---|---:|---:|")
         from dischargelab.flight import fit_flights
 
-        for label, kw in (("thermal prior (airflow)", {}),):
+        for label, model in (("auto, thermal prior (airflow)", "auto"),
+                             ("shepherd-dynamic (tau from the flight)", "shepherd-dynamic"),
+                             ("shepherd-thermal", "shepherd-thermal")):
             flights = flight_curves(folder / "29.csv", capacity_Ah=1.6)
-            res = fit_flights(flights, model="auto", **kw)
+            res = fit_flights(flights, model=model)
             cells = []
             for name, cap in (("29.csv", 1.6), ("28.csv", 1.5)):
                 from dischargelab.flight import analyse_flight

@@ -32,8 +32,8 @@ def test_fit_json_contract(capsys, bundled_data, tmp_path):
                          "--plot", tmp_path / "fit.png")
     assert code == 0, err
     doc = json.loads(out)  # JSON alone on stdout
-    # one rate with a logged temperature: the thermal family is chosen (and says why)
-    assert doc["model"] == "shepherd-thermal" and doc["cells_series"] == 1
+    # one rate with a logged temperature: the dynamic thermal family is chosen (and says why)
+    assert doc["model"] == "shepherd-dynamic" and doc["cells_series"] == 1
     assert any("chosen automatically" in n for n in doc["notes"])
     names = set(FAMILIES[doc["model"]].names)
     assert set(doc["parameters"]) == names == set(doc["stderr"]) and set(PARAMETER_NAMES) < names

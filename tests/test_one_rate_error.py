@@ -123,7 +123,7 @@ def one_rate_fit(bundled_data):
 
 def test_predict_and_fit_give_the_next_test(one_rate_fit, tmp_path, capsys):
     fit = one_rate_fit
-    assert fit.model == "shepherd-thermal"
+    assert fit.model == "shepherd-dynamic"
     doc = fit.to_dict()["next_test"]
     assert doc["current_A"] == pytest.approx(4 * fit.fit_currents_A[0])
     assert "next test" in fit.report()

@@ -45,7 +45,7 @@ def test_chemistry_from_the_full_cell_voltage():
 
 
 def test_a_slow_drain_without_temperature_predicts_the_fast_ones(shared_data):
-    """Samsung 30Q C/10 without its temperature: auto fits shepherd-thermal with the
+    """Samsung 30Q C/10 without its temperature: auto fits shepherd-dynamic with the
     thermal prior (the cell heats by well under a kelvin at C/10) and predicts 1C to 4C,
     where the cell heats by 10 to 40 K, within 5 %; held at the ambient, eq. 6 misses 4C
     by more than 15 %."""
@@ -54,7 +54,7 @@ def test_a_slow_drain_without_temperature_predicts_the_fast_ones(shared_data):
     runs = {r: dl.read(folder / f"Q30_S001_{r}.csv", columns=cols) for r in ("C10", "4C", "1C")}
     slow = replace(runs["C10"], temperature_C=None)
     res = dl.fit(slow, bootstrap=0)
-    assert res.model == "shepherd-thermal" and "thermal prior" in res.notes[0]
+    assert res.model == "shepherd-dynamic" and "thermal prior" in res.notes[0]
     assert any("self-heating is simulated" in n for n in res.notes)
     assert res.battery.extra["thermal_prior"]["fit_virtual_rise_K"] < 1.0
     cold = dl.fit(slow, bootstrap=0, cooling=None)

@@ -71,7 +71,7 @@ def fit(discharges: Discharge | str | Path | Sequence[Discharge | str | Path], *
         steps); choose others with ``dl.read(path, segment=N)``.
     model : str
         ``"auto"`` (by evidence; ``"ecm"`` for flights), ``"shepherd"``,
-        ``"shepherd-thermal"`` or ``"ecm"``.
+        ``"shepherd-thermal"``, ``"shepherd-dynamic"`` or ``"ecm"``.
     cells : int, optional
         Cells in series of the measured pack (default 1; for flights the log's count).
     parallel : int

@@ -128,8 +128,9 @@ def _print_fit(result, battery_path=None):
 @click.option("--bound", "bound", multiple=True, metavar="NAME=LOW:HIGH",
               help="Override a parameter's bounds (repeatable).")
 @click.option("--model", "model_name", default="auto", show_default=True, metavar="NAME",
-              help="Model family (see `dischargelab models`): shepherd, shepherd-thermal, ecm, "
-                   "or auto (one curve: shepherd-thermal, its self-heating from the logged "
+              help="Model family (see `dischargelab models`): shepherd, shepherd-thermal, "
+                   "shepherd-dynamic, ecm, or auto (one curve: shepherd-dynamic, the series "
+                   "resistance from its load step, its self-heating from the logged "
                    "cell temperature or else the thermal prior of --cooling; several rates: "
                    "the family with the smallest error on curve ends left out and on the "
                    "rate-capacity check between the currents).")

@@ -217,6 +217,7 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             raise FitError("paper mode fits one curve (the paper's setup); give one curve")
     fixed, bnds = _spec(family, requested_fixed, bounds, stack, paper_mode)
     notes, warnings = [], []
+    notes += family.fit_notes(stack, fixed)
     _resolve_e0_r(family, stack, fixed, notes, warnings)
     for c in curves:
         used = _thin(c.time_s.size, max_samples).size

@@ -2,6 +2,7 @@
 
 ``shepherd``          the paper's eq. (6), isothermal
 ``shepherd-thermal``  eq. (6) with temperature-dependent parameters and a lumped thermal state
+``shepherd-dynamic``  shepherd-thermal whose polarisation reads Tremblay's filtered current
 ``ecm``               OCV(SOC) + series R + RC pairs + solid-diffusion state + thermal state
 """
 
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 from ..errors import DataError
 from .base import Family, Parameter, Samples, State
+from .dynamic import ShepherdDynamic
 from .ecm import EquivalentCircuit
 from .shepherd import Shepherd
 from .thermal import ShepherdThermal
@@ -16,7 +18,7 @@ from .thermal import ShepherdThermal
 #: Registered families by name (the value of ``model`` in battery files). A new family
 #: is one new module plus its entry here.
 FAMILIES: dict[str, Family] = {f.name: f for f in (Shepherd(), ShepherdThermal(),
-                                                   EquivalentCircuit())}
+                                                   ShepherdDynamic(), EquivalentCircuit())}
 
 #: Names written by older versions of dischargelab.
 ALIASES = {"tremblay": "shepherd"}

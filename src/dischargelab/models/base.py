@@ -184,6 +184,35 @@ def lowpass_samples(time_s, current_A, first, tau_s):
     return x, s
 
 
+#: Filtered currents kept per ``Samples`` (one entry per time constant evaluated).
+_FILTER_CACHE_ENTRIES = 24
+
+
+def filtered_samples(data: Samples, tau_s):
+    """Lowpass-filtered current [A] and its sensitivity to ``tau_s`` [A/s] at every sample
+    of ``data`` (:func:`lowpass_samples` over the load samples of each curve, restarting
+    at each curve's load start; rest samples 0), cached on ``data`` per time constant."""
+    cache = data._cache.setdefault("lowpass", {})
+    source = data._cache.get("lowpass_source")
+    if source is None or source[0] is not data.time or source[1] is not data.current:
+        cache.clear()
+        data._cache["lowpass_source"] = (data.time, data.current)
+    key = float(tau_s)
+    if key not in cache:
+        load = np.flatnonzero(~np.asarray(data.is_rest, bool))
+        curve = np.asarray(data.curve)[load]
+        first = np.ones(load.size, bool)
+        first[1:] = curve[1:] != curve[:-1]
+        x = np.zeros(data.current.size)
+        s = np.zeros(data.current.size)
+        if load.size:
+            x[load], s[load] = lowpass_samples(data.time[load], data.current[load], first, key)
+        if len(cache) >= _FILTER_CACHE_ENTRIES:
+            cache.pop(next(iter(cache)))
+        cache[key] = (x, s)
+    return cache[key]
+
+
 def _recursion(a, da, i, x, s):
     """x_k = a_k x_{k-1} + (1 - a_k) i_k ; s_k = a_k s_{k-1} + da_k (x_{k-1} - i_k); x_-1 = 0.
 
@@ -248,6 +277,9 @@ class Family:
     #: True when what sets the family apart is a logged temperature: without one it
     #: reduces to another family, and ``model="auto"`` does not try it.
     needs_temperature: bool = False
+    #: False for a family that ``model="auto"`` does not compare on several rates (where
+    #: it would only repeat another family's fit).
+    several_rates_candidate: bool = True
     #: Growth with ln(extrapolation ratio) of the relative error of a time to cutoff
     #: predicted from a fit to ONE rate, for a sloped discharge curve
     #: (:func:`dischargelab.uncertainty.extrapolation_growth`; calibrated by
@@ -358,6 +390,11 @@ class Family:
     def fit_fixed(self, data: Samples) -> dict[str, float]:
         """Parameters this family holds fixed for these data (with :meth:`fit_notes`)."""
         return {p.name: p.default for p in self.parameters if not p.fit}
+
+    def fit_notes(self, data: Samples, fixed: dict) -> list[str]:
+        """Notes on what :meth:`fit_fixed` held for these data and why (``fixed``: every
+        value the fit holds)."""
+        return []
 
     # ---- file format ------------------------------------------------------------------
     def describe(self) -> dict:

@@ -59,7 +59,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Family, Parameter, Samples, State, arrhenius, arrhenius_dbeta, lowpass_samples
+from .base import (
+    Family,
+    Parameter,
+    Samples,
+    State,
+    arrhenius,
+    arrhenius_dbeta,
+    filtered_samples,
+)
 from .thermal import BETA_PRIOR_K, thermal_bounds, thermal_fixed
 
 #: Nodes of the piecewise-linear OCV in the surface state of discharge ``x = q_s / C`` [-]
@@ -92,9 +100,6 @@ TAU_D_BOUNDS_S = (1.0, 20000.0)
 STEADY_LEAD_PER_C = 0.01
 #: ``tau_d`` [s] giving :data:`STEADY_LEAD_PER_C` (the lead is ``k_s tau_d i / 3600`` Ah).
 STEADY_TAU_D_S = STEADY_LEAD_PER_C * 3600.0 / SURFACE_LEAD_PER_TAU
-
-#: Filtered currents kept per ``Samples`` (one entry per time constant evaluated).
-_CACHE_ENTRIES = 24
 
 
 def ocv_basis(x):
@@ -272,29 +277,11 @@ class EquivalentCircuit(Family):
         return np.asarray(p["C_Ah"], dtype=float) - self._lead_Ah(p, state.get("i_diff_A", 0.0))
 
     # ---- fitting ------------------------------------------------------------------------
-    def _filtered(self, data: Samples, tau):
+    @staticmethod
+    def _filtered(data: Samples, tau):
         """Lowpass-filtered current [A] and its tau-sensitivity [A/s] at every sample
-        (rest samples 0), cached on ``data`` per time constant."""
-        cache = data._cache.setdefault("ecm_lowpass", {})
-        source = data._cache.get("ecm_lowpass_source")
-        if source is None or source[0] is not data.time or source[1] is not data.current:
-            cache.clear()
-            data._cache["ecm_lowpass_source"] = (data.time, data.current)
-        key = float(tau)
-        if key not in cache:
-            load = np.flatnonzero(~np.asarray(data.is_rest, bool))
-            curve = np.asarray(data.curve)[load]
-            first = np.ones(load.size, bool)
-            first[1:] = curve[1:] != curve[:-1]
-            x = np.zeros(data.current.size)
-            s = np.zeros(data.current.size)
-            if load.size:
-                x[load], s[load] = lowpass_samples(data.time[load], data.current[load], first,
-                                                   key)
-            if len(cache) >= _CACHE_ENTRIES:
-                cache.pop(next(iter(cache)))
-            cache[key] = (x, s)
-        return cache[key]
+        (:func:`~dischargelab.models.base.filtered_samples`)."""
+        return filtered_samples(data, tau)
 
     def fit_voltage(self, p, data: Samples):
         i1, _ = self._filtered(data, p["tau1_s"])
