@@ -117,3 +117,14 @@ def test_samsung_slow_drain_load_step_is_the_cells_series_resistance(shared_data
     res = dl.fit(replace(d, temperature_C=None), model="shepherd-dynamic", bootstrap=0,
                  cooling=None)
     assert 0.030 < res.parameters["R_ohm"] < 0.040
+
+
+def test_a_flight_far_from_the_knee_falls_back_to_shepherd_thermal(shared_data):
+    # a DJI M100 flight ends at 40-50 % charge: with R held at the load step, nothing sets
+    # shepherd-dynamic's K and C (C runs to its bound); auto keeps the earlier one-rate family
+    path = sorted((shared_data / "dji_m100_flights").glob("derived_battery_*.csv"))[1]
+    res = dl.fit(dl.read(path), cells=6, bootstrap=0)
+    assert res.model == "shepherd-thermal"
+    assert "does not reach the end-of-discharge knee" in res.notes[0]
+    delivered = float(res.curves[0].charge_Ah[-1])
+    assert float(res.parameters["C_Ah"]) < 1.5 * delivered

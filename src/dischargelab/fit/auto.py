@@ -54,6 +54,24 @@ def _pct(value) -> str:
 ONE_RATE_FAMILY = "shepherd-dynamic"
 
 
+#: What ``auto`` fits to one rate when :data:`ONE_RATE_FAMILY` finds no capacity in it (a
+#: flight that ends far from the knee).
+ONE_RATE_FALLBACK = "shepherd-thermal"
+
+
+def _capacity_told(res: FitResult) -> bool:
+    """False when the fitted capacity ran to its upper bound or far above the charge the
+    curves delivered (:data:`~dischargelab.identifiability.CAPACITY_EXCESS_FACTOR`)."""
+    from ..identifiability import CAPACITY_EXCESS_FACTOR
+
+    if "C_Ah" not in res.free:
+        return True
+    capacity = float(res.parameters["C_Ah"])
+    upper = float(res.bounds["C_Ah"][1])
+    delivered = max(float(c.charge_Ah[-1]) for c in res.curves) / res.strings_parallel
+    return capacity < upper * (1 - 1e-6) and capacity <= CAPACITY_EXCESS_FACTOR * delivered
+
+
 def choose_model(curves, cooling: str | None = "still-air") -> tuple[list[str], str]:
     """Candidate families for ``model="auto"`` and why.
 
@@ -108,6 +126,13 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
         names, why = ["shepherd"], "paper mode: the paper's model"
     if len(names) == 1:
         res = fit_with_model_error(curves, model=names[0], **kw)
+        if names[0] == ONE_RATE_FAMILY and not _capacity_told(res):
+            res = fit_with_model_error(curves, model=ONE_RATE_FALLBACK, **kw)
+            names, why = [ONE_RATE_FALLBACK], (
+                f"one rate that does not reach the end-of-discharge knee: {ONE_RATE_FALLBACK} "
+                f"({ONE_RATE_FAMILY}'s capacity ran away: with its resistance held at the "
+                "load step and no knee, nothing in the curve sets its polarisation and "
+                "capacity)")
         res.notes.insert(0, f"model {names[0]!r} chosen automatically: {why}")
         return res
     fits, scores = {}, {}
