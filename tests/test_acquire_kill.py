@@ -67,6 +67,13 @@ def test_kill_minus_nine_loses_at_most_one_second(tmp_path, seed):
     assert len(before) >= 20
 
 
+def _interruptible() -> None:
+    """In the logger's process: Ctrl-C's default, as at a terminal. A suite started in the
+    background by a shell (``make test &``) has SIGINT ignored, every child inherits that,
+    and Python then installs no Ctrl-C handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_interrupt_stops_cleanly_with_summary(tmp_path, signum):
     out = tmp_path / "run.csv"
@@ -75,7 +82,8 @@ def test_interrupt_stops_cleanly_with_summary(tmp_path, signum):
             [sys.executable, "-m", "dischargelab", "acquire", "--port", dev.port, "--out",
              str(out), "--ke", str(KE), "--cells", "2", "--rate", "20", "--quiet",
              "--switch-load"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            preexec_fn=_interruptible)
         deadline = time.monotonic() + 90
         while rows_in(out) < 10:
             assert logger.poll() is None, logger.stderr.read()

@@ -230,6 +230,7 @@ def test_corrupt_or_foreign_log_one_line_exit_2_nothing_written(tmp_path, capsys
     assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.ulg"]
 
 
+@pytest.mark.slow
 def test_fit_and_flight_commands_on_a_flight_log(logs, tmp_path, capsys):
     pack = tmp_path / "pack.json"
     code, _, err = run(capsys, "fit", logs / INA29, "--model", "ecm", "--bootstrap", "0")
@@ -260,6 +261,7 @@ def test_flight_options_need_a_flight_log(bundled_data, capsys):
     assert code == 2 and "flight logs" in err
 
 
+@pytest.mark.slow
 def test_validate_flies_a_flight_from_its_charge_at_take_off_at_the_ambient(fit29, logs):
     """A thermal family fitted without a logged temperature simulates the cells' heating
     with the thermal prior (a 1.6 Ah LiPo cell of a 4S pack in the airflow of flight) in

@@ -59,6 +59,7 @@ def computed_at(lb: Logbook) -> dict:
                                         schema.pack_figures.c.pack_version)).all())
 
 
+@pytest.mark.slow
 def test_each_write_recomputes_only_the_pack_it_changed_and_reads_compute_nothing(
         tmp_path, shared_data, counting):
     with Logbook(tmp_path / "lb.sqlite") as lb:

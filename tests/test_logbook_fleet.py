@@ -85,6 +85,7 @@ def test_local_cluster_stores_the_same_events_and_refits_and_reports_alike(
             local[name].parameters.as_dict(), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_refits_build_each_packs_job_only_as_the_executor_asks(packs, tmp_path, monkeypatch):
     url = str(tmp_path / "lb.sqlite")
     with Logbook(url) as lb:

@@ -400,6 +400,7 @@ def test_a_log_whose_ambient_drifts_more_than_the_cell_heats_keeps_the_defaults(
 
 
 # ---- (7) one steady rate: the dynamics held absent --------------------------------------------
+@pytest.mark.slow
 def test_one_steady_rate_holds_the_dynamics_absent():
     """One constant current cannot show RC pairs or the diffusion lead (time under load
     and charge drawn are proportional): the fit holds them absent and says so, unless

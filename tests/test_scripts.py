@@ -14,7 +14,7 @@ BENCHMARKS = {
     "fit_speed.py": (["--repeats", "1", "--large-rows", "50000", "--families", "shepherd"],
                      "speed-up"),
     "fit_latency.py": (["--repeats", "1", "--bootstrap", "10"], "x the baseline"),
-    "slow_to_fast.py": (["--cells", "enertech"], "endurance error"),
+    "slow_to_fast.py": (["--cells", "none"], "endurance error"),
     "accuracy.py": (["--sets", "enertech", "--families", "auto", "--bootstrap", "5"],
                     "endurance error"),
     "one_rate_errors.py": (["--cells", "enertech", "--families", "shepherd", "--no-two-rate"],
