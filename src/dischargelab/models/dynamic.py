@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Parameter, Samples, State, arrhenius, arrhenius_dbeta, filtered_samples
+from .base import Parameter, Samples, State, arrhenius, filtered_samples
 from .thermal import BETA_PRIOR_K, ShepherdThermal
 
 #: Time constant of the filtered current [s] for data that cannot show it (one steady
@@ -105,28 +105,10 @@ class ShepherdDynamic(ShepherdThermal):
         names = self.names if names is None else tuple(names)
         if not names:
             return np.empty((data.charge.size, 0))
-        i, q, temp = data.current, data.charge, data.temperature
         i_f, s_f = filtered_samples(data, p["tau_s"])
-        dt, f, cap, gain, denom = self._terms(p, q, temp)
-        pol = i_f + q
-        expo = np.exp(-p["B_per_Ah"] * q)
-        d_cap = p["K_V_per_Ah"] * f * pol * q / denom**2
-        zero = np.zeros_like(q)
-        columns = {
-            "E0_V": lambda: np.ones_like(q),
-            "R_ohm": lambda: -f * i,
-            "K_V_per_Ah": lambda: -f * gain * pol,
-            "A_V": lambda: expo,
-            "dE0_dT_V_per_K": lambda: dt,
-            "B_per_Ah": lambda: -p["A_V"] * q * expo,
-            "C_Ah": lambda: d_cap,
-            "dC_dT_Ah_per_K": lambda: d_cap * dt,
-            "beta_K": lambda: (-p["R_ohm"] * f * i - p["K_V_per_Ah"] * f * gain * pol)
-            * arrhenius_dbeta(temp),
-            "Cth_J_per_K": lambda: zero,
-            "Rth_K_per_W": lambda: zero,
-            "tau_s": lambda: -p["K_V_per_Ah"] * f * gain * s_f,
-        }
+        columns = self._columns(p, data, i_f)
+        _, f, _, gain, _ = self._terms(p, data.charge, data.temperature)
+        columns["tau_s"] = lambda: -p["K_V_per_Ah"] * f * gain * s_f
         return np.column_stack([columns[n]() for n in names])
 
     def start_grid(self, data: Samples, free_nonlinear):

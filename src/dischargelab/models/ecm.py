@@ -59,15 +59,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import (
-    Family,
-    Parameter,
-    Samples,
-    State,
-    arrhenius,
-    arrhenius_dbeta,
-    filtered_samples,
-)
+from .base import Family, Parameter, Samples, State, arrhenius, arrhenius_dbeta, filtered_samples
 from .thermal import BETA_PRIOR_K, thermal_bounds, thermal_fixed
 
 #: Nodes of the piecewise-linear OCV in the surface state of discharge ``x = q_s / C`` [-]

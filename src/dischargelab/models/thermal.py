@@ -113,9 +113,17 @@ class ShepherdThermal(Family):
 
     def jacobian(self, p, data: Samples, names=None):
         names = self.names if names is None else tuple(names)
+        if not names:
+            return np.empty((data.charge.size, 0))
+        columns = self._columns(p, data, data.current)
+        return np.column_stack([columns[n]() for n in names])
+
+    def _columns(self, p, data: Samples, i_pol) -> dict:
+        """The Jacobian's columns (each computed when called), the polarisation term
+        reading the current ``i_pol`` [A] (the current itself here)."""
         i, q, temp = data.current, data.charge, data.temperature
         dt, f, cap, gain, denom = self._terms(p, q, temp)
-        pol = i + q
+        pol = i_pol + q
         expo = np.exp(-p["B_per_Ah"] * q)
         d_cap = p["K_V_per_Ah"] * f * pol * q / denom**2
         zero = np.zeros_like(q)
@@ -133,8 +141,7 @@ class ShepherdThermal(Family):
             "Cth_J_per_K": lambda: zero,
             "Rth_K_per_W": lambda: zero,
         }
-        return np.column_stack([columns[n]() for n in names]) if names else \
-            np.empty((q.size, 0))
+        return columns
 
     def guess(self, data: Samples):
         out = Shepherd().guess(data)
