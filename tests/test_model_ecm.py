@@ -10,6 +10,7 @@ from scipy.optimize import least_squares
 from dischargelab import engine
 from dischargelab.fit import Curve, fit_battery
 from dischargelab.models import Samples, get_family
+from dischargelab.models.base import filtered_samples
 from dischargelab.models.ecm import (
     OCV_DROP_NAMES,
     OCV_NODES,
@@ -79,7 +80,7 @@ def test_jacobian_matches_central_differences():
     data = _jacobian_samples()
     p = dict(TRUE, C_Ah=2.26, tau_d_s=400.0, beta_K=3000.0)  # x_s up to 0.99
     # no sample sits on an OCV node (the OCV has a kink there)
-    i_d, _ = ECM._filtered(data, p["tau_d_s"])
+    i_d, _ = filtered_samples(data, p["tau_d_s"])
     x_s = ECM.surface_charge_Ah(p, {"charge_Ah": data.charge, "i_diff_A": i_d}) / p["C_Ah"]
     assert 0.98 < x_s.max() < 0.995 and np.min(np.abs(x_s[:, None] - OCV_NODES[1:])) > 1e-4
     jac = ECM.jacobian(p, data)
@@ -108,9 +109,9 @@ def test_voltage_is_linear_in_the_linear_parameters():
 def test_fit_voltage_equals_state_voltage_and_rest_is_full_ocv():
     data = _jacobian_samples()
     p = dict(TRUE, C_Ah=3.0)
-    i1, _ = ECM._filtered(data, p["tau1_s"])
-    i2, _ = ECM._filtered(data, p["tau2_s"])
-    i_d, _ = ECM._filtered(data, p["tau_d_s"])
+    i1, _ = filtered_samples(data, p["tau1_s"])
+    i2, _ = filtered_samples(data, p["tau2_s"])
+    i_d, _ = filtered_samples(data, p["tau_d_s"])
     state = {"charge_Ah": data.charge, "i_rc1_A": i1, "i_rc2_A": i2, "i_diff_A": i_d,
              "temperature_C": data.temperature}
     np.testing.assert_allclose(ECM.fit_voltage(p, data), ECM.voltage(p, state, data.current))

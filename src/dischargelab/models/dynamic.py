@@ -82,16 +82,6 @@ class ShepherdDynamic(ShepherdThermal):
               State("temperature_C", "degC", "thermal"))
 
     # ---- physics ---------------------------------------------------------------------
-    def _voltage(self, p, q, i, i_f, temperature):
-        q = np.asarray(q, dtype=float)
-        dt, f, cap, gain, _ = self._terms(p, q, temperature)
-        ok = q < cap
-        gain = np.where(ok, gain, 0.0)
-        v = (p["E0_V"] + p["dE0_dT_V_per_K"] * dt - p["R_ohm"] * f * np.asarray(i, dtype=float)
-             - p["K_V_per_Ah"] * f * gain * (np.asarray(i_f, dtype=float) + q)
-             + p["A_V"] * np.exp(-p["B_per_Ah"] * q))
-        return np.where(ok, v, -np.inf)
-
     def voltage(self, p, state, current_A):
         return self._voltage(p, state["charge_Ah"], current_A, state["i_f_A"],
                              state["temperature_C"])

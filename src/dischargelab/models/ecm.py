@@ -269,16 +269,10 @@ class EquivalentCircuit(Family):
         return np.asarray(p["C_Ah"], dtype=float) - self._lead_Ah(p, state.get("i_diff_A", 0.0))
 
     # ---- fitting ------------------------------------------------------------------------
-    @staticmethod
-    def _filtered(data: Samples, tau):
-        """Lowpass-filtered current [A] and its tau-sensitivity [A/s] at every sample
-        (:func:`~dischargelab.models.base.filtered_samples`)."""
-        return filtered_samples(data, tau)
-
     def fit_voltage(self, p, data: Samples):
-        i1, _ = self._filtered(data, p["tau1_s"])
-        i2, _ = self._filtered(data, p["tau2_s"])
-        i_d, _ = self._filtered(data, p["tau_d_s"])
+        i1, _ = filtered_samples(data, p["tau1_s"])
+        i2, _ = filtered_samples(data, p["tau2_s"])
+        i_d, _ = filtered_samples(data, p["tau_d_s"])
         return self._terminal(p, data.charge, data.current, i1, i2, i_d, data.temperature)
 
     def jacobian(self, p, data: Samples, names=None):
@@ -287,9 +281,9 @@ class EquivalentCircuit(Family):
         if not names:
             return np.empty((n, 0))
         i, temp = data.current, data.temperature
-        i1, s1 = self._filtered(data, p["tau1_s"])
-        i2, s2 = self._filtered(data, p["tau2_s"])
-        i_d, s_d = self._filtered(data, p["tau_d_s"])
+        i1, s1 = filtered_samples(data, p["tau1_s"])
+        i2, s2 = filtered_samples(data, p["tau2_s"])
+        i_d, s_d = filtered_samples(data, p["tau_d_s"])
         C, tau_d = float(p["C_Ah"]), float(p["tau_d_s"])
         q_s = data.charge + self._lead_Ah(p, i_d)
         x_s = q_s / C
@@ -323,7 +317,7 @@ class EquivalentCircuit(Family):
         out = self.defaults()
         out.update(self.fit_fixed(data))
         out.update({"tau1_s": 10.0, "tau2_s": 400.0, "tau_d_s": 100.0})
-        i_d, _ = self._filtered(data, out["tau_d_s"])
+        i_d, _ = filtered_samples(data, out["tau_d_s"])
         q_s_max = float(np.max(data.charge + self._lead_Ah(out, i_d)))
         out["C_Ah"] = max(1.02 * data.q_max, 1.01 * q_s_max)
         lin = self.linear_names

@@ -93,13 +93,20 @@ class ShepherdThermal(Family):
         return dt, f, cap, gain, denom
 
     def voltage(self, p, state, current_A):
-        q = np.asarray(state["charge_Ah"], dtype=float)
-        i = np.asarray(current_A, dtype=float)
-        dt, f, cap, gain, _ = self._terms(p, q, state["temperature_C"])
+        return self._voltage(p, state["charge_Ah"], current_A, current_A,
+                             state["temperature_C"])
+
+    def _voltage(self, p, q, i, i_pol, temperature):
+        """Eq. (6) with temperature [V per cell]: the series resistance carries the current
+        ``i`` [A], the polarisation term the current ``i_pol`` [A] (``i`` itself here)."""
+        q = np.asarray(q, dtype=float)
+        i = np.asarray(i, dtype=float)
+        dt, f, cap, gain, _ = self._terms(p, q, temperature)
         ok = q < cap
         gain = np.where(ok, gain, 0.0)
         v = (p["E0_V"] + p["dE0_dT_V_per_K"] * dt - p["R_ohm"] * f * i
-             - p["K_V_per_Ah"] * f * gain * (i + q) + p["A_V"] * np.exp(-p["B_per_Ah"] * q))
+             - p["K_V_per_Ah"] * f * gain * (np.asarray(i_pol, dtype=float) + q)
+             + p["A_V"] * np.exp(-p["B_per_Ah"] * q))
         return np.where(ok, v, -np.inf)
 
     def capacity_Ah(self, p, state):
