@@ -368,6 +368,20 @@ def test_endurance_with_a_pack_uses_todays_capacity(tmp_path, shared_data):
     assert flown.to_dict()["notes"] and not fresh.to_dict()["notes"]
 
 
+def test_a_high_voltage_pack_that_only_flies_flies_the_lihv_prior(tmp_path, shared_data):
+    """A DJI Matrice 100 pack (6S, rests at 4.35 V per cell off the charger): today's model
+    of a pack without a full discharge is the LiHV prior, starting at its full rest."""
+    path = (shared_data / "dji_m100_flights"
+            / "derived_battery_19-12-17_tablet1_2019_12_17_18_49.csv")
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.set_pack("m100", cells=6)
+        lb.add(path, pack="m100")
+        pack = lb.pack("m100")
+    today = pack.battery()
+    assert "LiHV" in today.extra["note"]
+    assert today.voltage(np.zeros(1), np.zeros(1))[0] / 6 == pytest.approx(4.33, abs=0.01)
+
+
 def test_export_csv(tmp_path, shared_data):
     with Logbook(tmp_path / "lb.sqlite") as lb:
         lb.add(cell_c_files(shared_data, [1, 10]), pack="C")

@@ -188,3 +188,51 @@ def test_in_process_executor_hands_back_exceptions():
 
     got = dict(InProcessExecutor().map_unordered(task, [1, 2, 3]))
     assert got[1] == 10 and got[3] == 30 and isinstance(got[2], DataError)
+
+
+# --------------------------------------------------------------------------- LiHV prior
+
+def test_lihv_curve_extends_the_lipo_curve_to_4_35_v():
+    """The high-voltage LiPo curve: the LiPo curve below its top with its charge scaled by
+    the extension's share, rising above it to the rest after a 4.35 V charge (as far below
+    4.35 V as the LiPo curve's top is below 4.20 V), non-decreasing in state of charge."""
+    from dischargelab.ocv import (
+        CHARGE_CELL_V,
+        GENERIC_OCV_V,
+        LIHV_EXTRA_SHARE,
+        LIHV_FULL_CELL_V,
+        LIHV_OCV_V,
+        OCV_SOC,
+        generic_ocv,
+    )
+
+    relaxed = CHARGE_CELL_V["lipo"] - GENERIC_OCV_V["lipo"][0]
+    assert LIHV_OCV_V[0] == pytest.approx(LIHV_FULL_CELL_V - relaxed, abs=1e-3)
+    assert LIHV_OCV_V[-1] == pytest.approx(GENERIC_OCV_V["lipo"][-1], abs=1e-3)
+    assert np.all(np.diff(LIHV_OCV_V) <= 0)
+    assert 0.05 < LIHV_EXTRA_SHARE < 0.3
+    # below the old top: the same voltage at the charge left scaled by (1 - share)
+    soc = 0.5
+    hv = np.interp(soc * (1 - LIHV_EXTRA_SHARE), OCV_SOC[::-1], LIHV_OCV_V[::-1])
+    assert hv == pytest.approx(np.interp(soc, OCV_SOC[::-1], GENERIC_OCV_V["lipo"][::-1]),
+                               abs=0.01)
+    # chosen from the rest voltage, and only for LiPo
+    assert generic_ocv("lipo", 4.32)[0] is LIHV_OCV_V
+    assert generic_ocv(None, 4.32)[0] is LIHV_OCV_V
+    assert generic_ocv("lipo", 4.19)[0] is GENERIC_OCV_V["lipo"]
+    assert generic_ocv("li-ion", 4.32)[0] is GENERIC_OCV_V["li-ion"]
+
+
+def test_dji_hv_pack_reads_through_the_lihv_curve(shared_data):
+    """A DJI Matrice 100 pack rests at 4.29-4.35 V per cell (a 4.35 V LiHV pack): its
+    flights are read through the LiHV curve, whose rest before a flight from a pack not
+    quite full no longer reads 100 %."""
+    summary = summarise_source(shared_data / "dji_m100_flights"
+                               / "derived_battery_20-01-12_tablet1_2020_01_12_12_08.csv")
+    events = stored(summary, 1)
+    health, _, _ = pack_health(events, cells=6, chemistry="lipo")
+    flight = next(h for h in health if h.capacity_Ah is not None)
+    assert any("LiHV" in n for n in flight.notes)
+    # 25.836 V at rest = 4.306 V per cell: below the LiHV top, above the LiPo curve's
+    assert 0.9 < flight.soc_start < 0.99
+    assert flight.capacity_interval95[0] < flight.capacity_Ah < flight.capacity_interval95[1]

@@ -17,6 +17,12 @@ References
    samsung-30Q-cell" (Samsung INR18650-30Q C/10 discharge, ``../shared/data/samsung30q_S001``)
    and "Dataset-battery-electro-thermal-characterization" (K2 LFP26650 1C discharge,
    ``../shared/data/k2_lfp26650``); CC BY-SA 4.0.
+.. [4] M. Doyle, "Design and simulation of lithium rechargeable batteries", PhD thesis,
+   University of California, Berkeley (1995), and the Dualfoil program (J. Newman's group):
+   the LiCoO2 open-circuit potential against lithium, ``U_p(y)``, measured down to a lithium
+   fraction below 0.4 (as given in PyBaMM's ``Marquis2019`` parameter set, with its
+   stoichiometry window of a 4.2 V LiCoO2/graphite cell: ``y`` from 0.4832 full to 0.9629
+   empty; S. G. Marquis et al., J. Electrochem. Soc. 166 (2019) A3693).
 """
 
 from __future__ import annotations
@@ -71,6 +77,76 @@ OCV_SOURCE = {
 
 #: Charge voltage per cell [V] by chemistry (for inferring the cell count).
 CHARGE_CELL_V = {"lipo": 4.2, "li-ion": 4.2, "lifepo4": 3.65}
+
+
+#: Lithium fractions of LiCoO2 at the full and empty ends of a 4.2 V LiCoO2/graphite
+#: cell's window (ref. [4]).
+LCO_FULL_Y, LCO_EMPTY_Y = 0.4832, 0.9629
+
+#: Full rest voltage per cell of a high-voltage LiPo (LiHV) cell [V]: charged to 4.35 V.
+LIHV_FULL_CELL_V = 4.35
+
+#: A LiPo pack whose rest voltage per cell is above this [V] is a high-voltage one (LiHV):
+#: a 4.20 V cell cannot rest there (its charger stops at 4.20 V, +-0.05 V at worst), a
+#: 4.35 V cell rests at 4.28-4.35 V after its charge.
+LIHV_REST_CELL_V = 4.25
+
+
+def _lco_potential(y):
+    """Open-circuit potential of Li_yCoO2 against lithium [V] (Doyle 1995, ref. [4])."""
+    y = 1.062 * np.asarray(y, dtype=float)
+    t = np.tanh
+    return (2.16216 + 0.07645 * t(30.834 - 54.4806 * y) + 2.1581 * t(52.294 - 50.294 * y)
+            - 0.14169 * t(11.0923 - 19.8543 * y) + 0.2051 * t(1.4684 - 5.4888 * y)
+            + 0.2531 * t((-y + 0.56478) / 0.1316) - 0.02167 * t((y - 0.525) / 0.006))
+
+
+def _lihv_table() -> tuple[np.ndarray, float]:
+    """The LiHV open-circuit voltage per cell at :data:`OCV_SOC` [V] and the share of its
+    charge above the LiPo curve's top (see :data:`LIHV_OCV_V`)."""
+    lipo = GENERIC_OCV_V["lipo"]
+    offset = float(_lco_potential(LCO_FULL_Y)) - lipo[0]   # the negative's potential, full
+    # full is the rest after the charge, as for the LiPo curve (4.181 V after 4.20 V)
+    top_v = LIHV_FULL_CELL_V - (CHARGE_CELL_V["lipo"] - lipo[0])
+    y = np.linspace(0.25, LCO_FULL_Y, 2001)
+    top_y = float(np.interp(top_v, (_lco_potential(y) - offset)[::-1], y[::-1]))
+    share = (LCO_FULL_Y - top_y) / (LCO_EMPTY_Y - top_y)
+    soc = OCV_SOC
+    below = np.interp(soc / (1.0 - share), OCV_SOC[::-1], lipo[::-1])
+    above = _lco_potential(LCO_FULL_Y - (soc - (1.0 - share)) / share * (LCO_FULL_Y - top_y))
+    return np.round(np.where(soc <= 1.0 - share, below, above - offset), 3), float(share)
+
+
+#: Generic open-circuit voltage per cell of a high-voltage LiPo (LiHV, charged to 4.35 V:
+#: DJI's TB47/TB48 class) at :data:`OCV_SOC` [V], a prior. The same LiCoO2/graphite cell
+#: as ``"lipo"`` with its positive electrode taken further: below the LiPo curve's top its
+#: voltage against the charge left is the LiPo curve's (the same electrodes, emptied the
+#: same way); above it, the LiCoO2 potential (ref. [4]) from the 4.2 V window's full
+#: lithium fraction to where the cell reads 4.35 V, less the negative's potential there
+#: (the LiPo curve's top). That extension holds :data:`LIHV_EXTRA_SHARE` (0.22) of the
+#: charge, 28 % more than the 4.2 V window, an upper bound: commercial LiHV cells are
+#: balanced for the extra charge at some cost elsewhere. Chosen from what a log shows (a
+#: rest above :data:`LIHV_REST_CELL_V` per cell), not from a label.
+LIHV_OCV_V, LIHV_EXTRA_SHARE = _lihv_table()
+
+#: Where the LiHV table comes from.
+LIHV_SOURCE = ("generic LiHV (LiCoO2 to 4.35 V) OCV: the LiPo curve extended by the LiCoO2 "
+               "potential (Doyle 1995)")
+
+
+def generic_ocv(chemistry: str | None, rest_cell_V: float | None = None
+                ) -> tuple[np.ndarray, str]:
+    """The generic open-circuit voltage table per cell at :data:`OCV_SOC` [V] and its source.
+
+    A LiPo pack (``"lipo"`` or None) whose highest rest voltage per cell ``rest_cell_V``
+    is above :data:`LIHV_REST_CELL_V` gets the high-voltage table :data:`LIHV_OCV_V`.
+    """
+    chem = check_chemistry(chemistry)
+    if chem == "lipo" and rest_cell_V is not None and rest_cell_V > LIHV_REST_CELL_V:
+        return LIHV_OCV_V, LIHV_SOURCE
+    return GENERIC_OCV_V[chem], OCV_SOURCE[chem]
+
+
 
 
 #: Chemistry assumed when none is given (most UAV packs).

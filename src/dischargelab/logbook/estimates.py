@@ -265,13 +265,15 @@ class OcvCurve:
     capacity_Ah: float | None = None
 
     @classmethod
-    def prior(cls, chemistry: str | None) -> OcvCurve:
-        """The generic curve of a chemistry (:data:`dischargelab.ocv.GENERIC_OCV_V`)."""
-        from ..ocv import GENERIC_OCV_V, OCV_SOC, OCV_SOURCE, check_chemistry
+    def prior(cls, chemistry: str | None, rest_cell_V: float | None = None) -> OcvCurve:
+        """The generic curve of a chemistry (:func:`dischargelab.ocv.generic_ocv`): a LiPo
+        pack resting above 4.25 V per cell (``rest_cell_V``, its highest rest) gets the
+        high-voltage (LiHV, 4.35 V) curve."""
+        from ..ocv import OCV_SOC, generic_ocv
 
-        chem = check_chemistry(chemistry)
-        return cls(soc=OCV_SOC[::-1].astype(float), cell_V=GENERIC_OCV_V[chem][::-1].copy(),
-                   sd_V=PRIOR_CURVE_SD_CELL_V, source=OCV_SOURCE[chem], temperature_C=25.0)
+        table, source = generic_ocv(chemistry, rest_cell_V)
+        return cls(soc=OCV_SOC[::-1].astype(float), cell_V=table[::-1].copy(),
+                   sd_V=PRIOR_CURVE_SD_CELL_V, source=source, temperature_C=25.0)
 
     @classmethod
     def from_discharge(cls, charge_Ah, voltage_V, current_A, *, cells: int,

@@ -36,7 +36,7 @@ from .results import DEFAULT_EOL, Health, Pack, build_health
 
 #: Version of the figures this code computes: raise it when what build_health,
 #: the fleet row or the model curves hold changes (every stored pack is then redone).
-FIGURES_VERSION = 3
+FIGURES_VERSION = 4
 
 #: C-rates of the model curves on a pack page.
 CURVE_C_RATES = (0.5, 1.0, 2.0)
@@ -79,7 +79,8 @@ def make_pack(row: dict, events: int, health: Health, model: dict | None,
 def seen_in(events: list[dict], row: dict) -> dict:
     """Cells in series and chemistry as the events show them (for a pack whose settings
     do not say): cells from the latest event, chemistry from the highest rest voltage
-    per cell (LiFePO4 below 3.75 V when full, else LiPo)."""
+    per cell (LiFePO4 below 3.75 V when full, else LiPo), and that voltage
+    (``rest_cell_V``, which tells a high-voltage LiPo pack)."""
     from ..thermalprior import chemistry_from_full_voltage
     from .health import order_events, pack_cells
 
@@ -88,8 +89,9 @@ def seen_in(events: list[dict], row: dict) -> dict:
     ordered = order_events(events)
     cells = pack_cells(ordered[-1], row["cells"], row["chemistry"])
     rests = [e.get("rest_voltage_V") for e in ordered if e.get("rest_voltage_V")]
-    chemistry = chemistry_from_full_voltage(max(rests) / cells) if rests else None
-    return {"cells": cells, "chemistry": chemistry}
+    top = max(rests) / cells if rests else None
+    chemistry = chemistry_from_full_voltage(top) if rests else None
+    return {"cells": cells, "chemistry": chemistry, "rest_cell_V": top}
 
 
 def _thin(values, points: int = CURVE_POINTS) -> list:

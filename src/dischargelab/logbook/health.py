@@ -680,16 +680,27 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
         n = pack_cells(e, cells, chemistry)
         curves.append((k, learned_curve(dict(e, source=e.get("source")), cap, n, chemistry,
                                         resistance_ohm=first_drop)))
-    from ..ocv import CHARGE_CELL_V, check_chemistry
+    from ..ocv import CHARGE_CELL_V, LIHV_FULL_CELL_V, check_chemistry
 
-    full_cell = CHARGE_CELL_V[check_chemistry(chemistry)]
+    prior = OcvCurve.prior(chemistry, highest_rest_cell_V(ordered, cells, chemistry))
+    full_cell = LIHV_FULL_CELL_V if prior.cell_V[-1] >= LIHV_FULL_CELL_V else \
+        CHARGE_CELL_V[check_chemistry(chemistry)]
     if fulls:
         e = fulls[0][1]
         if e.get("rest_voltage_V"):
             full_cell = float(e["rest_voltage_V"]) / pack_cells(e, cells, chemistry)
     return PackContext(cells=cells, chemistry=chemistry, model=model, fulls=fulls,
-                       curves=curves, prior=OcvCurve.prior(chemistry), full_cell_V=full_cell,
-                       label_Ah=label_Ah)
+                       curves=curves, prior=prior, full_cell_V=full_cell, label_Ah=label_Ah)
+
+
+def highest_rest_cell_V(ordered: list[dict], cells: int | None, chemistry: str | None
+                        ) -> float | None:
+    """The highest rest voltage per cell the pack's events show [V] (the rest before each
+    load, read at its end), or None: what says a LiPo pack is a high-voltage one."""
+    counts = _cell_counts(ordered, cells, chemistry)
+    tops = [float(e["rest_voltage_V"]) / n for e, n in zip(ordered, counts)
+            if e.get("rest_voltage_V") and e.get("kind") in ("discharge", "flight")]
+    return max(tops) if tops else None
 
 
 def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,

@@ -393,7 +393,8 @@ class Pack:
             note += f"; chemistry taken as {chemistry} from its full rest voltage"
         cells = self.cells or self._seen.get("cells") or 1
         return prior_battery(self.name, chemistry, int(cells), float(capacity),
-                             self.resistance_ohm, note)
+                             self.resistance_ohm, note,
+                             rest_cell_V=self._seen.get("rest_cell_V"))
 
     def _scaled(self, model: dict):
         from ..cell import CellParameters

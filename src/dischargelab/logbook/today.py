@@ -29,7 +29,7 @@ DEFAULT_CELL_OHM = 0.02
 
 
 def prior_battery(name: str, chemistry: str, cells: int, capacity_Ah: float,
-                  resistance_ohm: float | None, note: str):
+                  resistance_ohm: float | None, note: str, rest_cell_V: float | None = None):
     """The chemistry's prior (module docstring) as a Battery of ``cells`` in series.
 
     Parameters
@@ -45,18 +45,22 @@ def prior_battery(name: str, chemistry: str, cells: int, capacity_Ah: float,
         Pack resistance today [ohm].
     note : str
         Where the figures come from (the Battery's ``extra["note"]`` starts with it).
+    rest_cell_V : float, optional
+        The pack's highest rest voltage per cell [V]: a LiPo pack resting above 4.25 V
+        gets the high-voltage (LiHV) curve (:func:`dischargelab.ocv.generic_ocv`).
     """
     from ..cell import CellParameters
     from ..model import Battery
     from ..models import get_family
     from ..models.ecm import OCV_DROP_NAMES, OCV_NODES, STEADY_TAU_D_S
-    from ..ocv import OCV_SOURCE, check_chemistry, ocv_from_soc
+    from ..ocv import OCV_SOC, check_chemistry, generic_ocv
     from ..thermalprior import thermal_prior
 
     chemistry = check_chemistry(chemistry)
     if not capacity_Ah or capacity_Ah <= 0:
         raise LogbookError(f"pack {name!r} has no capacity today to build a model from")
-    ocv = np.asarray(ocv_from_soc(1.0 - OCV_NODES, chemistry), dtype=float)
+    table, source = generic_ocv(chemistry, rest_cell_V)
+    ocv = np.interp(1.0 - OCV_NODES, OCV_SOC[::-1], table[::-1])
     cell_ohm = DEFAULT_CELL_OHM if resistance_ohm is None else float(resistance_ohm) / cells
     heat = thermal_prior(capacity_Ah, chemistry, cells=cells)
     fam = get_family("ecm")
@@ -68,7 +72,7 @@ def prior_battery(name: str, chemistry: str, cells: int, capacity_Ah: float,
     resistance = ("no resistance measured: 20 mOhm per cell assumed" if resistance_ohm is None
                   else f"its resistance today {1000 * cell_ohm:.1f} mOhm per cell")
     text = (f"{note}; no fitted model (no full discharge): the {chemistry} prior "
-            f"({OCV_SOURCE[chemistry]}) scaled to its capacity today {capacity_Ah:.3g} Ah and "
+            f"({source}) scaled to its capacity today {capacity_Ah:.3g} Ah and "
             f"{resistance} - a prior, not a fit: expect a few per cent of error in time")
     return Battery(parameters=CellParameters.from_dict(values, fam.names), cells_series=cells,
                    name=f"{name} (today, {chemistry} prior)", chemistry=chemistry,
