@@ -19,10 +19,12 @@ Every figure goes through the logbook as a user meets it (``Logbook.add`` of the
    same cut and the same comparison (goal: within 2 %), how often the capacity now's
    95 % interval holds the next test (goal: >= 90 %), and per event how often the 95 %
    interval holds the true capacity (the model's, on the tests' scale).
-3. **DJI Matrice 100 flights**: each flight's capacity against the charge counted
-   between the same two readings divided by the smart battery's own change in state
-   of charge there (goal: within 5 % for every full-enough flight, one that moves the
-   smart battery's state of charge by at least :data:`FULL_ENOUGH` ).
+3. **DJI Matrice 100 flights** (added with no options: the cell count from the smart
+   battery's state of charge, the LiHV curve from the rest voltage): each flight's
+   capacity against the charge counted between the same two readings divided by the
+   smart battery's own change in state of charge there (goal: within 5 % for every
+   full-enough flight, one that moves the smart battery's state of charge by at least
+   :data:`FULL_ENOUGH`).
 4. **Cell C partial discharges** cut at 60 % of their charge, with or without a clock
    time, added before or after the full cycles (goal: within 3 %).
 5. **Flight logs** (``../shared/data/flight_logs``): a resistance for every log, a
@@ -373,8 +375,7 @@ def dji_section(folder: Path) -> None:
     for path in sorted(DJI.glob("derived_battery_*.csv")):
         raw = pd.read_csv(path)
         db = folder / f"{path.stem}.sqlite"
-        with Logbook(db) as lb:
-            lb.set_pack("m100", cells=6, chemistry="lipo")
+        with Logbook(db) as lb:      # as a user adds them: no cells, no chemistry
             lb.add(path, pack="m100")
             health = lb.health("m100")
         stored = stored_events(db)

@@ -236,3 +236,29 @@ def test_dji_hv_pack_reads_through_the_lihv_curve(shared_data):
     # 25.836 V at rest = 4.306 V per cell: below the LiHV top, above the LiPo curve's
     assert 0.9 < flight.soc_start < 0.99
     assert flight.capacity_interval95[0] < flight.capacity_Ah < flight.capacity_interval95[1]
+
+
+def test_cells_from_a_smart_battery_gauge():
+    """The one count for which the idle voltage at a full gauge reading is a full cell's."""
+    from dischargelab.flight.samples import cells_from_gauge
+
+    current = np.array([0.8, 0.8, 18.0, 20.0, 0.9])
+    # 26.1 V at 100 %: 6 x 4.35 V (LiHV), not 7 x 3.73 V; the loaded 24.2 V is left out
+    assert cells_from_gauge([26.11, 26.10, 24.2, 22.0, 22.1], current, [100, 99, 97, 40, 39]) == 6
+    # 4S LiFePO4 full at 13.4 V (3 x 4.47 V is too high for any lithium cell)
+    assert cells_from_gauge([13.4, 13.4, 12.0, 12.5, 12.6], current, [98, 98, 90, 40, 39]) == 4
+    # 16.75 V: 4 x 4.19 V (LiPo) or 5 x 3.35 V (LiFePO4): no answer
+    assert cells_from_gauge([16.75, 16.74, 15.0, 14.0, 14.5], current,
+                            [100, 99, 90, 40, 39]) is None
+    # never full at idle: no answer
+    assert cells_from_gauge([23.9, 23.9, 22.0, 21.0, 22.0], current, [67, 66, 50, 20, 19]) is None
+
+
+def test_dji_pack_without_cells_is_6s_from_its_gauge(shared_data):
+    """A DJI log added without --cells: 26.1 V is a 6S LiHV pack at its gauge's 100 %."""
+    summary = summarise_source(shared_data / "dji_m100_flights"
+                               / "derived_battery_19-12-17_tablet1_2019_12_17_18_49.csv")
+    assert {e["cells"] for e in summary.events} == {6}
+    health, _, _ = pack_health(stored(summary, 1))
+    flight = next(h for h in health if h.capacity_Ah is not None)
+    assert 5.0 < flight.capacity_Ah < 6.2          # the gauge's: 4.957 Ah over 89 %: 5.57 Ah

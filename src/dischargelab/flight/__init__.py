@@ -61,11 +61,18 @@ from ..ocv import (
 from .analysis import FlightAnalysis, FlightReport, analyse_flight, resistance_windows
 from .fitting import CAPACITY_TOLERANCE, FlightCurves, fit_flights, flight_curves, steady_current
 from .replay import REPLAY_EVERY_S
-from .samples import FlightSamples, RestVoltage, flight_samples, infer_cells, resample
+from .samples import (
+    FlightSamples,
+    RestVoltage,
+    cells_from_gauge,
+    flight_samples,
+    infer_cells,
+    resample,
+)
 
 __all__ = ["GENERIC_OCV_V", "OCV_SOC", "OCV_SOURCE", "CHARGE_CELL_V", "DEFAULT_CHEMISTRY",
            "CAPACITY_TOLERANCE", "REPLAY_EVERY_S", "FlightCurves", "FlightReport",
            "FlightAnalysis", "FlightSamples", "RestVoltage", "flight_curves", "fit_flights",
            "analyse_flight", "flight_samples", "resample", "steady_current", "check_chemistry",
            "soc_from_rest_voltage", "soc_per_10mV", "ocv_from_soc", "resistance_windows",
-           "infer_cells", "model_charge_at_rest"]
+           "infer_cells", "cells_from_gauge", "model_charge_at_rest"]

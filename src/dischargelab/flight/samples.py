@@ -274,6 +274,45 @@ def infer_cells(voltage_V, chemistry: str | None = None) -> int:
     return max(1, int(np.ceil(top / (CHARGE_CELL_V[check_chemistry(chemistry)] + 0.05))))
 
 
+#: Rest voltage per cell of a lithium pack just charged full [V]: LiFePO4 (3.65 V charge),
+#: and LiPo / Li-ion (4.20 V) with high-voltage LiPo (4.35 V), resting up to a few tens of
+#: millivolts below their charge voltage (and a little above it at worst).
+FULL_REST_CELL_V = ((3.30, 3.65), (4.05, 4.40))
+
+#: A smart battery's own state of charge [%] that counts as full for
+#: :func:`cells_from_gauge`.
+GAUGE_FULL_PCT = 95.0
+
+
+def cells_from_gauge(voltage_V, current_A, soc_pct) -> int | None:
+    """Cells in series from a smart battery's own state of charge (a DJI log's
+    ``soc_pct``): the one count for which the pack's idle voltage while the gauge reads at
+    least :data:`GAUGE_FULL_PCT` is a full cell's rest voltage (:data:`FULL_REST_CELL_V`).
+
+    A 6S high-voltage pack at 26.1 V when full is 4.35 V per cell, not a 7S pack at 3.73 V
+    (:func:`infer_cells` cannot tell them from the voltage alone).
+
+    Returns
+    -------
+    int or None
+        None when the gauge never reads full at idle, or more or fewer than one count fits.
+    """
+    v = np.asarray(voltage_V, dtype=float)
+    i = np.abs(np.asarray(current_A, dtype=float))
+    soc = np.asarray(soc_pct, dtype=float)
+    ok = np.isfinite(v) & np.isfinite(i) & np.isfinite(soc)
+    if not ok.any():
+        return None
+    idle = i <= 0.1 * float(np.percentile(i[ok], 98))
+    full = ok & idle & (soc >= GAUGE_FULL_PCT)
+    if not full.any():
+        return None
+    pack = float(np.median(v[full]))
+    fits = [n for n in range(1, 1 + int(pack / FULL_REST_CELL_V[0][0]))
+            if any(lo <= pack / n <= hi for lo, hi in FULL_REST_CELL_V)]
+    return fits[0] if len(fits) == 1 else None
+
+
 def cell_count(series, cells, chemistry: str, notes: list) -> int:
     if cells is not None:
         if int(cells) < 1:

@@ -328,7 +328,7 @@ def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = Non
         if "ambient_temperature_C" in frame else None
     event = load_figures(log, rest=rest, after=after, ambient_C=ambient)
     details["resistance_method"] = event.pop("resistance_method")
-    event.update(start_time=_start_time(meta), cells=meta.get("cells"),
+    event.update(start_time=_start_time(meta), cells=meta.get("cells") or _gauge_cells(whole),
                  segment=meta.get("segment"), details=details)
     return event
 
@@ -337,6 +337,16 @@ def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = Non
 #: (from its first sample to the load, or from the load to its last sample): a flight's
 #: moments at zero throttle are not rests.
 MIN_READING_S = 5.0
+
+def _gauge_cells(whole) -> int | None:
+    """Cells in series from a smart battery's own state of charge, when the log has one
+    (:func:`dischargelab.flight.samples.cells_from_gauge`)."""
+    from ..flight.samples import cells_from_gauge
+
+    if whole is None or "soc_pct" not in whole:
+        return None
+    return cells_from_gauge(whole["voltage_V"], whole["current_A"], whole["soc_pct"])
+
 
 #: Rows of a rest beside a flight draw at most this share of the load level (98th
 #: percentile of the current) above the log's quietest current.
