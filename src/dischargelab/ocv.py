@@ -147,8 +147,6 @@ def generic_ocv(chemistry: str | None, rest_cell_V: float | None = None
     return GENERIC_OCV_V[chem], OCV_SOURCE[chem]
 
 
-
-
 #: Chemistry assumed when none is given (most UAV packs).
 DEFAULT_CHEMISTRY = "lipo"
 
