@@ -45,14 +45,19 @@ from .thermal import BETA_PRIOR_K, ShepherdThermal
 #: constant (see ``benchmarks/slow_to_fast.py``, load steps of the Samsung 30Q).
 POLARISATION_TAU_S = 30.0
 
-#: The load step is read from the first load sample within this time of the load start [s]
-#: (a logger that starts later has already seen the polarisation build).
+#: The load step is read only when the first load sample comes within this time of the
+#: load start [s] (a logger that starts later has missed the step).
 STEP_WINDOW_S = 5.0
 
 #: A curve whose current varies by this coefficient of variation or more shows the time
 #: constant (a flight, pulses); a resistor drain (its current falling with the voltage by
 #: about a quarter over the run) does not.
 VARYING_CV = 0.25
+
+#: The load step's transient is read over this time after the load start [s]: from the
+#: seconds after the step (a tester's current ramp, the fastest polarisation) to a few
+#: ``tau``.
+TRANSIENT_S = (2.0, 120.0)
 
 #: Bounds of the filtered current's time constant [s] when it is fitted.
 TAU_BOUNDS_S = (1.0, 600.0)
@@ -66,39 +71,46 @@ class ShepherdDynamic(ShepherdThermal):
     #: At several constant rates the filtered current equals the current after the first
     #: minute of each run: the fit is shepherd-thermal's, which ``auto`` already compares.
     several_rates_candidate = False
-    version = 1
+    version = 2
     title = ("modified Shepherd with Tremblay's filtered current, temperature and a lumped "
              "thermal model")
     description = ("eq. 6 whose polarisation K C/(C-q) i* reads the current filtered over tau "
                    "(Tremblay 2009): after a load step only R appears at once, the "
                    "polarisation builds up; temperature and self-heating as shepherd-thermal.")
-    headline = ShepherdThermal.headline + ("tau_s",)
+    headline = ShepherdThermal.headline + ("Rp_ohm", "tau_s")
     parameters = ShepherdThermal.parameters + (
         Parameter("tau_s", "s", *TAU_BOUNDS_S, POLARISATION_TAU_S, False,
                   "time constant of the polarisation's filtered current",
                   limit_note="the polarisation's time constant sits at the edge of its range"),
+        Parameter("Rp_ohm", "ohm", 0.0, 2.0, 0.0, True,
+                  "polarisation resistance at full charge (builds over tau after a step)",
+                  limit_note="no polarisation builds after a load step at full charge"),
     )
+    #: Files of version 1 lack ``Rp_ohm``: Tremblay's polarisation resistance at full
+    #: charge is ``K`` (the same random variable, so its covariance is K's).
+    upgrades = {1: {"Rp_ohm": "K_V_per_Ah"}}
     states = (State("charge_Ah", "Ah", "charge"), State("i_f_A", "A", "lowpass", tau="tau_s"),
               State("temperature_C", "degC", "thermal"))
 
     # ---- physics ---------------------------------------------------------------------
     def voltage(self, p, state, current_A):
         return self._voltage(p, state["charge_Ah"], current_A, state["i_f_A"],
-                             state["temperature_C"])
+                             state["temperature_C"], p["Rp_ohm"])
 
     # ---- fitting ------------------------------------------------------------------------
     def fit_voltage(self, p, data: Samples):
         i_f, _ = filtered_samples(data, p["tau_s"])
-        return self._voltage(p, data.charge, data.current, i_f, data.temperature)
+        return self._voltage(p, data.charge, data.current, i_f, data.temperature, p["Rp_ohm"])
 
     def jacobian(self, p, data: Samples, names=None):
         names = self.names if names is None else tuple(names)
         if not names:
             return np.empty((data.charge.size, 0))
         i_f, s_f = filtered_samples(data, p["tau_s"])
-        columns = self._columns(p, data, i_f)
+        columns = self._columns(p, data, i_f, p["Rp_ohm"])
         _, f, _, gain, _ = self._terms(p, data.charge, data.temperature)
-        columns["tau_s"] = lambda: -p["K_V_per_Ah"] * f * gain * s_f
+        r_pol = p["Rp_ohm"] + p["K_V_per_Ah"] * (gain - 1.0)
+        columns["tau_s"] = lambda: -f * r_pol * s_f
         return np.column_stack([columns[n]() for n in names])
 
     def start_grid(self, data: Samples, free_nonlinear):
@@ -113,9 +125,11 @@ class ShepherdDynamic(ShepherdThermal):
         fixed = super().fit_fixed(data)
         if not varying_current(data):
             fixed["tau_s"] = POLARISATION_TAU_S
-            r_step = step_resistance(data, fixed.get("beta_K", BETA_PRIOR_K))
-            if r_step is not None:
-                fixed["R_ohm"] = r_step
+            step = load_step(data, fixed.get("beta_K", BETA_PRIOR_K))
+            if step is not None:
+                fixed["R_ohm"], fixed["Rp_ohm"] = step
+            else:  # nothing shows the build: the polarisation at full charge comes with R
+                fixed["Rp_ohm"] = 0.0
         return fixed
 
     def fit_notes(self, data: Samples, fixed: dict) -> list[str]:
@@ -124,43 +138,65 @@ class ShepherdDynamic(ShepherdThermal):
             notes.append(f"tau_s held at {POLARISATION_TAU_S:g} s (the time constant with "
                          "which measured cells' polarisation builds after a load step): one "
                          "constant current cannot show it")
-        r_step = step_resistance(data, fixed.get("beta_K", BETA_PRIOR_K))
-        if r_step is not None and fixed.get("R_ohm") == r_step:
-            notes.append(f"R_ohm = {1000 * r_step:.4g} mOhm from the load step (rest voltage "
-                         "less the first load sample, over the current): the one thing in "
-                         "one constant current that tells the series resistance from E0; "
-                         "the polarisation K C/(C-q) i* builds after the step")
+        step = load_step(data, fixed.get("beta_K", BETA_PRIOR_K))
+        if step is not None and fixed.get("R_ohm") == step[0]:
+            notes.append(f"R_ohm = {1000 * step[0]:.4g} mOhm and Rp_ohm = {1000 * step[1]:.4g} "
+                         "mOhm from the load step (the voltage drop over the current in the "
+                         f"first {TRANSIENT_S[1]:g} s, read as R + Rp (1 - exp(-t/tau)) plus the "
+                         "open-circuit voltage's slope): the one thing in one constant current "
+                         "that tells the resistances from E0")
+        elif fixed.get("Rp_ohm") == 0.0 and not varying_current(data):
+            notes.append("Rp_ohm held at 0 (no load step from rest: nothing shows the "
+                         "polarisation build; R carries it)")
         return notes
 
 
-def step_resistance(data: Samples, beta_K: float) -> float | None:
-    """Series resistance [ohm] shown by the load step of one-rate data: the rest voltage
-    less the first load sample, over its current, read at the reference temperature
-    (Arrhenius ``beta_K``); the mean over the curves that have both. None without a rest
-    sample or a load step, or when the step is not a drop.
+def load_step(data: Samples, beta_K: float) -> tuple[float, float] | None:
+    """Series and polarisation resistance [ohm] shown by the load step of one-rate data,
+    read at the reference temperature (Arrhenius ``beta_K``); the means over the curves
+    that have a rest sample and a load step. None without one, or when the step is not a
+    drop.
 
-    The filtered current starts at 0 when the load does, so the first load sample
-    carries ``R i`` only: the polarisation ``K C/(C-q) i*`` builds after it. A slow
-    drain shows nothing else that separates ``R`` from ``E0`` (one current), and a fit
-    left to choose gives the step to the curve shape where eq. (6) misfits the
-    open-circuit voltage (``R`` at 0 on a LiPo pack's slow drain).
+    The apparent resistance ``r(t) = (V_rest - V(t)) / i`` over :data:`TRANSIENT_S` is
+    fitted (linear least squares) as ``R + Rp (1 - exp(-t/tau)) + s t`` with ``tau`` at
+    :data:`POLARISATION_TAU_S` and ``s t`` the open-circuit voltage falling with the
+    charge: the model's own response to a step at full charge. ``R`` is thus the drop
+    at the step instant extrapolated back from the seconds after it: the ohmic drop and
+    whatever builds within a few seconds (charge transfer, double layer, the first
+    seconds of diffusion: on a Neware-logged cell at 3 A the drop grows from 18 to
+    30 mOhm within 5 s), which a 30 s lowpass cannot follow and a logger sampling every
+    few seconds does not resolve. With fewer than four samples in that window ``R`` is
+    the first load sample's (within :data:`STEP_WINDOW_S` of the load start) and ``Rp``
+    0. A slow drain shows nothing else that separates ``R`` and ``Rp`` from ``E0`` (one
+    current), and a fit left to choose gives the step to the curve shape where eq. (6)
+    misfits the open-circuit voltage (``R`` at 0 on a LiPo pack's slow drain).
     """
-    steps = []
+    r_s, rp_s = [], []
     for k in range(data.n_curves):
         mine = data.curve == k
         rest = np.flatnonzero(mine & data.is_rest)
         load = np.flatnonzero(mine & ~data.is_rest)
         if rest.size == 0 or load.size < 2:
             continue
-        i = data.current[load]
-        first = load[np.argmax(i >= 0.5 * np.median(i))]
-        if data.time[first] > STEP_WINDOW_S:
+        on = load[data.current[load] >= 0.5 * np.median(data.current[load])]
+        t = data.time[on]
+        if t.size == 0 or t[0] > STEP_WINDOW_S:
             continue
-        f = float(arrhenius(data.temperature[first], beta_K))
-        steps.append((data.voltage[rest[0]] - data.voltage[first]) / (f * data.current[first]))
-    if not steps or not np.mean(steps) > 0:
+        f = arrhenius(data.temperature[on], beta_K)
+        r = (data.voltage[rest[0]] - data.voltage[on]) / (f * data.current[on])
+        w = (t >= TRANSIENT_S[0]) & (t <= TRANSIENT_S[1])
+        if np.count_nonzero(w) >= 4:
+            basis = np.column_stack([np.ones(w.sum()), -np.expm1(-t[w] / POLARISATION_TAU_S),
+                                     t[w]])
+            (r0, rp, _), *_ = np.linalg.lstsq(basis, r[w], rcond=None)
+        else:
+            r0, rp = r[0], 0.0
+        r_s.append(float(r0))
+        rp_s.append(max(float(rp), 0.0))
+    if not r_s or not np.mean(r_s) > 0:
         return None
-    return float(min(np.mean(steps), ShepherdThermal().parameter("R_ohm").upper))
+    upper = ShepherdThermal().parameter("R_ohm").upper
+    return float(min(np.mean(r_s), upper)), float(min(np.mean(rp_s), upper))
 
 
 def varying_current(data: Samples) -> bool:
