@@ -71,9 +71,14 @@ STEP_WINDOW_S = 5.0
 VARYING_CV = 0.25
 
 #: The load step's transient is read over this time after the load start [s]: from the
-#: seconds after the step (a tester's current ramp, the fastest polarisation) to a few
-#: ``tau``.
-TRANSIENT_S = (2.0, 120.0)
+#: seconds after the step (a tester's current ramp, the fastest polarisation) to four
+#: ``tau``, or up to ten ``tau`` when that holds fewer than :data:`TRANSIENT_SAMPLES`
+#: samples (a sparse log, or a long one thinned for the fit: three coefficients against
+#: the ADC's noise; a C/10 drain at 0.3 A reads 3 mOhm per mV).
+TRANSIENT_S = (2.0, 4 * POLARISATION_TAU_S, 10 * POLARISATION_TAU_S)
+
+#: The samples the transient's window holds when the log allows (see :data:`TRANSIENT_S`).
+TRANSIENT_SAMPLES = 24
 
 #: Bounds of the filtered current's time constant [s] when it is fitted.
 TAU_BOUNDS_S = (1.0, 600.0)
@@ -160,9 +165,9 @@ class ShepherdDynamic(ShepherdThermal):
         if step is not None and fixed.get("R_ohm") == step[0]:
             notes.append(f"R_ohm = {1000 * step[0]:.4g} mOhm and Rp_ohm = {1000 * step[1]:.4g} "
                          "mOhm from the load step (the voltage drop over the current in the "
-                         f"first {TRANSIENT_S[1]:g} s, read as R + Rp (1 - exp(-t/tau)) plus the "
-                         "open-circuit voltage's slope): the one thing in one constant current "
-                         "that tells the resistances from E0")
+                         "first minutes, read as R + Rp (1 - exp(-t/tau)) plus the open-circuit "
+                         "voltage's slope): the one thing in one constant current that tells "
+                         "the resistances from E0")
         elif fixed.get("Rp_ohm") == 0.0 and not varying_current(data):
             notes.append("Rp_ohm held at 0 (no load step from rest: nothing shows the "
                          "polarisation build; R carries it)")
@@ -202,7 +207,12 @@ def load_step(data: Samples, beta_K: float) -> tuple[float, float] | None:
             continue
         f = arrhenius(data.temperature[on], beta_K)
         r = (data.voltage[rest[0]] - data.voltage[on]) / (f * data.current[on])
-        w = (t >= TRANSIENT_S[0]) & (t <= TRANSIENT_S[1])
+        after = np.flatnonzero(t >= TRANSIENT_S[0])
+        end = TRANSIENT_S[1]
+        if after.size:
+            end = max(end, min(t[after[min(TRANSIENT_SAMPLES, after.size) - 1]],
+                               TRANSIENT_S[2]))
+        w = (t >= TRANSIENT_S[0]) & (t <= end)
         if np.count_nonzero(w) >= 4:
             basis = np.column_stack([np.ones(w.sum()), -np.expm1(-t[w] / POLARISATION_TAU_S),
                                      t[w]])
