@@ -47,10 +47,11 @@ def _pct(value) -> str:
 
 
 #: The family ``model="auto"`` fits to one rate (with a thermal prior or a logged
-#: temperature): eq. (6) whose polarisation builds after a load step, with the series
-#: resistance the step shows (``benchmarks/slow_to_fast.py``: a slow drain's model flies
-#: a 27 A flight at 0.45 % voltage RMS, where shepherd-thermal, its polarisation present
-#: at once and its resistance left to the curve shape, flew it at 2.06 %).
+#: temperature): eq. (6) whose polarisation builds after a load step, with the series and
+#: polarisation resistances the step shows (``benchmarks/slow_to_fast.py``: a slow drain's
+#: model flies a 27 A flight at 0.11 % voltage RMS, where shepherd-thermal, its
+#: polarisation present at once and its resistance left to the curve shape, flew it at
+#: 2.06 %).
 ONE_RATE_FAMILY = "shepherd-dynamic"
 
 
@@ -76,9 +77,9 @@ def choose_model(curves, cooling: str | None = "still-air") -> tuple[list[str], 
     """Candidate families for ``model="auto"`` and why.
 
     One curve with a logged temperature: ``shepherd-dynamic`` (eq. 6 with Tremblay's
-    filtered current and the load step's series resistance; its temperature dependence
-    from physics priors, the self-heating from the log). One curve without temperature:
-    the same with its self-heating simulated by the thermal prior
+    filtered current and the load step's series and polarisation resistances; its
+    temperature dependence from physics priors, the self-heating from the log). One curve
+    without temperature: the same with its self-heating simulated by the thermal prior
     (:func:`dischargelab.fit.family.fit_self_heating`): a slow drain hardly heats, a
     fast one does, and a warm cell sags less (Samsung 30Q fitted on C/10 without its
     temperature: 1C-4C within -3.0 %, where eq. 6 held at the ambient misses 4C by
@@ -92,13 +93,13 @@ def choose_model(curves, cooling: str | None = "still-air") -> tuple[list[str], 
     if not several_rates(curves):
         if has_temp:
             return [ONE_RATE_FAMILY], (f"one rate with a logged temperature: {ONE_RATE_FAMILY} "
-                                       "(the load step's series resistance, the polarisation "
-                                       "building after it, self-heating from the log, "
-                                       "Arrhenius prior)")
+                                       "(the load step's series resistance and the "
+                                       "polarisation building after it, self-heating from "
+                                       "the log, Arrhenius prior)")
         if cooling is not None:
             return [ONE_RATE_FAMILY], (
                 f"one rate without temperature: {ONE_RATE_FAMILY} (the load step's series "
-                "resistance, the polarisation building after it) with its self-heating "
+                "resistance and the polarisation building after it) with its self-heating "
                 "simulated from a thermal prior (a fit at one current cannot show how a "
                 "faster drain heats the cell)")
         return ["shepherd"], "one rate without temperature: the paper's shepherd model"

@@ -28,12 +28,11 @@ Why ``Rp`` of its own: Tremblay ties the polarisation at full charge to the knee
 minutes after a step whatever their knee says (:func:`load_step`, ``R`` and ``Rp``:
 Samsung 30Q 32-36 and 9-17 mOhm, Enertech pouch 35 and 16, a Neware-logged cell 27 and
 23, PyBaMM NMC 38 and 22 at 0.5C, PyBaMM LiFePO4 72-80 and 100-150), where the knee's
-``K`` gives 5-18 mOhm.
-With the tie, what ``K`` is short of goes to the curve's shape (``A exp(-B q)``
-falling over the first minutes), which does not grow with the current: a one-rate
-model then sags too little at a higher current (virtual cells up to 0.7 points more
-optimistic than eq. 6 with ``R`` left free) and a discharge from a partial charge
-starts from the wrong charge (+15.7 % on the Neware cell). On one rate ``R`` and
+``K`` gives 5-18 mOhm. With the tie, what ``K`` is short of goes to the curve's shape
+(``A exp(-B q)`` falling over the first minutes), which does not grow with the current:
+a one-rate model then sags too little at a higher current (virtual cells up to 0.7 points more
+optimistic than eq. 6 with ``R`` left free), and a discharge of a Neware-logged cell
+from a partial charge was missed by +15.7 % (+5.7 % with ``Rp``). On one rate ``R`` and
 ``Rp`` are both read from the load step (:func:`load_step`), ``K`` from the knee.
 
 ``tau`` [s] is held at :data:`POLARISATION_TAU_S` (measured on load steps of real
