@@ -78,6 +78,9 @@ def test_a_version_1_battery_file_loads_with_tremblays_polarisation_resistance()
                                rtol=1e-12)
     with pytest.raises(dl.DataError):
         Battery.from_dict(dict(old, model_version=2))  # a version-2 file needs Rp_ohm
+    for bad in (names[:-1] + ["X_ohm"], names[:-1] + [names[0]], "E0_V"):
+        with pytest.raises(dl.DataError, match="covariance"):
+            Battery.from_dict(dict(old, covariance={"names": bad, "matrix": cov.tolist()}))
 
 
 def test_one_rate_fit_takes_the_series_resistance_from_the_load_step():

@@ -200,7 +200,10 @@ class Battery:
             cov_data = data["covariance"]
             if not isinstance(cov_data, dict) or "matrix" not in cov_data:
                 raise DataError("battery file covariance must have 'names' and 'matrix'")
-            names = list(cov_data.get("names", [n for n in fam.names if n not in added]))
+            names = cov_data.get("names", [n for n in fam.names if n not in added])
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise DataError("battery file covariance 'names' must be a list of parameter "
+                                "names")
             try:
                 cov = np.asarray(cov_data["matrix"], dtype=float)
             except (TypeError, ValueError):
