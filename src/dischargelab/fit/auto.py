@@ -62,11 +62,17 @@ ONE_RATE_FALLBACK = "shepherd-thermal"
 
 def _capacity_told(res: FitResult) -> bool:
     """False when the fitted capacity ran to its upper bound or far above the charge the
-    curves delivered (:data:`~dischargelab.identifiability.CAPACITY_EXCESS_FACTOR`)."""
+    curves delivered (:data:`~dischargelab.identifiability.CAPACITY_EXCESS_FACTOR`), or
+    when the knee's ``K`` sits at 0: the curve shows no knee, and without one the capacity
+    changes nothing in the fitted voltage (it is where the fit started, not a measurement).
+    """
     from ..identifiability import CAPACITY_EXCESS_FACTOR
 
     if "C_Ah" not in res.free:
         return True
+    if "K_V_per_Ah" in res.free and \
+            float(res.parameters["K_V_per_Ah"]) <= float(res.bounds["K_V_per_Ah"][0]):
+        return False
     capacity = float(res.parameters["C_Ah"])
     upper = float(res.bounds["C_Ah"][1])
     delivered = max(float(c.charge_Ah[-1]) for c in res.curves) / res.strings_parallel
@@ -131,9 +137,9 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
             res = fit_with_model_error(curves, model=ONE_RATE_FALLBACK, **kw)
             names, why = [ONE_RATE_FALLBACK], (
                 f"one rate that does not reach the end-of-discharge knee: {ONE_RATE_FALLBACK} "
-                f"({ONE_RATE_FAMILY}'s capacity ran away: with its resistance held at the "
-                "load step and no knee, nothing in the curve sets its polarisation and "
-                "capacity)")
+                f"({ONE_RATE_FAMILY} found no knee (K at 0) or its capacity ran away: with "
+                "its resistances held at the load step and no knee, nothing in the curve "
+                "sets its capacity)")
         res.notes.insert(0, f"model {names[0]!r} chosen automatically: {why}")
         return res
     fits, scores = {}, {}
