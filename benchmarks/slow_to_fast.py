@@ -23,10 +23,11 @@ ecm with its RC pairs held absent and its diffusion lead at the steady prior, th
 prior for airflow), the same with ecm's RC
 pairs and diffusion state fitted anyway (their bounds given), as a bench discharge
 (``auto``: shepherd-dynamic, eq. 6 with Tremblay's filtered current and the load step's
-series resistance, with the thermal prior for still air), as a bench discharge forced to
-shepherd-thermal (what ``auto`` chose before: eq. 6, its polarisation present at once with
-the current, the series resistance left to the fit), and as a bench discharge with the
-cell held at the ambient (``cooling=None``: the behaviour without a thermal prior: eq. 6).
+series and polarisation resistances, with the thermal prior for still air), as a bench
+discharge forced to shepherd-thermal (what ``auto`` chose before: eq. 6, its polarisation
+present at once with the current, the series resistance left to the fit), and as a bench
+discharge with the cell held at the ambient (``cooling=None``: the behaviour without a
+thermal prior: eq. 6).
 Each fit is checked with ``dischargelab.validate`` on the fast drain (endurance to
 3.3 V/cell held 10 s, its 95 % interval, the extrapolation warning) and on the 27 A
 flight (voltage RMS in % of the mean pack voltage).
@@ -338,7 +339,7 @@ def main(argv=None):
             ("flight log, ecm with its dynamics fitted anyway (bounds given)",
              lambda: dl.fit(flight_curves(folder / "slow.csv"), model="ecm",
                             bounds=dynamics_free(), bootstrap=0)),
-            ("bench discharge, auto (shepherd-dynamic: R from the load step, Tremblay's "
+            ("bench discharge, auto (shepherd-dynamic: R and Rp from the load step, Tremblay's "
              "filtered current; thermal prior: still air)",
              lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30)),
             ("bench discharge, shepherd-thermal (auto before; thermal prior: still air)",

@@ -274,10 +274,11 @@ def test_fit_on_lithium_cells_validates_on_their_other_steps(cyclers):
     held_out = [c for c in cases if not c.summary["in_fit"]]
     assert [c.summary["file"].endswith("step 2") for c in held_out] == [True]
     error = held_out[0].summary["endurance_error_s"] / held_out[0].summary["endurance_measured_s"]
-    # a discharge from a partial charge, one rate fitted: shepherd-dynamic (auto) +15.7 %,
-    # shepherd-thermal +7.7 % (its resistance from this cell's load step, 18 mOhm, leaves
-    # less of the sag to the curve's shape; see docs/accuracy.md)
-    assert abs(error) < 0.2, error
+    # a discharge from a partial charge, one rate fitted: shepherd-dynamic (auto) +5.7 %
+    # with the polarisation read from the load step (R 26 mOhm, Rp 23 mOhm), +15.7 % when
+    # its polarisation at full charge was the knee's K (8 mOhm); shepherd-thermal +7.7 %
+    # (see docs/accuracy.md)
+    assert abs(error) < 0.15, error
 
 
 def test_ec_lab_text_export_with_decimal_commas_reads_like_the_mpr(cyclers, tmp_path):

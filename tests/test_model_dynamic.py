@@ -15,7 +15,7 @@ from dischargelab.models.base import lowpass_samples
 from dischargelab.models.dynamic import POLARISATION_TAU_S
 
 DYN = get_family("shepherd-dynamic")
-CELL = dict(E0_V=3.75, R_ohm=0.03, K_V_per_Ah=0.015, A_V=0.35, B_per_Ah=2.0, C_Ah=3.1,
+CELL = dict(E0_V=3.75, R_ohm=0.03, K_V_per_Ah=0.015, Rp_ohm=0.015, A_V=0.35, B_per_Ah=2.0, C_Ah=3.1,
             dE0_dT_V_per_K=0.0, dC_dT_Ah_per_K=0.0, beta_K=2500.0, Cth_J_per_K=1e6,
             Rth_K_per_W=25.0, tau_s=POLARISATION_TAU_S)
 
@@ -55,6 +55,32 @@ def _slow_drain(current_A=0.6, noise_V=0.0005, seed=1, dt_s=2.0):
     v = DYN.voltage(CELL, {"charge_Ah": q, "i_f_A": i_f, "temperature_C": 25.0}, i)
     v = v + np.random.default_rng(seed).normal(0.0, noise_V, t.size)
     return Discharge(t, v, i, None, CELL["E0_V"] + CELL["A_V"], "slow drain")
+
+
+def test_a_version_1_battery_file_loads_with_tremblays_polarisation_resistance():
+    """Version 1 had no Rp_ohm: its polarisation resistance at full charge was K."""
+    from dischargelab.model import Battery
+
+    names = [n for n in DYN.names if n != "Rp_ohm"]
+    cov = np.diag(np.arange(1.0, len(names) + 1)) * 1e-8
+    old = {"model": "shepherd-dynamic", "model_version": 1,
+           "parameters": {n: CELL[n] for n in names},
+           "covariance": {"names": names, "matrix": cov.tolist()}}
+    bat = Battery.from_dict(old)
+    assert bat.parameters["Rp_ohm"] == CELL["K_V_per_Ah"]
+    k, rp = DYN.names.index("K_V_per_Ah"), DYN.names.index("Rp_ohm")
+    assert bat.covariance[rp, rp] == bat.covariance[k, k] == bat.covariance[k, rp]
+    state = {"charge_Ah": np.array([0.0, 1.5, 2.9]), "i_f_A": np.array([0.0, 2.0, 3.0]),
+             "temperature_C": 30.0}
+    tremblay = get_family("shepherd-thermal")._voltage(
+        CELL, state["charge_Ah"], 3.0, state["i_f_A"], 30.0)  # K C/(C-q) i*
+    np.testing.assert_allclose(DYN.voltage(dict(bat.parameters.items()), state, 3.0), tremblay,
+                               rtol=1e-12)
+    with pytest.raises(dl.DataError):
+        Battery.from_dict(dict(old, model_version=2))  # a version-2 file needs Rp_ohm
+    for bad in (names[:-1] + ["X_ohm"], names[:-1] + [names[0]], "E0_V"):
+        with pytest.raises(dl.DataError, match="covariance"):
+            Battery.from_dict(dict(old, covariance={"names": bad, "matrix": cov.tolist()}))
 
 
 def test_one_rate_fit_takes_the_series_resistance_from_the_load_step():
@@ -120,8 +146,9 @@ def test_samsung_slow_drain_load_step_is_the_cells_series_resistance(shared_data
 
 
 def test_a_flight_far_from_the_knee_falls_back_to_shepherd_thermal(shared_data):
-    # a DJI M100 flight ends at 40-50 % charge: with R held at the load step, nothing sets
-    # shepherd-dynamic's K and C (C runs to its bound); auto keeps the earlier one-rate family
+    # a DJI M100 flight ends at 40-50 % charge: with R and Rp held at the load step, nothing
+    # in it sets shepherd-dynamic's K and C (K sits at 0; C ran to its bound, 94 Ah, when Rp
+    # was tied to K); auto keeps the earlier one-rate family and says why
     path = sorted((shared_data / "dji_m100_flights").glob("derived_battery_*.csv"))[1]
     res = dl.fit(dl.read(path), cells=6, bootstrap=0)
     assert res.model == "shepherd-thermal"

@@ -40,6 +40,8 @@ def _point(family, data):
         p["C_Ah"] = 2.0
     if "beta_K" in p:
         p["beta_K"] = 2500.0
+    if "Rp_ohm" in p:  # linear, and the time constant's column reads it
+        p["Rp_ohm"] = 0.012
     return p
 
 

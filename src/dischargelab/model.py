@@ -190,22 +190,34 @@ class Battery:
         if not isinstance(version, int) or version > fam.version:
             raise DataError(f"battery file model {fam.name!r} version {version!r} is newer than "
                             f"this dischargelab understands ({fam.version}); upgrade dischargelab")
-        params = CellParameters.from_dict(data["parameters"], fam.names)
+        added = {new: old for v, pairs in fam.upgrades.items() if version <= v
+                 for new, old in pairs.items()}
+        values = dict(data["parameters"])
+        values.update({n: values[o] for n, o in added.items() if n not in values and o in values})
+        params = CellParameters.from_dict(values, fam.names)
         cov = None
         if data.get("covariance"):
             cov_data = data["covariance"]
             if not isinstance(cov_data, dict) or "matrix" not in cov_data:
                 raise DataError("battery file covariance must have 'names' and 'matrix'")
-            names = cov_data.get("names", list(fam.names))
-            if list(names) != list(fam.names):
-                raise DataError("battery file covariance has unexpected parameter names")
+            names = cov_data.get("names", [n for n in fam.names if n not in added])
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise DataError("battery file covariance 'names' must be a list of parameter "
+                                "names")
             try:
                 cov = np.asarray(cov_data["matrix"], dtype=float)
             except (TypeError, ValueError):
                 raise DataError("battery file covariance matrix is not numeric") from None
-            n = len(fam.names)
-            if cov.shape != (n, n):
-                raise DataError(f"battery file covariance must be {n}x{n}, got {cov.shape}")
+            if cov.shape != (len(names), len(names)):
+                raise DataError(f"battery file covariance must be {len(names)}x{len(names)}, "
+                                f"got {cov.shape}")
+            # an older file's parameter that equalled another: the same row and column
+            source = [names.index(n) if n in names else
+                      names.index(added[n]) if added.get(n) in names else -1 for n in fam.names]
+            if len(set(names)) != len(names) or not set(names) <= set(fam.names) \
+                    or min(source) < 0:
+                raise DataError("battery file covariance has unexpected parameter names")
+            cov = cov[np.ix_(source, source)]
         known = {"model", "model_version", "written_by", "name", "chemistry", "cells_series",
                  "strings_parallel", "parameters", "fit_currents_A", "covariance"}
         try:

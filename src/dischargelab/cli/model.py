@@ -130,10 +130,10 @@ def _print_fit(result, battery_path=None):
 @click.option("--model", "model_name", default="auto", show_default=True, metavar="NAME",
               help="Model family (see `dischargelab models`): shepherd, shepherd-thermal, "
                    "shepherd-dynamic, ecm, or auto (one curve: shepherd-dynamic, the series "
-                   "resistance from its load step, its self-heating from the logged "
-                   "cell temperature or else the thermal prior of --cooling; several rates: "
-                   "the family with the smallest error on curve ends left out and on the "
-                   "rate-capacity check between the currents).")
+                   "and polarisation resistances from its load step, its self-heating from "
+                   "the logged cell temperature or else the thermal prior of --cooling; "
+                   "several rates: the family with the smallest error on curve ends left out "
+                   "and on the rate-capacity check between the currents).")
 @click.option("--paper-mode", is_flag=True,
               help="Reproduce the paper: E0 given (--e0), current fitted with R, K, A, B, C. "
                    "Degenerate by construction; prints why.")

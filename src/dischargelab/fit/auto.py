@@ -47,10 +47,11 @@ def _pct(value) -> str:
 
 
 #: The family ``model="auto"`` fits to one rate (with a thermal prior or a logged
-#: temperature): eq. (6) whose polarisation builds after a load step, with the series
-#: resistance the step shows (``benchmarks/slow_to_fast.py``: a slow drain's model flies
-#: a 27 A flight at 0.45 % voltage RMS, where shepherd-thermal, its polarisation present
-#: at once and its resistance left to the curve shape, flew it at 2.06 %).
+#: temperature): eq. (6) whose polarisation builds after a load step, with the series and
+#: polarisation resistances the step shows (``benchmarks/slow_to_fast.py``: a slow drain's
+#: model flies a 27 A flight at 0.11 % voltage RMS, where shepherd-thermal, its
+#: polarisation present at once and its resistance left to the curve shape, flew it at
+#: 2.06 %).
 ONE_RATE_FAMILY = "shepherd-dynamic"
 
 
@@ -61,11 +62,17 @@ ONE_RATE_FALLBACK = "shepherd-thermal"
 
 def _capacity_told(res: FitResult) -> bool:
     """False when the fitted capacity ran to its upper bound or far above the charge the
-    curves delivered (:data:`~dischargelab.identifiability.CAPACITY_EXCESS_FACTOR`)."""
+    curves delivered (:data:`~dischargelab.identifiability.CAPACITY_EXCESS_FACTOR`), or
+    when the knee's ``K`` sits at 0: the curve shows no knee, and without one the capacity
+    changes nothing in the fitted voltage (it is where the fit started, not a measurement).
+    """
     from ..identifiability import CAPACITY_EXCESS_FACTOR
 
     if "C_Ah" not in res.free:
         return True
+    if "K_V_per_Ah" in res.free and \
+            float(res.parameters["K_V_per_Ah"]) <= float(res.bounds["K_V_per_Ah"][0]):
+        return False
     capacity = float(res.parameters["C_Ah"])
     upper = float(res.bounds["C_Ah"][1])
     delivered = max(float(c.charge_Ah[-1]) for c in res.curves) / res.strings_parallel
@@ -76,9 +83,9 @@ def choose_model(curves, cooling: str | None = "still-air") -> tuple[list[str], 
     """Candidate families for ``model="auto"`` and why.
 
     One curve with a logged temperature: ``shepherd-dynamic`` (eq. 6 with Tremblay's
-    filtered current and the load step's series resistance; its temperature dependence
-    from physics priors, the self-heating from the log). One curve without temperature:
-    the same with its self-heating simulated by the thermal prior
+    filtered current and the load step's series and polarisation resistances; its
+    temperature dependence from physics priors, the self-heating from the log). One curve
+    without temperature: the same with its self-heating simulated by the thermal prior
     (:func:`dischargelab.fit.family.fit_self_heating`): a slow drain hardly heats, a
     fast one does, and a warm cell sags less (Samsung 30Q fitted on C/10 without its
     temperature: 1C-4C within -3.0 %, where eq. 6 held at the ambient misses 4C by
@@ -92,13 +99,13 @@ def choose_model(curves, cooling: str | None = "still-air") -> tuple[list[str], 
     if not several_rates(curves):
         if has_temp:
             return [ONE_RATE_FAMILY], (f"one rate with a logged temperature: {ONE_RATE_FAMILY} "
-                                       "(the load step's series resistance, the polarisation "
-                                       "building after it, self-heating from the log, "
-                                       "Arrhenius prior)")
+                                       "(the load step's series resistance and the "
+                                       "polarisation building after it, self-heating from "
+                                       "the log, Arrhenius prior)")
         if cooling is not None:
             return [ONE_RATE_FAMILY], (
                 f"one rate without temperature: {ONE_RATE_FAMILY} (the load step's series "
-                "resistance, the polarisation building after it) with its self-heating "
+                "resistance and the polarisation building after it) with its self-heating "
                 "simulated from a thermal prior (a fit at one current cannot show how a "
                 "faster drain heats the cell)")
         return ["shepherd"], "one rate without temperature: the paper's shepherd model"
@@ -130,9 +137,9 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
             res = fit_with_model_error(curves, model=ONE_RATE_FALLBACK, **kw)
             names, why = [ONE_RATE_FALLBACK], (
                 f"one rate that does not reach the end-of-discharge knee: {ONE_RATE_FALLBACK} "
-                f"({ONE_RATE_FAMILY}'s capacity ran away: with its resistance held at the "
-                "load step and no knee, nothing in the curve sets its polarisation and "
-                "capacity)")
+                f"({ONE_RATE_FAMILY} found no knee (K at 0) or its capacity ran away: with "
+                "its resistances held at the load step and no knee, nothing in the curve "
+                "sets its capacity)")
         res.notes.insert(0, f"model {names[0]!r} chosen automatically: {why}")
         return res
     fits, scores = {}, {}

@@ -2,7 +2,8 @@
 
 ``shepherd``          the paper's eq. (6), isothermal
 ``shepherd-thermal``  eq. (6) with temperature-dependent parameters and a lumped thermal state
-``shepherd-dynamic``  shepherd-thermal whose polarisation reads Tremblay's filtered current
+``shepherd-dynamic``  shepherd-thermal whose polarisation reads Tremblay's filtered current,
+                      its resistance at full charge a parameter of its own
 ``ecm``               OCV(SOC) + series R + RC pairs + solid-diffusion state + thermal state
 """
 

@@ -297,6 +297,10 @@ class Family:
     steady_prior: dict = {}
     steady_prior_carries: tuple = ()
     steady_prior_note: str = ""
+    #: Parameters a battery file of an older :attr:`version` lacks: ``{version: {new
+    #: parameter: the parameter it equalled in files of that version and older}}``
+    #: (:meth:`dischargelab.model.Battery.from_dict` copies its value and covariance).
+    upgrades: dict = {}
 
     # ---- parameters -------------------------------------------------------------
     @property

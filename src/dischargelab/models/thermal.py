@@ -96,16 +96,22 @@ class ShepherdThermal(Family):
         return self._voltage(p, state["charge_Ah"], current_A, current_A,
                              state["temperature_C"])
 
-    def _voltage(self, p, q, i, i_pol, temperature):
+    def _voltage(self, p, q, i, i_pol, temperature, r_pol=None):
         """Eq. (6) with temperature [V per cell]: the series resistance carries the current
-        ``i`` [A], the polarisation term the current ``i_pol`` [A] (``i`` itself here)."""
+        ``i`` [A], the polarisation term the current ``i_pol`` [A] (``i`` itself here).
+
+        The polarisation resistance is ``r_pol + K (C/(C - q) - 1)`` [ohm] (before
+        Arrhenius): ``r_pol`` at full charge, growing towards the knee with ``K``;
+        Tremblay's ``K C/(C - q)`` when ``r_pol`` is None (``r_pol = K``)."""
         q = np.asarray(q, dtype=float)
         i = np.asarray(i, dtype=float)
         dt, f, cap, gain, _ = self._terms(p, q, temperature)
         ok = q < cap
         gain = np.where(ok, gain, 0.0)
+        k = p["K_V_per_Ah"]
+        r = k * gain if r_pol is None else r_pol + k * (gain - 1.0)
         v = (p["E0_V"] + p["dE0_dT_V_per_K"] * dt - p["R_ohm"] * f * i
-             - p["K_V_per_Ah"] * f * gain * (np.asarray(i_pol, dtype=float) + q)
+             - f * r * np.asarray(i_pol, dtype=float) - k * f * gain * q
              + p["A_V"] * np.exp(-p["B_per_Ah"] * q))
         return np.where(ok, v, -np.inf)
 
@@ -125,25 +131,31 @@ class ShepherdThermal(Family):
         columns = self._columns(p, data, data.current)
         return np.column_stack([columns[n]() for n in names])
 
-    def _columns(self, p, data: Samples, i_pol) -> dict:
+    def _columns(self, p, data: Samples, i_pol, r_pol=None) -> dict:
         """The Jacobian's columns (each computed when called), the polarisation term
-        reading the current ``i_pol`` [A] (the current itself here)."""
+        reading the current ``i_pol`` [A] (the current itself here) with the polarisation
+        resistance of :meth:`_voltage` (``r_pol``: its value at full charge, a parameter
+        ``Rp_ohm`` of its own; None: Tremblay's ``K C/(C - q)``)."""
         i, q, temp = data.current, data.charge, data.temperature
         dt, f, cap, gain, denom = self._terms(p, q, temp)
         pol = i_pol + q
+        k = p["K_V_per_Ah"]
         expo = np.exp(-p["B_per_Ah"] * q)
-        d_cap = p["K_V_per_Ah"] * f * pol * q / denom**2
+        d_cap = k * f * pol * q / denom**2
+        d_k = gain * pol if r_pol is None else gain * pol - i_pol
+        r = k * gain if r_pol is None else r_pol + k * (gain - 1.0)
         zero = np.zeros_like(q)
         columns = {
             "E0_V": lambda: np.ones_like(q),
             "R_ohm": lambda: -f * i,
-            "K_V_per_Ah": lambda: -f * gain * pol,
+            "K_V_per_Ah": lambda: -f * d_k,
+            "Rp_ohm": lambda: -f * i_pol,
             "A_V": lambda: expo,
             "dE0_dT_V_per_K": lambda: dt,
             "B_per_Ah": lambda: -p["A_V"] * q * expo,
             "C_Ah": lambda: d_cap,
             "dC_dT_Ah_per_K": lambda: d_cap * dt,
-            "beta_K": lambda: (-p["R_ohm"] * f * i - p["K_V_per_Ah"] * f * gain * pol)
+            "beta_K": lambda: (-p["R_ohm"] * f * i - f * r * i_pol - k * f * gain * q)
             * arrhenius_dbeta(temp),
             "Cth_J_per_K": lambda: zero,
             "Rth_K_per_W": lambda: zero,
