@@ -19,7 +19,9 @@ or a scheduler, and the client is the only writer of whatever stores the results
 
 :func:`executor` picks one from the arguments (or ``DISCHARGELAB_SCHEDULER``);
 ``background=True`` starts a Dask one in a thread (:class:`StartingExecutor`), so the
-caller lists and hashes its files while the workers come up.
+caller lists and hashes its files while the workers come up, and the first tasks run in
+this process until they are (a local cluster's fork server, :func:`start_fork_server`,
+imports the workers' modules meanwhile on the other core).
 
 References
 ----------
