@@ -470,7 +470,7 @@ def _start_method() -> str:
 def start_fork_server() -> bool:
     """Start this process's multiprocessing fork server, importing ``distributed`` and
     :data:`PRELOAD` as it starts, unless it runs already; False where the platform has none
-    or Dask is not installed.
+    or Dask is not installed, or it cannot be started (the workers are then spawned).
 
     It returns at once (the server imports in a process of its own, about 3 s of one core),
     and needs no Dask import here: a local cluster calls it before its own imports, so
@@ -488,7 +488,10 @@ def start_fork_server() -> bool:
         multiprocessing.get_context("forkserver").set_forkserver_preload(
             ["distributed", *PRELOAD])
         _FORK_SERVER["preload_set"] = True
-    forkserver.ensure_running()
+    try:
+        forkserver.ensure_running()
+    except OSError:     # no socket or process to spare: Dask's spawned workers still work
+        return False
     return True
 
 
