@@ -60,10 +60,9 @@ WORKER_DEATHS_ALLOWED = 1
 START_TIMEOUT_S = 60.0
 
 #: Seconds a local cluster's tasks may wait with no worker at all (every worker died and
-#: none started again) before the work ends with :class:`FleetError` instead of waiting for
-#: ever. Generous: on a machine starved by other work, a worker's restart after a crash
-#: has taken over a minute.
-NO_WORKERS_TIMEOUT_S = 300.0
+#: none could start again, e.g. on a starved machine) before the work ends with
+#: :class:`FleetError` instead of waiting for ever.
+NO_WORKERS_TIMEOUT_S = 60.0
 
 #: Modules a local cluster's workers import as they start (the readers and the logbook's
 #: tasks, with pandas and scipy): a few seconds each worker would otherwise spend on its
