@@ -59,11 +59,6 @@ WORKER_DEATHS_ALLOWED = 1
 #: Seconds to wait for a cluster's workers to come up (or connect to a scheduler).
 START_TIMEOUT_S = 60.0
 
-#: Seconds a local cluster's tasks may wait with no worker at all (every worker died and
-#: none could start again, e.g. on a starved machine) before the work ends with
-#: :class:`FleetError` instead of waiting for ever.
-NO_WORKERS_TIMEOUT_S = 60.0
-
 #: Modules a local cluster's workers import as they start (the readers and the logbook's
 #: tasks, with pandas and scipy): a few seconds each worker would otherwise spend on its
 #: first task, spent while the client lists and hashes its files.
@@ -186,8 +181,6 @@ class DaskExecutor:
                 with dask.config.set({"distributed.scheduler.allowed-failures":
                                       WORKER_DEATHS_ALLOWED,
                                       "distributed.scheduler.worker-saturation": 1.0,
-                                      "distributed.scheduler.no-workers-timeout":
-                                      f"{NO_WORKERS_TIMEOUT_S}s",
                                       "distributed.worker.multiprocessing-method":
                                       _start_method(),
                                       **QUIET_WORKERS}):
@@ -248,15 +241,11 @@ class DaskExecutor:
         milliseconds, is then shared: worth it when an item takes tens of
         milliseconds). When the workers running a task of several items die twice,
         its items are run again one per task, and an item whose own task's worker
-        dies twice yields :class:`WorkerCrash`. A task that waits with no worker at all for
-        longer than the scheduler allows (:data:`NO_WORKERS_TIMEOUT_S` on a local cluster)
-        raises :class:`FleetError`. Stopping the iteration early (or Ctrl-C) cancels what is
-        still pending.
+        dies twice yields :class:`WorkerCrash`. Stopping the iteration early (or
+        Ctrl-C) cancels what is still pending.
         """
         from distributed import as_completed
         from distributed.scheduler import KilledWorker
-
-        no_workers = _no_workers_errors()
 
         source = iter(items)
         alone: deque = deque()      # items of a crashed task, to run one per task
@@ -286,12 +275,6 @@ class DaskExecutor:
                     outcomes = future.result()
                     if len(group) == 1:
                         outcomes = [outcomes]
-                except no_workers:
-                    raise FleetError(
-                        "the Dask cluster has had no worker for too long (every worker died "
-                        f"and none started again; a local cluster waits "
-                        f"{NO_WORKERS_TIMEOUT_S:.0f} s); what was done is kept: run the "
-                        "command again, with fewer workers or on a less busy machine") from None
                 except KilledWorker:
                     if len(group) > 1:   # one of them crashes its reader: find which
                         alone.extend(group)
@@ -515,15 +498,6 @@ def start_fork_server() -> bool:
 #: Whether this process gave the fork server its preload list (once: a running server
 #: keeps the list it started with).
 _FORK_SERVER = {"preload_set": False}
-
-
-def _no_workers_errors() -> tuple[type[BaseException], ...]:
-    """What a future raises when its task waited too long with no worker (the scheduler's
-    ``no-workers-timeout``; Dask versions without it raise none of these)."""
-    from distributed import scheduler
-
-    return tuple(getattr(scheduler, name) for name in ("NoValidWorkerError", "NoWorkerError")
-                 if hasattr(scheduler, name))
 
 
 def run_batch(func: Callable[[Any], Any], items: list) -> list:
