@@ -34,3 +34,16 @@ def crash_on_file(task, file_name: str, item):
     if os.path.basename(str(name)) == file_name:
         os._exit(3)
     return task(item)
+
+
+def square_unless_refused(n: int) -> dict:
+    """:func:`square_slowly`, but items 1 and 13 are refused (a bad file) with a library
+    error."""
+    if n in (1, 13):
+        raise DataError(f"item {n} is refused")
+    return square_slowly(n)
+
+
+def parent_pid(n: int) -> int:
+    """The process id of the task's process's parent."""
+    return os.getppid()

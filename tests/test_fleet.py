@@ -13,10 +13,17 @@ from dischargelab.fleet import (
     DaskExecutor,
     FleetError,
     InProcessExecutor,
+    StartingExecutor,
     WorkerCrash,
     executor,
 )
-from fleet_tasks import crash_on_seven, refuse_odd, square_slowly
+from fleet_tasks import (
+    crash_on_seven,
+    parent_pid,
+    refuse_odd,
+    square_slowly,
+    square_unless_refused,
+)
 
 distributed = pytest.importorskip("distributed")
 
@@ -97,6 +104,37 @@ def test_local_cluster_same_results_bounded_submission_and_a_crashing_task():
     assert isinstance(outcomes[7], WorkerCrash)
     assert "died twice" in str(outcomes[7])
     assert all(outcomes[n] == n for n in range(12) if n != 7)
+
+
+@pytest.mark.slow
+def test_a_starting_cluster_runs_the_first_items_here_and_the_rest_on_its_workers():
+    from multiprocessing import forkserver
+
+    start = time.monotonic()
+    with executor(workers=2, background=True) as ex:
+        assert isinstance(ex, StartingExecutor)
+        assert ex.shares_files                   # known before the cluster is up
+        server = forkserver._forkserver._forkserver_pid
+        assert server is not None                # started at once, before the cluster
+        seen = {}
+        for item, result in ex.map_unordered(square_unless_refused, range(40), per_task=2):
+            assert item not in seen              # each item once, here or there
+            seen[item] = result
+            if len(seen) == 3:
+                ex.ready()                       # then the rest goes to the workers
+        assert ex.ready().workers == 2
+        parents = {pid for _, pid in ex.map_unordered(parent_pid, range(6))}
+    assert time.monotonic() - start < 150
+    assert sorted(seen) == list(range(40))
+    here = sorted(n for n, r in seen.items() if isinstance(r, dict) and r["pid"] == os.getpid())
+    ran_here = here + [1] * (ex.ran_here > 1)    # item 1 is refused, here
+    assert 1 <= ex.ran_here <= 3 and sorted(ran_here) == list(range(ex.ran_here))
+    for n in (1, 13):                            # refused here (1) and on a worker (13)
+        assert isinstance(seen[n], DataError) and f"item {n} is refused" in str(seen[n])
+    squares = {n: r for n, r in seen.items() if n not in (1, 13)}
+    assert all(r["square"] == n * n for n, r in squares.items())
+    assert len({r["pid"] for r in squares.values()} - {os.getpid()}) >= 1
+    assert parents == {server}                   # workers forked from that server
 
 
 @pytest.mark.slow

@@ -14,7 +14,7 @@ pytest.importorskip("distributed")
 
 from dask_cluster import Cluster
 from dischargelab.errors import LogbookError
-from dischargelab.fleet import DaskExecutor, InProcessExecutor
+from dischargelab.fleet import DaskExecutor, InProcessExecutor, executor
 from dischargelab.logbook import Logbook
 from dischargelab.logbook.figures import pack_figures
 from fleet_tasks import crash_on_file
@@ -83,6 +83,31 @@ def test_local_cluster_stores_the_same_events_and_refits_and_reports_alike(
     for name, battery in fitted.items():
         assert battery.parameters.as_dict() == pytest.approx(
             local[name].parameters.as_dict(), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_files_read_here_while_the_cluster_starts_are_stored_once_and_alike(
+        packs, in_process, tmp_path):
+    url = str(tmp_path / "lb.sqlite")
+    total = n_files(packs)
+    with executor(workers=2, background=True) as ex, Logbook(url) as lb:
+        def progress(done, total, name):
+            if ex.ran_here >= 3:
+                ex.ready()              # the first files here, the rest on the workers
+        result = lb.add(packs, pack_from="parent", recursive=True, executor=ex,
+                        progress=progress)
+        assert lb.stale() == []
+        figures = {name: lb.health(name).to_dict() for name in lb.pack_names()}
+    assert 1 <= ex.ran_here <= 3
+    assert len(result.added) == total and not result.rejected and not result.skipped
+    assert stored(url) == in_process
+    with Logbook(str(tmp_path / "here.sqlite")) as lb:
+        lb.add(packs, pack_from="parent", recursive=True)
+        alike = {name: lb.health(name).to_dict() for name in lb.pack_names()}
+    for health in (*figures.values(), *alike.values()):
+        for event in health["events"]:
+            event.pop("event_id")
+    assert figures == alike
 
 
 @pytest.mark.slow

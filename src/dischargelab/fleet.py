@@ -19,7 +19,9 @@ or a scheduler, and the client is the only writer of whatever stores the results
 
 :func:`executor` picks one from the arguments (or ``DISCHARGELAB_SCHEDULER``);
 ``background=True`` starts a Dask one in a thread (:class:`StartingExecutor`), so the
-caller lists and hashes its files while the workers come up.
+caller lists and hashes its files while the workers come up, and the first tasks run in
+this process until they are (a local cluster's fork server, :func:`start_fork_server`,
+imports the workers' modules meanwhile on the other core).
 
 References
 ----------
@@ -127,11 +129,7 @@ class InProcessExecutor:
         """Yield ``(item, func(item))``, or ``(item, exception)`` when ``func`` raised one
         (``per_task`` is for the interface: here every item is its own call)."""
         for item in items:
-            try:
-                outcome = func(item)
-            except Exception as exc:  # handed to the caller, which re-raises what is a bug
-                outcome = exc
-            yield item, outcome
+            yield item, _outcome(func, item)
 
     def describe(self) -> str:
         return "in this process"
@@ -314,7 +312,12 @@ class DaskExecutor:
 
 class StartingExecutor:
     """A :class:`DaskExecutor` started in a thread: the caller goes on (opens its database,
-    lists and hashes its files) while the cluster comes up; the first use waits for it.
+    lists and hashes its files) while the cluster comes up, and the first tasks run here,
+    in this process, until it is up (a core is otherwise idle then).
+
+    A local cluster's fork server is started at once, before Dask is imported here, so
+    that its imports (the readers, pandas, scipy) run on the other core while this process
+    imports Dask and hashes its files.
 
     Parameters
     ----------
@@ -328,6 +331,11 @@ class StartingExecutor:
         self._ready = threading.Event()
         self._executor: DaskExecutor | None = None
         self._error: BaseException | None = None
+        self._local = options.get("workers") is not None
+        #: Items run here while the cluster came up (for progress lines and tests).
+        self.ran_here = 0
+        if self._local:
+            start_fork_server()
 
         def start() -> None:
             try:
@@ -354,6 +362,11 @@ class StartingExecutor:
         return self._executor
 
     @property
+    def is_ready(self) -> bool:
+        """True once the start has ended (up, or failed: :meth:`ready` then raises)."""
+        return self._ready.is_set()
+
+    @property
     def workers(self) -> int:
         return self.ready().workers
 
@@ -363,17 +376,29 @@ class StartingExecutor:
 
     @property
     def shares_files(self) -> bool:
-        return self.ready().shares_files
+        """A local cluster's workers see this machine's files (known before it is up)."""
+        return True if self._local else self.ready().shares_files
 
     def sees(self, path) -> bool:
-        return self.ready().sees(path)
+        return True if self._local else self.ready().sees(path)
 
     def describe(self) -> str:
         return self.ready().describe()
 
     def map_unordered(self, func: Callable[[Any], Any], items: Iterable[Any],
                       per_task: int = 1) -> Iterator[tuple[Any, Any]]:
-        return self.ready().map_unordered(func, items, per_task=per_task)
+        """As :meth:`DaskExecutor.map_unordered`; while the cluster is still coming up, the
+        next item runs here instead (one at a time, as :class:`InProcessExecutor`), and
+        once it is up every item left goes to it. Each item runs once, either here or there,
+        and its outcome is the same."""
+        source = iter(items)
+        while not self._ready.is_set():
+            item = next(source, _END)
+            if item is _END:
+                return
+            self.ran_here += 1
+            yield item, _outcome(func, item)
+        yield from self.ready().map_unordered(func, source, per_task=per_task)
 
     def close(self) -> None:
         self._ready.wait(timeout=2 * START_TIMEOUT_S)
@@ -385,6 +410,19 @@ class StartingExecutor:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+#: End of an iterator (a value no item can be).
+_END = object()
+
+
+def _outcome(func: Callable[[Any], Any], item: Any) -> Any:
+    """``func(item)``, or the exception it raised (handed to the caller, which re-raises
+    what is a bug)."""
+    try:
+        return func(item)
+    except Exception as exc:
+        return exc
 
 
 def executor(workers: int | None = None, scheduler: str | None = None,
@@ -421,29 +459,50 @@ def _start_method() -> str:
     package it knows into this process). Where Dask has no such flag (a version that starts
     its fork server differently), the workers are spawned.
     """
-    import multiprocessing
-
     from distributed import utils as dask_utils
 
-    if ("forkserver" not in multiprocessing.get_all_start_methods()
-            or not hasattr(dask_utils, "_forkserver_preload_set")):
+    if not hasattr(dask_utils, "_forkserver_preload_set") or not start_fork_server():
         return "spawn"
-    if not dask_utils._forkserver_preload_set:
+    dask_utils._forkserver_preload_set = True
+    return "forkserver"
+
+
+def start_fork_server() -> bool:
+    """Start this process's multiprocessing fork server, importing ``distributed`` and
+    :data:`PRELOAD` as it starts, unless it runs already; False where the platform has none
+    or Dask is not installed, or it cannot be started (the workers are then spawned).
+
+    It returns at once (the server imports in a process of its own, about 3 s of one core),
+    and needs no Dask import here: a local cluster calls it before its own imports, so
+    that the two overlap. The server ends with this process.
+    """
+    import importlib.util
+    import multiprocessing
+
+    if ("forkserver" not in multiprocessing.get_all_start_methods()
+            or importlib.util.find_spec("distributed") is None):
+        return False
+    from multiprocessing import forkserver
+
+    if not _FORK_SERVER["preload_set"]:
         multiprocessing.get_context("forkserver").set_forkserver_preload(
             ["distributed", *PRELOAD])
-        dask_utils._forkserver_preload_set = True
-    return "forkserver"
+        _FORK_SERVER["preload_set"] = True
+    try:
+        forkserver.ensure_running()
+    except OSError:     # no socket or process to spare: Dask's spawned workers still work
+        return False
+    return True
+
+
+#: Whether this process gave the fork server its preload list (once: a running server
+#: keeps the list it started with).
+_FORK_SERVER = {"preload_set": False}
 
 
 def run_batch(func: Callable[[Any], Any], items: list) -> list:
     """``func`` over ``items`` on a worker: each result, or the exception it raised."""
-    out = []
-    for item in items:
-        try:
-            out.append(func(item))
-        except Exception as exc:  # travels back with its item, like InProcessExecutor
-            out.append(exc)
-    return out
+    return [_outcome(func, item) for item in items]
 
 
 def _file_size(path: str) -> int:

@@ -400,7 +400,9 @@ def fit_cmd(name, every, bootstrap, workers, scheduler, db, as_json):
                   f"{_num(ref['capacity_Ah'])} Ah", markup=False)
         return
     bar, progress = progress_bar("fitting")
-    with open_logbook(db) as lb, open_executor(workers, scheduler) as executor, bar:
+    # the workers come up while the logbook is opened; the first fits run here meanwhile
+    with open_executor(workers, scheduler, background=True) as executor, \
+            open_logbook(db) as lb, bar:
         results = lb.fit_all(executor=executor, progress=progress, bootstrap=bootstrap)
     fitted = {k: v for k, v in results.items() if not isinstance(v, str)}
     if as_json:
@@ -439,7 +441,7 @@ def report_cmd(fleet, output, within, eol, force, workers, scheduler, db, as_jso
     bar, progress = progress_bar("packs")
     with open_logbook(db) as lb:
         guard_outputs([output], lb.own_files(), force)   # never the logbook, even with --force
-        with open_executor(workers, scheduler) as executor, bar:
+        with open_executor(workers, scheduler, background=True) as executor, bar:
             report = lb.fleet(eol=eol, executor=executor, progress=progress)
     path = report.save(output, force=force, within_efc=within)
     due = report.retire_soon(within)
