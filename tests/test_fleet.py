@@ -164,3 +164,31 @@ def test_real_scheduler_and_workers_kill_one_worker_mid_run():
     finally:
         cluster.stop()
     assert cluster.alive() == []
+
+
+@pytest.mark.slow
+def test_a_cluster_left_without_workers_ends_the_wait_with_one_line(monkeypatch):
+    import dischargelab.fleet as fleet
+    from dask_cluster import Cluster
+
+    monkeypatch.setattr(fleet, "NO_WORKER_S", 2.0)
+    cluster = Cluster(workers=1)
+    try:
+        with executor(scheduler=cluster.address) as ex:
+            deadline = time.monotonic() + 60
+            while ex.workers < 1 and time.monotonic() < deadline:
+                time.sleep(0.2)
+            results = []
+            started = None
+            with pytest.raises(FleetError, match="no worker for 2 s") as info:
+                for item, result in ex.map_unordered(square_slowly, range(200)):
+                    results.append(result["square"] == item * item)
+                    if started is None:
+                        cluster.kill(cluster.workers[0])
+                        started = time.monotonic()
+            assert time.monotonic() - started < 30          # bounded, not Dask's own wait
+            assert results and all(results)                  # what finished was handed over
+            assert "\n" not in str(info.value)
+    finally:
+        cluster.stop()
+    assert cluster.alive() == []

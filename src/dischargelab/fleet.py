@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from itertools import islice
@@ -58,6 +59,14 @@ WORKER_DEATHS_ALLOWED = 1
 
 #: Seconds to wait for a cluster's workers to come up (or connect to a scheduler).
 START_TIMEOUT_S = 60.0
+
+#: Seconds a cluster may have no worker at all while tasks wait before the wait ends with
+#: :class:`FleetError` (every worker died and none came back, or all left the scheduler).
+#: A nanny restarts a crashed worker in a few seconds, over a minute on a starved machine.
+NO_WORKER_S = 300.0
+
+#: Seconds between looks at a cluster while no finished task is waiting to be collected.
+POLL_S = 0.02
 
 #: Modules a local cluster's workers import as they start (the readers and the logbook's
 #: tasks, with pandas and scipy): a few seconds each worker would otherwise spend on its
@@ -269,7 +278,8 @@ class DaskExecutor:
             for _ in range(limit):
                 if not submit_next():
                     break
-            for future in done:
+            while not done.is_empty():
+                future = self._next_finished(done)
                 _, group = pending.pop(future.key)
                 try:
                     outcomes = future.result()
@@ -294,6 +304,24 @@ class DaskExecutor:
                 self.client.cancel([f for f, _ in pending.values()])
                 pending.clear()
             done.clear()
+
+    def _next_finished(self, done):
+        """The next finished future of ``done`` (a ``distributed.as_completed``); waits as
+        long as tasks run, but :class:`FleetError` once the cluster has had no worker for
+        :data:`NO_WORKER_S` seconds."""
+        no_worker_since = None
+        while not done.has_ready():
+            time.sleep(POLL_S)
+            if self.client.scheduler_info().get("workers"):
+                no_worker_since = None
+            elif no_worker_since is None:
+                no_worker_since = time.monotonic()
+            elif time.monotonic() - no_worker_since > NO_WORKER_S:
+                where = self.scheduler or "the local cluster"
+                raise FleetError(f"{where} has had no worker for {NO_WORKER_S:.0f} s (every "
+                                 "worker died or left and none came back); what finished is "
+                                 "kept: run again, with fewer workers or without a cluster")
+        return next(done)
 
     def close(self) -> None:
         client = getattr(self, "client", None)
