@@ -65,8 +65,11 @@ START_TIMEOUT_S = 60.0
 #: A nanny restarts a crashed worker in a few seconds, over a minute on a starved machine.
 NO_WORKER_S = 300.0
 
-#: Seconds between looks at a cluster while no finished task is waiting to be collected.
-POLL_S = 0.02
+#: Seconds between looks for a finished task while none is waiting to be collected.
+POLL_S = 0.01
+
+#: Seconds of waiting between two looks at the cluster's worker list.
+LOOK_S = 1.0
 
 #: Modules a local cluster's workers import as they start (the readers and the logbook's
 #: tasks, with pandas and scipy): a few seconds each worker would otherwise spend on its
@@ -308,15 +311,21 @@ class DaskExecutor:
     def _next_finished(self, done):
         """The next finished future of ``done`` (a ``distributed.as_completed``); waits as
         long as tasks run, but :class:`FleetError` once the cluster has had no worker for
-        :data:`NO_WORKER_S` seconds."""
+        :data:`NO_WORKER_S` seconds (its worker list is asked for once every
+        :data:`LOOK_S` of waiting: each look is a call to the scheduler)."""
+        last_look = time.monotonic()
         no_worker_since = None
         while not done.has_ready():
             time.sleep(POLL_S)
+            now = time.monotonic()
+            if now - last_look < LOOK_S:
+                continue
+            last_look = now
             if self.client.scheduler_info().get("workers"):
                 no_worker_since = None
             elif no_worker_since is None:
-                no_worker_since = time.monotonic()
-            elif time.monotonic() - no_worker_since > NO_WORKER_S:
+                no_worker_since = now
+            elif now - no_worker_since > NO_WORKER_S:
                 where = self.scheduler or "the local cluster"
                 raise FleetError(f"{where} has had no worker for {NO_WORKER_S:.0f} s (every "
                                  "worker died or left and none came back); what finished is "
