@@ -28,6 +28,13 @@ from fleet_tasks import (
 distributed = pytest.importorskip("distributed")
 
 
+def wait_for_workers(ex, n: int, timeout_s: float = 60.0) -> None:
+    """Wait (bounded) until ``n`` workers have joined the executor's scheduler."""
+    deadline = time.monotonic() + timeout_s
+    while ex.workers < n and time.monotonic() < deadline:
+        time.sleep(0.2)
+
+
 def test_no_flag_runs_in_process_without_importing_dask():
     code = ("import sys; from dischargelab.fleet import executor; e = executor(); "
             "r = list(e.map_unordered(abs, [-1, -2])); "
@@ -144,9 +151,7 @@ def test_real_scheduler_and_workers_kill_one_worker_mid_run():
     cluster = Cluster(workers=2)
     try:
         with executor(scheduler=cluster.address) as ex:
-            deadline = time.monotonic() + 60
-            while ex.workers < 2 and time.monotonic() < deadline:
-                time.sleep(0.2)
+            wait_for_workers(ex, 2)
             assert ex.workers == 2
             assert not ex.shares_files
             assert ex.sees(__file__)
@@ -175,9 +180,7 @@ def test_a_cluster_left_without_workers_ends_the_wait_with_one_line(monkeypatch)
     cluster = Cluster(workers=1)
     try:
         with executor(scheduler=cluster.address) as ex:
-            deadline = time.monotonic() + 60
-            while ex.workers < 1 and time.monotonic() < deadline:
-                time.sleep(0.2)
+            wait_for_workers(ex, 1)
             results = []
             started = None
             with pytest.raises(FleetError, match="no worker for 2 s") as info:
