@@ -1,10 +1,11 @@
 """Battery model families. Each family is one module; register it in :data:`FAMILIES`.
 
-``shepherd``          the paper's eq. (6), isothermal
-``shepherd-thermal``  eq. (6) with temperature-dependent parameters and a lumped thermal state
-``shepherd-dynamic``  shepherd-thermal whose polarisation reads Tremblay's filtered current,
-                      its resistance at full charge a parameter of its own
-``ecm``               OCV(SOC) + series R + RC pairs + solid-diffusion state + thermal state
+- ``shepherd``: the paper's eq. (6), isothermal.
+- ``shepherd-thermal``: eq. (6) with temperature-dependent parameters and a lumped thermal
+  state.
+- ``shepherd-dynamic``: shepherd-thermal whose polarisation reads Tremblay's filtered current,
+  its resistance at full charge a parameter of its own.
+- ``ecm``: OCV(SOC) + series R + RC pairs + solid-diffusion state + thermal state.
 """
 
 from __future__ import annotations
