@@ -36,6 +36,7 @@ BENCHMARKS = {
     "tester_files.py": ([], "tester's counter"),
     "logbook_pages.py": (["--sizes", "2,3", "--requests", "3", "--workers", "1"], "goals at 3"),
     "health_from_use.py": (["--skip", "cmu", "synthetic", "cellc"], "full-enough flights"),
+    "cmu_rewindow.py": ([], "re-windowed"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }
