@@ -203,6 +203,7 @@ def test_lihv_curve_extends_the_lipo_curve_to_4_35_v():
         LIHV_FULL_CELL_V,
         LIHV_OCV_V,
         OCV_SOC,
+        charge_cell_V,
         generic_ocv,
     )
 
@@ -221,6 +222,12 @@ def test_lihv_curve_extends_the_lipo_curve_to_4_35_v():
     assert generic_ocv(None, 4.32)[0] is LIHV_OCV_V
     assert generic_ocv("lipo", 4.19)[0] is GENERIC_OCV_V["lipo"]
     assert generic_ocv("li-ion", 4.32)[0] is GENERIC_OCV_V["li-ion"]
+    # its charges end full at 4.35 V per cell, not at a LiPo's 4.20 V
+    assert charge_cell_V("lipo", 4.32) == LIHV_FULL_CELL_V
+    assert charge_cell_V(None, 4.32) == LIHV_FULL_CELL_V
+    assert charge_cell_V("lipo", 4.19) == CHARGE_CELL_V["lipo"]
+    assert charge_cell_V("li-ion", 4.32) == CHARGE_CELL_V["li-ion"]
+    assert charge_cell_V("lifepo4") == CHARGE_CELL_V["lifepo4"]
 
 
 def test_dji_hv_pack_reads_through_the_lihv_curve(shared_data):

@@ -142,9 +142,24 @@ def generic_ocv(chemistry: str | None, rest_cell_V: float | None = None
     is above :data:`LIHV_REST_CELL_V` gets the high-voltage table :data:`LIHV_OCV_V`.
     """
     chem = check_chemistry(chemistry)
-    if chem == "lipo" and rest_cell_V is not None and rest_cell_V > LIHV_REST_CELL_V:
+    if is_lihv(chem, rest_cell_V):
         return LIHV_OCV_V, LIHV_SOURCE
     return GENERIC_OCV_V[chem], OCV_SOURCE[chem]
+
+
+def is_lihv(chemistry: str | None, rest_cell_V: float | None) -> bool:
+    """True for a LiPo pack (``"lipo"`` or None) whose highest rest voltage per cell
+    ``rest_cell_V`` [V] is above :data:`LIHV_REST_CELL_V`: a high-voltage (4.35 V) pack."""
+    return (check_chemistry(chemistry) == "lipo" and rest_cell_V is not None
+            and rest_cell_V > LIHV_REST_CELL_V)
+
+
+def charge_cell_V(chemistry: str | None, rest_cell_V: float | None = None) -> float:
+    """The voltage per cell a pack is charged to [V]: :data:`LIHV_FULL_CELL_V` for a
+    high-voltage pack (:func:`is_lihv`), else :data:`CHARGE_CELL_V` of its chemistry."""
+    if is_lihv(chemistry, rest_cell_V):
+        return LIHV_FULL_CELL_V
+    return CHARGE_CELL_V[check_chemistry(chemistry)]
 
 
 #: Chemistry assumed when none is given (most UAV packs).

@@ -680,11 +680,11 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
         n = pack_cells(e, cells, chemistry)
         curves.append((k, learned_curve(dict(e, source=e.get("source")), cap, n, chemistry,
                                         resistance_ohm=first_drop)))
-    from ..ocv import CHARGE_CELL_V, LIHV_FULL_CELL_V, check_chemistry
+    from ..ocv import charge_cell_V
 
-    prior = OcvCurve.prior(chemistry, highest_rest_cell_V(ordered, cells, chemistry))
-    full_cell = LIHV_FULL_CELL_V if prior.cell_V[-1] >= LIHV_FULL_CELL_V else \
-        CHARGE_CELL_V[check_chemistry(chemistry)]
+    top = highest_rest_cell_V(ordered, cells, chemistry)
+    prior = OcvCurve.prior(chemistry, top)
+    full_cell = charge_cell_V(chemistry, top)
     if fulls:
         e = fulls[0][1]
         if e.get("rest_voltage_V"):
