@@ -268,10 +268,12 @@ class DaskExecutor:
             group = [alone.popleft()] if alone else list(islice(source, max(1, per_task)))
             if not group:
                 return False
+            # sealed: Dask's graph parser walks a plain argument's lists and dicts object by
+            # object (0.14 s for one pack's figures job of ~25,000 numbers, in this process)
             if len(group) == 1:
-                future = self.client.submit(func, group[0], pure=False)
+                future = self.client.submit(run_sealed, func, Sealed(group[0]), pure=False)
             else:
-                future = self.client.submit(run_batch, func, group, pure=False)
+                future = self.client.submit(run_batch, func, Sealed(group), pure=False)
             pending[future.key] = (future, group)
             done.add(future)
             return True
@@ -537,9 +539,25 @@ def start_fork_server() -> bool:
 _FORK_SERVER = {"preload_set": False}
 
 
-def run_batch(func: Callable[[Any], Any], items: list) -> list:
-    """``func`` over ``items`` on a worker: each result, or the exception it raised."""
-    return [_outcome(func, item) for item in items]
+class Sealed:
+    """An argument handed to a Dask task as one opaque object: pickled whole, never walked
+    by the graph parser (which looks into every list, tuple and dict it gets for task
+    references, at a cost per contained object in the client)."""
+
+    __slots__ = ("value",)
+
+    def __init__(self, value: Any):
+        self.value = value
+
+
+def run_sealed(func: Callable[[Any], Any], item: Sealed) -> Any:
+    """``func`` of a sealed item on a worker (its exception propagates, as a task's)."""
+    return func(item.value)
+
+
+def run_batch(func: Callable[[Any], Any], items: Sealed) -> list:
+    """``func`` over sealed ``items`` on a worker: each result, or the exception it raised."""
+    return [_outcome(func, item) for item in items.value]
 
 
 def _file_size(path: str) -> int:
