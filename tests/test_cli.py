@@ -147,6 +147,20 @@ def test_import_stays_light():
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
+def test_the_package_and_the_command_line_load_no_numerics_until_used():
+    """``import dischargelab`` and the command line's import load neither numpy, pandas nor
+    scipy (a cluster's fork server starts before them); the API's names load on first use,
+    and ``dischargelab.fit`` is the function even when the submodule was imported first."""
+    code = ("import sys, dischargelab, dischargelab.cli;"
+            "print(sorted(m for m in ('numpy', 'pandas', 'scipy') if m in sys.modules));"
+            "import dischargelab.fit.auto, dischargelab.validate;"
+            "print(callable(dischargelab.fit), callable(dischargelab.validate),"
+            " dischargelab.Battery.__name__, 'numpy' in sys.modules)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split("\n")[:2] == ["[]", "True True Battery True"]
+
+
 def test_cutoff_defaults_to_the_chemistry_and_says_so(capsys):
     code, out, err = run(capsys, "predict", "hacker-4100-4s-lifepo4", "--current", "20",
                          "--json")
