@@ -20,7 +20,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/dischargelab demo --out demo-out --force
 
+# the sources byte-compiled first: the suite starts many Python processes (commands, servers,
+# Dask workers), and where PYTHONDONTWRITEBYTECODE is set each would compile them again
 test: $(STAMP) browser postgres mdbtools
+	$(BIN)/python -m compileall -q src
 	$(BIN)/python -m pytest
 
 lint: $(STAMP)

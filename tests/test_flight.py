@@ -192,6 +192,7 @@ def test_replay_of_a_drain_to_the_cutoff_by_the_true_model(tmp_path):
 
 # --------------------------------------------------------------------------- Betaflight
 
+@pytest.mark.slow     # decodes the Betaflight log (~7 s)
 def test_betaflight_three_flights_of_one_pack_fitted_together(logs):
     flights = flight_curves(logs / BETAFLIGHT, capacity_Ah=1.3)
     starts = [c.initial_charge_Ah for c in flights.curves]
@@ -211,7 +212,8 @@ def test_fit_needs_a_capacity_when_the_log_has_none(logs):
 
 # --------------------------------------------------------------------------- command line
 
-@pytest.mark.parametrize("name", LOGS)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n.endswith(".bbl")
+                                  else n for n in LOGS])
 def test_every_bundled_log_runs_through_flight_without_flags(logs, capsys, name):
     code, out, err = run(capsys, "flight", logs / name)
     assert code == 0, err

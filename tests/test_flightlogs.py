@@ -72,7 +72,10 @@ def tolerance_mAh(reference: float) -> float:
 
 # --------------------------------------------------------------------------- every bundled log
 
-@pytest.mark.parametrize("name", list(README))
+# the Betaflight log takes orangebox ~7 s to decode: read once per CI run, not again at the
+# minimum versions (its other tests there decode a truncated copy)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n.endswith(".bbl")
+                                  else n for n in README])
 def test_every_log_loads_without_flags(logs, name):
     fmt, cells, flights, records, span, charge, counter = README[name]
     assert detect_flight_log(logs / name) == fmt
@@ -194,6 +197,7 @@ def test_px4_log_starting_in_flight_has_no_offset(logs):
 
 # --------------------------------------------------------------------------- read_discharge
 
+@pytest.mark.slow     # decodes the Betaflight log twice (~14 s)
 def test_read_discharge_takes_one_flight_of_one_battery(logs):
     frame, meta = read_discharge(logs / BETAFLIGHT)
     assert meta["flight"] == 3  # the longest
