@@ -280,3 +280,7 @@ def test_fleet_report_page_lists_packs_soonest_end_of_life_first(packs, tmp_path
     assert html.count("<svg") == 6 and "<script" not in html and "http" not in html
     code, out, err = run_cli("logbook", "report", "--fleet", "-o", page, "--db", url)
     assert code == 2 and "already exists" in err and "--force" in err
+    # every figure stored: --workers starts no cluster
+    code, out, err = run_cli("logbook", "report", "--fleet", "-o", tmp_path / "again.html",
+                             "--db", url, "--workers", "2")
+    assert code == 0 and "no workers needed" in err and "running on" not in err, err

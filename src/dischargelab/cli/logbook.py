@@ -441,6 +441,10 @@ def report_cmd(fleet, output, within, eol, force, workers, scheduler, db, as_jso
     bar, progress = progress_bar("packs")
     with open_logbook(db) as lb:
         guard_outputs([output], lb.own_files(), force)   # never the logbook, even with --force
+        if (workers or scheduler) and not lb.stale():
+            err.print("every pack's figures are stored and current: no workers needed",
+                      markup=False)
+            workers = scheduler = None
         with open_executor(workers, scheduler, background=True) as executor, bar:
             report = lb.fleet(eol=eol, executor=executor, progress=progress)
     path = report.save(output, force=force, within_efc=within)
