@@ -6,7 +6,7 @@ LCO pouch, and the PyBaMM virtual cells at 25 degC, ``tests/data/virtual``) is r
 (:func:`dischargelab.models.dynamic.load_step`): the apparent resistance over the first
 minutes after the step, ``R + r_p (1 - exp(-t / 30 s)) + s t``. The overpotential the step
 built, ``eta = r_p i``, is then compared across the rates of one cell with the
-charge-transfer law of the model, ``eta = b asinh(Rp i / b)``, ``b = R_g T / (alpha F)``
+charge-transfer law, ``eta = b asinh(Rp i / b)``, ``b = R_g T / (alpha F)``
 (Bard and Faulkner, Electrochemical Methods, 2nd ed., eq. 3.4.11): the transfer coefficient
 ``alpha`` that fits the cell's rates best (0 is linear), and the run-to-run RMS of the
 overpotential with ``alpha`` = 0 (linear), 0.5 (a symmetric reaction) and the best.
@@ -31,10 +31,23 @@ import accuracy  # noqa: E402
 import one_rate_errors  # noqa: E402
 from _machine import machine_line  # noqa: E402
 from dischargelab.fit.problem import _stack  # noqa: E402
+from dischargelab.models.base import ZERO_CELSIUS_K  # noqa: E402
 from dischargelab.models.dynamic import load_step  # noqa: E402
-from dischargelab.models.thermal import BETA_PRIOR_K, charge_transfer  # noqa: E402
+from dischargelab.models.thermal import BETA_PRIOR_K  # noqa: E402
 
 ALPHAS = np.round(np.arange(0.0, 2.001, 0.05), 2)
+
+#: Faraday constant over the gas constant [K/V].
+F_OVER_R_K_PER_V = 96485.33212 / 8.314462618
+
+
+def butler_volmer(x_V, alpha, temperature_C):
+    """``b asinh(x / b)`` [V], ``b = R_g T / (alpha F)``; ``x`` itself at ``alpha`` = 0."""
+    x = np.asarray(x_V, dtype=float)
+    if alpha == 0:
+        return x
+    b = (np.asarray(temperature_C, dtype=float) + ZERO_CELSIUS_K) / (alpha * F_OVER_R_K_PER_V)
+    return b * np.arcsinh(x / b)
 
 
 def step_readings(series):
@@ -42,7 +55,7 @@ def step_readings(series):
     out = []
     for label, run in series.runs.items():
         stack = _stack([run.discharge.to_curve()], 1, 1, True, "equal")
-        step = load_step(stack, BETA_PRIOR_K, 0.0)
+        step = load_step(stack, BETA_PRIOR_K)
         if step is None:
             continue
         out.append((label, run.current_A, step[0], step[1], run.ambient_C))
@@ -53,7 +66,7 @@ def fit_law(currents, eta, temperature, alpha):
     """Best Rp [ohm] and RMS [V] of ``eta = b asinh(Rp i / b)`` at ``alpha``."""
     best = (np.inf, 0.0)
     for rp in np.geomspace(1e-4, 1.0, 2000):
-        model = charge_transfer(rp * currents, alpha, temperature)[0]
+        model = butler_volmer(rp * currents, alpha, temperature)
         cost = float(np.sqrt(np.mean((model - eta) ** 2)))
         best = min(best, (cost, rp))
     return best[1], best[0]
@@ -85,8 +98,7 @@ def main(argv=None):
         steps = ", ".join(f"{r[0]} {1000 * r[2]:.0f} + {1000 * r[3]:.0f}" for r in rows)
         print(f"| {s.title} | {steps} | {best:.2f} | {1000 * fits[0.0][1]:.2f} | "
               f"{1000 * fits[0.5][1]:.2f} | {1000 * fits[best][1]:.2f} |")
-    print()
-    print(machine_line())
+    print(f"\nMachine: {machine_line()}; load average {os.getloadavg()[0]:.1f} (shared machine)")
 
 
 if __name__ == "__main__":

@@ -2,22 +2,13 @@
 
 Per cell, discharge current ``i`` > 0, discharged charge ``q`` [Ah], cell
 temperature ``T`` [degC], as ``shepherd-thermal`` except that the polarisation
-term reads a lowpass-filtered current ``i*`` [1]_, its resistance at full charge is a
-parameter of its own, ``Rp``, and its drop at full charge is the charge-transfer
-overpotential of Butler-Volmer kinetics [3]_, linear in ``i*`` at small current and
-logarithmic at large::
+term reads a lowpass-filtered current ``i*`` [1]_ and its resistance at full
+charge is a parameter of its own, ``Rp``::
 
     i*' = (i - i*) / tau                                  [A]
-    eta = b asinh(f(T) Rp i* / b),   b = R_g T / (alpha_ct F)
-    V   = E0 + dE0_dT (T - T_ref) - R f(T) i - eta
-          - f(T) K (C(T)/(C(T) - q) - 1) i*
+    V   = E0 + dE0_dT (T - T_ref) - R f(T) i
+          - f(T) [Rp + K (C(T)/(C(T) - q) - 1)] i*
           - K f(T) C(T)/(C(T) - q) q + A exp(-B q)
-
-``b`` is per cell (the family's voltage is a cell's; a battery of ``n_s`` cells in
-series scales it to ``n_s b``) at the cell temperature ``T`` [K]; ``alpha_ct`` = 0.5, a
-symmetric reaction, gives ``b = 2 R_g T / F`` = 51.4 mV at 25 degC. ``alpha_ct`` = 0 is
-the polarisation linear in the current, ``f(T) Rp i*`` (battery files of versions 1 and
-2, which load with it and predict as they did).
 
 Tremblay's eq. is ``Rp = K`` (``K C/(C - q) (i* + q)``; battery files of version 1).
 
@@ -44,14 +35,6 @@ optimistic than eq. 6 with ``R`` left free), and a discharge of a Neware-logged 
 from a partial charge was missed by +15.7 % (+5.7 % with ``Rp``). On one rate ``R`` and
 ``Rp`` are both read from the load step (:func:`load_step`), ``K`` from the knee.
 
-Why Butler-Volmer: a slow run's step builds more polarisation per ampere than a fast
-run's (``benchmarks/step_polarisation.py``: the Samsung 30Q's ``r_p`` 12-15 mOhm at C/10
-to 2C, 5 at 4C; the PyBaMM LiFePO4 cells 140-210 mOhm at 0.1-0.5C, 27-50 at 2C-3C), as
-charge transfer does: its overpotential grows with the logarithm of the current once it
-passes ``b``. A polarisation linear in the current read at a slow step sags a faster run
-too much. ``alpha_ct`` is held at :data:`ALPHA_CT` on every fit (one rate cannot tell
-it; the best per cell over its rates scatters from 0.1 to 1.1 around 0.5).
-
 ``tau`` [s] is held at :data:`POLARISATION_TAU_S` (measured on load steps of real
 cells, see its comment) unless the data vary their current (a flight log, a pulse
 test) or hold several rates, which can show it; ``Rp`` is then fitted too.
@@ -63,10 +46,6 @@ References
    (the filtered current ``i*`` in the polarisation term).
 .. [2] MathWorks, Simscape Electrical "Battery" block ("battery response time",
    the filter time constant of ``i*``; temperature effects).
-.. [3] A. J. Bard, L. R. Faulkner, Electrochemical Methods, 2nd ed., Wiley (2001), eq.
-   3.4.11 (Butler-Volmer; ``i = 2 i0 sinh(alpha F eta / (R T))`` for a symmetric
-   reaction, ``R_ct = R T / (F i0)`` its small-current slope); J. Newman, K. E.
-   Thomas-Alyea, Electrochemical Systems, 3rd ed., Wiley (2004).
 """
 
 from __future__ import annotations
@@ -74,7 +53,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Parameter, Samples, State, arrhenius, filtered_samples
-from .thermal import BETA_PRIOR_K, ShepherdThermal, charge_transfer
+from .thermal import BETA_PRIOR_K, ShepherdThermal
 
 #: Time constant of the filtered current [s] for data that cannot show it (one steady
 #: current): the polarisation of measured cells after a load step builds with this time
@@ -100,10 +79,6 @@ TRANSIENT_S = (2.0, 4 * POLARISATION_TAU_S, 10 * POLARISATION_TAU_S)
 #: The samples the transient's window holds when the log allows (see :data:`TRANSIENT_S`).
 TRANSIENT_SAMPLES = 24
 
-#: Charge-transfer coefficient of the polarisation [-]: a symmetric reaction (Bard and
-#: Faulkner, eq. 3.4.11), ``b = R_g T / (alpha F)`` = 51.4 mV per cell at 25 degC.
-ALPHA_CT = 0.5
-
 #: Bounds of the filtered current's time constant [s] when it is fitted.
 TAU_BOUNDS_S = (1.0, 600.0)
 
@@ -117,60 +92,52 @@ class ShepherdDynamic(ShepherdThermal):
     #: At several constant rates the filtered current equals the current after the first
     #: minute of each run: the fit is shepherd-thermal's, which ``auto`` already compares.
     several_rates_candidate = False
-    version = 3
+    version = 2
     title = ("modified Shepherd with Tremblay's filtered current, temperature and a lumped "
              "thermal model")
     description = ("eq. 6 whose polarisation (Rp + K (C/(C-q) - 1)) i* reads the current "
                    "filtered over tau (Tremblay 2009): after a load step only R appears at "
-                   "once, the polarisation Rp builds up, its drop b asinh(Rp i*/b) "
-                   "(Butler-Volmer, b = R T/(alpha F)); on one rate R and Rp are read from "
+                   "once, the polarisation Rp builds up; on one rate R and Rp are read from "
                    "the load step; temperature and self-heating as shepherd-thermal.")
     headline = ShepherdThermal.headline + ("Rp_ohm", "tau_s")
     parameters = ShepherdThermal.parameters + (
         Parameter("tau_s", "s", *TAU_BOUNDS_S, POLARISATION_TAU_S, False,
                   "time constant of the polarisation's filtered current",
                   limit_note="the polarisation's time constant sits at the edge of its range"),
-        Parameter("Rp_ohm", "ohm", 0.0, 2.0, 0.0, False,
-                  "polarisation resistance at full charge (builds over tau after a step; "
-                  "its small-current slope)",
+        Parameter("Rp_ohm", "ohm", 0.0, 2.0, 0.0, True,
+                  "polarisation resistance at full charge (builds over tau after a step)",
                   limit_note="no polarisation builds after a load step at full charge"),
-        Parameter("alpha_ct", "1", 0.0, 1.0, ALPHA_CT, False,
-                  "charge-transfer coefficient of the polarisation (Butler-Volmer; 0: "
-                  "linear in the current)", fit=False),
     )
     #: Files of version 1 lack ``Rp_ohm``: Tremblay's polarisation resistance at full
-    #: charge is ``K`` (the same random variable, so its covariance is K's). Files of
-    #: versions 1 and 2 lack ``alpha_ct``: their polarisation was linear in the current
-    #: (``alpha_ct = 0``, held: no covariance).
-    upgrades = {1: {"Rp_ohm": "K_V_per_Ah"}, 2: {"alpha_ct": 0.0}}
+    #: charge is ``K`` (the same random variable, so its covariance is K's).
+    upgrades = {1: {"Rp_ohm": "K_V_per_Ah"}}
     states = (State("charge_Ah", "Ah", "charge"), State("i_f_A", "A", "lowpass", tau="tau_s"),
               State("temperature_C", "degC", "thermal"))
 
     # ---- physics ---------------------------------------------------------------------
     def voltage(self, p, state, current_A):
         return self._voltage(p, state["charge_Ah"], current_A, state["i_f_A"],
-                             state["temperature_C"], p["Rp_ohm"], p["alpha_ct"])
+                             state["temperature_C"], p["Rp_ohm"])
 
     # ---- fitting ------------------------------------------------------------------------
     def fit_voltage(self, p, data: Samples):
         i_f, _ = filtered_samples(data, p["tau_s"])
-        return self._voltage(p, data.charge, data.current, i_f, data.temperature, p["Rp_ohm"],
-                             p["alpha_ct"])
+        return self._voltage(p, data.charge, data.current, i_f, data.temperature, p["Rp_ohm"])
 
     def jacobian(self, p, data: Samples, names=None):
         names = self.names if names is None else tuple(names)
         if not names:
             return np.empty((data.charge.size, 0))
         i_f, s_f = filtered_samples(data, p["tau_s"])
-        columns = self._columns(p, data, i_f, p["Rp_ohm"], p["alpha_ct"])
-        columns["tau_s"] = lambda: -columns["d_pol_d_i_pol"]() * s_f
+        columns = self._columns(p, data, i_f, p["Rp_ohm"])
+        _, f, _, gain, _ = self._terms(p, data.charge, data.temperature)
+        r_pol = p["Rp_ohm"] + p["K_V_per_Ah"] * (gain - 1.0)
+        columns["tau_s"] = lambda: -f * r_pol * s_f
         return np.column_stack([columns[n]() for n in names])
 
     def start_grid(self, data: Samples, free_nonlinear):
         grid = super().start_grid(data, free_nonlinear)
         grid["tau_s"] = [POLARISATION_TAU_S]
-        if "Rp_ohm" in free_nonlinear:  # nonlinear once alpha_ct > 0: none and the step's
-            grid["Rp_ohm"] = [0.0, self.guess(data)["R_ohm"]]
         return grid
 
     def fit_bounds(self, data: Samples):
@@ -178,11 +145,9 @@ class ShepherdDynamic(ShepherdThermal):
 
     def fit_fixed(self, data: Samples):
         fixed = super().fit_fixed(data)
-        fixed["alpha_ct"] = ALPHA_CT
         if not varying_current(data):
             fixed["tau_s"] = POLARISATION_TAU_S
-            step = load_step(data, fixed.get("beta_K", BETA_PRIOR_K),
-                             fixed.get("alpha_ct", ALPHA_CT))
+            step = load_step(data, fixed.get("beta_K", BETA_PRIOR_K))
             if step is not None:
                 fixed["R_ohm"], fixed["Rp_ohm"] = step
             else:  # nothing shows the build: the polarisation at full charge comes with R
@@ -195,8 +160,7 @@ class ShepherdDynamic(ShepherdThermal):
             notes.append(f"tau_s held at {POLARISATION_TAU_S:g} s (the time constant with "
                          "which measured cells' polarisation builds after a load step): one "
                          "constant current cannot show it")
-        step = load_step(data, fixed.get("beta_K", BETA_PRIOR_K),
-                         fixed.get("alpha_ct", ALPHA_CT))
+        step = load_step(data, fixed.get("beta_K", BETA_PRIOR_K))
         if step is not None and fixed.get("R_ohm") == step[0]:
             notes.append(f"R_ohm = {1000 * step[0]:.4g} mOhm and Rp_ohm = {1000 * step[1]:.4g} "
                          "mOhm from the load step (the voltage drop over the current in the "
@@ -209,15 +173,14 @@ class ShepherdDynamic(ShepherdThermal):
         return notes
 
 
-def load_step(data: Samples, beta_K: float,
-              alpha: float = ALPHA_CT) -> tuple[float, float] | None:
+def load_step(data: Samples, beta_K: float) -> tuple[float, float] | None:
     """Series and polarisation resistance [ohm] shown by the load step of one-rate data,
     read at the reference temperature (Arrhenius ``beta_K``); the means over the curves
     that have a rest sample and a load step. None without one, or when the step is not a
     drop.
 
     The apparent resistance ``r(t) = (V_rest - V(t)) / i`` over :data:`TRANSIENT_S` is
-    fitted (linear least squares) as ``R + r_p (1 - exp(-t/tau)) + s t`` with ``tau`` at
+    fitted (linear least squares) as ``R + Rp (1 - exp(-t/tau)) + s t`` with ``tau`` at
     :data:`POLARISATION_TAU_S` and ``s t`` the open-circuit voltage falling with the
     charge: the model's own response to a step at full charge. ``R`` is thus the drop
     at the step instant extrapolated back from the seconds after it: the ohmic drop and
@@ -229,13 +192,6 @@ def load_step(data: Samples, beta_K: float,
     0. A slow drain shows nothing else that separates ``R`` and ``Rp`` from ``E0`` (one
     current), and a fit left to choose gives the step to the curve shape where eq. (6)
     misfits the open-circuit voltage (``R`` at 0 on a LiPo pack's slow drain).
-
-    The polarisation the step builds is the Butler-Volmer overpotential of the model
-    (:func:`~dischargelab.models.thermal.charge_transfer`, transfer coefficient
-    ``alpha``): with ``alpha`` > 0 the transient is read as ``R + eta(t) / (f i) + s t``
-    with ``eta = b asinh(f Rp i* / b)``, ``b = R_g T / (alpha F)``, and ``Rp`` is its
-    small-current slope; at a steady current this inverts the step's overpotential,
-    ``Rp = b sinh(eta / b) / (f i)`` (``r_p`` itself when ``alpha`` is 0).
     """
     r_s, rp_s = [], []
     for k in range(data.n_curves):
@@ -260,47 +216,14 @@ def load_step(data: Samples, beta_K: float,
             basis = np.column_stack([np.ones(w.sum()), -np.expm1(-t[w] / POLARISATION_TAU_S),
                                      t[w]])
             (r0, rp, _), *_ = np.linalg.lstsq(basis, r[w], rcond=None)
-            rp = max(float(rp), 0.0)
-            if alpha > 0 and rp > 0:
-                r0, rp = _butler_volmer_step(t[w], r[w], f[w] * data.current[on][w],
-                                             data.temperature[on][w], alpha, rp)
         else:
             r0, rp = r[0], 0.0
         r_s.append(float(r0))
-        rp_s.append(float(rp))
+        rp_s.append(max(float(rp), 0.0))
     if not r_s or not np.mean(r_s) > 0:
         return None
     upper = ShepherdThermal().parameter("R_ohm").upper
     return float(min(np.mean(r_s), upper)), float(min(np.mean(rp_s), upper))
-
-
-def _butler_volmer_step(t, r, drive, temperature, alpha, rp_linear):
-    """``(R, Rp)`` [ohm] of a load step's apparent resistance ``r`` [ohm] at times ``t``
-    [s] read as the model's own response: ``R + eta(t) / drive + s t``, ``eta`` the
-    Butler-Volmer overpotential of ``f Rp i*`` (:func:`charge_transfer`), ``i*`` the
-    filtered current building as ``i (1 - exp(-t/tau))``, ``drive`` = ``f i`` [A]. ``Rp``
-    by a bounded scalar search from the linear reading ``rp_linear``; ``R`` and ``s`` by
-    linear least squares at each trial."""
-    from scipy.optimize import minimize_scalar
-
-    build = -np.expm1(-t / POLARISATION_TAU_S)
-    basis = np.column_stack([np.ones(t.size), t])
-
-    def shape(rp):
-        return charge_transfer(rp * drive * build, alpha, temperature)[0] / drive
-
-    def cost(rp):
-        y = r - shape(rp)
-        coef, *_ = np.linalg.lstsq(basis, y, rcond=None)
-        return float(np.sum((basis @ coef - y) ** 2))
-
-    upper = ShepherdThermal().parameter("R_ohm").upper
-    hi = min(upper, 20.0 * rp_linear)
-    best = minimize_scalar(cost, bounds=(0.0, hi), method="bounded",
-                           options={"xatol": 1e-7, "maxiter": 200})
-    rp = float(best.x)
-    coef, *_ = np.linalg.lstsq(basis, r - shape(rp), rcond=None)
-    return float(coef[0]), rp
 
 
 def varying_current(data: Samples) -> bool:

@@ -35,7 +35,6 @@ import numpy as np
 
 from .base import (
     REFERENCE_TEMPERATURE_C,
-    ZERO_CELSIUS_K,
     Family,
     Parameter,
     Samples,
@@ -53,9 +52,6 @@ BETA_SPAN_K = 15.0
 
 #: Curves whose ambient temperatures span at least this much [K] determine dE0/dT, dC/dT.
 AMBIENT_SPAN_K = 8.0
-
-#: Faraday constant over the gas constant [K/V] (96,485.33 C/mol / 8.314463 J/(mol K)).
-F_OVER_R_K_PER_V = 96485.33212 / 8.314462618
 
 #: Default heat capacity per Ah of capacity [J/(K Ah)] (an 18650 of 3 Ah is ~45 J/K).
 HEAT_CAPACITY_PER_AH = 15.0
@@ -100,31 +96,23 @@ class ShepherdThermal(Family):
         return self._voltage(p, state["charge_Ah"], current_A, current_A,
                              state["temperature_C"])
 
-    def _voltage(self, p, q, i, i_pol, temperature, r_pol=None, alpha=None):
+    def _voltage(self, p, q, i, i_pol, temperature, r_pol=None):
         """Eq. (6) with temperature [V per cell]: the series resistance carries the current
         ``i`` [A], the polarisation term the current ``i_pol`` [A] (``i`` itself here).
 
         The polarisation resistance is ``r_pol + K (C/(C - q) - 1)`` [ohm] (before
         Arrhenius): ``r_pol`` at full charge, growing towards the knee with ``K``;
-        Tremblay's ``K C/(C - q)`` when ``r_pol`` is None (``r_pol = K``). With a
-        charge-transfer coefficient ``alpha`` the drop ``f r_pol i_pol`` is the
-        Butler-Volmer overpotential :func:`charge_transfer` of that linear drop."""
+        Tremblay's ``K C/(C - q)`` when ``r_pol`` is None (``r_pol = K``)."""
         q = np.asarray(q, dtype=float)
         i = np.asarray(i, dtype=float)
-        i_pol = np.asarray(i_pol, dtype=float)
         dt, f, cap, gain, _ = self._terms(p, q, temperature)
         ok = q < cap
         gain = np.where(ok, gain, 0.0)
         k = p["K_V_per_Ah"]
-        if r_pol is None:
-            pol = f * k * gain * i_pol
-        elif alpha is None:
-            pol = f * (r_pol + k * (gain - 1.0)) * i_pol
-        else:
-            pol = f * k * (gain - 1.0) * i_pol + charge_transfer(f * r_pol * i_pol, alpha,
-                                                                 temperature)[0]
-        v = (p["E0_V"] + p["dE0_dT_V_per_K"] * dt - p["R_ohm"] * f * i - pol
-             - k * f * gain * q + p["A_V"] * np.exp(-p["B_per_Ah"] * q))
+        r = k * gain if r_pol is None else r_pol + k * (gain - 1.0)
+        v = (p["E0_V"] + p["dE0_dT_V_per_K"] * dt - p["R_ohm"] * f * i
+             - f * r * np.asarray(i_pol, dtype=float) - k * f * gain * q
+             + p["A_V"] * np.exp(-p["B_per_Ah"] * q))
         return np.where(ok, v, -np.inf)
 
     def capacity_Ah(self, p, state):
@@ -143,14 +131,11 @@ class ShepherdThermal(Family):
         columns = self._columns(p, data, data.current)
         return np.column_stack([columns[n]() for n in names])
 
-    def _columns(self, p, data: Samples, i_pol, r_pol=None, alpha=None) -> dict:
+    def _columns(self, p, data: Samples, i_pol, r_pol=None) -> dict:
         """The Jacobian's columns (each computed when called), the polarisation term
         reading the current ``i_pol`` [A] (the current itself here) with the polarisation
         resistance of :meth:`_voltage` (``r_pol``: its value at full charge, a parameter
-        ``Rp_ohm`` of its own; None: Tremblay's ``K C/(C - q)``; ``alpha``: the
-        charge-transfer coefficient ``alpha_ct`` of its Butler-Volmer overpotential).
-        ``"d_pol_d_i_pol"`` is the derivative of the polarisation drop with respect to
-        ``i_pol`` [ohm] (for a filtered current's time constant)."""
+        ``Rp_ohm`` of its own; None: Tremblay's ``K C/(C - q)``)."""
         i, q, temp = data.current, data.charge, data.temperature
         dt, f, cap, gain, denom = self._terms(p, q, temp)
         pol = i_pol + q
@@ -159,19 +144,12 @@ class ShepherdThermal(Family):
         d_cap = k * f * pol * q / denom**2
         d_k = gain * pol if r_pol is None else gain * pol - i_pol
         r = k * gain if r_pol is None else r_pol + k * (gain - 1.0)
-        slope = np.ones_like(q)  # d(overpotential) / d(linear drop f Rp i_pol)
-        d_alpha = np.zeros_like(q)
-        if r_pol is not None and alpha is not None:
-            x = f * r_pol * i_pol
-            _, slope, d_alpha, _ = charge_transfer(x, alpha, temp)
-            r = k * (gain - 1.0) + r_pol * slope
         zero = np.zeros_like(q)
         columns = {
             "E0_V": lambda: np.ones_like(q),
             "R_ohm": lambda: -f * i,
             "K_V_per_Ah": lambda: -f * d_k,
-            "Rp_ohm": lambda: -f * i_pol * slope,
-            "alpha_ct": lambda: -d_alpha,
+            "Rp_ohm": lambda: -f * i_pol,
             "A_V": lambda: expo,
             "dE0_dT_V_per_K": lambda: dt,
             "B_per_Ah": lambda: -p["A_V"] * q * expo,
@@ -181,7 +159,6 @@ class ShepherdThermal(Family):
             * arrhenius_dbeta(temp),
             "Cth_J_per_K": lambda: zero,
             "Rth_K_per_W": lambda: zero,
-            "d_pol_d_i_pol": lambda: f * r,
         }
         return columns
 
@@ -206,54 +183,6 @@ class ShepherdThermal(Family):
             fixed["dE0_dT_V_per_K"] = 0.0
             fixed["dC_dT_Ah_per_K"] = 0.0
         return fixed
-
-
-def charge_transfer(x_V, alpha, temperature_C):
-    """Charge-transfer overpotential [V] of a symmetric Butler-Volmer reaction whose
-    linear drop (small-current limit, ``R_ct i``) is ``x_V`` [V].
-
-    ``eta = b asinh(x / b)`` with ``b = R_g T / (alpha F)`` per cell (``alpha`` the
-    transfer coefficient; 0.5 gives ``b = 2 R_g T / F`` = 51.4 mV at 25 degC): linear,
-    ``eta = x``, at small current and logarithmic (Tafel) at large [1]_ [2]_. ``alpha``
-    = 0 is the linear limit exactly.
-
-    Parameters
-    ----------
-    x_V : numpy.ndarray
-        Linear drop ``R_ct i`` [V] (signed: a charge current gives a negative drop).
-    alpha : float or numpy.ndarray
-        Transfer coefficient [-] (>= 0).
-    temperature_C : float or numpy.ndarray
-        Cell temperature [degC].
-
-    Returns
-    -------
-    eta, d_eta_dx, d_eta_dalpha, d_eta_dT : numpy.ndarray
-        Overpotential [V] and its partial derivatives with respect to ``x`` [-], ``alpha``
-        [V] and the temperature at fixed ``x`` [V/K].
-
-    References
-    ----------
-    .. [1] A. J. Bard, L. R. Faulkner, Electrochemical Methods, 2nd ed., Wiley (2001),
-       eq. 3.4.11 (Butler-Volmer) and its symmetric form ``i = 2 i0 sinh(alpha F eta /
-       R T)``.
-    .. [2] J. Newman, K. E. Thomas-Alyea, Electrochemical Systems, 3rd ed., Wiley (2004),
-       ch. 8.
-    """
-    x = np.asarray(x_V, dtype=float)
-    t_k = np.asarray(temperature_C, dtype=float) + ZERO_CELSIUS_K
-    u = np.asarray(alpha, dtype=float) * F_OVER_R_K_PER_V / t_k  # 1 / b [1/V]
-    z = u * x
-    small = np.abs(z) < 1e-3
-    z_safe = np.where(small, 1.0, z)
-    z2 = z * z
-    asinhc = np.where(small, 1.0 - z2 / 6.0, np.arcsinh(z_safe) / z_safe)
-    slope = 1.0 / np.sqrt(1.0 + z2)
-    # (z / sqrt(1 + z^2) - asinh z) / z^3, its series near 0
-    g = np.where(small, -1.0 / 3.0 + 0.3 * z2,
-                 (z_safe / np.sqrt(1.0 + z_safe**2) - np.arcsinh(z_safe)) / z_safe**3)
-    d_u = g * x**3 * u  # d eta / d u
-    return x * asinhc, slope, d_u * F_OVER_R_K_PER_V / t_k, -d_u * u / t_k
 
 
 def thermal_bounds(data: Samples) -> dict:
