@@ -20,6 +20,7 @@ BENCHMARKS = {
     "one_rate_errors.py": (["--cells", "enertech", "--families", "shepherd", "--no-two-rate"],
                            "leave one cell out"),
     "next_test.py": (["--cells", "enertech"], "Predicted within a factor"),
+    "step_polarisation.py": (["--cells", "enertech"], "best alpha"),
     "mission_speed.py": (["--repeats", "1"], "Table 5"),
     "io_read_speed.py": (["--repeats", "1", "--rows", "20000"], "ms"),
     "acquire_throughput.py": (["--seconds", "5"], "corrupt"),
