@@ -270,10 +270,7 @@ class DaskExecutor:
                 return False
             # sealed: Dask's graph parser walks a plain argument's lists and dicts object by
             # object (0.14 s for one pack's figures job of ~25,000 numbers, in this process)
-            if len(group) == 1:
-                future = self.client.submit(run_sealed, func, Sealed(group[0]), pure=False)
-            else:
-                future = self.client.submit(run_batch, func, Sealed(group), pure=False)
+            future = self.client.submit(run_batch, func, Sealed(group), pure=False)
             pending[future.key] = (future, group)
             done.add(future)
             return True
@@ -288,8 +285,6 @@ class DaskExecutor:
                 _, group = pending.pop(future.key)
                 try:
                     outcomes = future.result()
-                    if len(group) == 1:
-                        outcomes = [outcomes]
                 except KilledWorker:
                     if len(group) > 1:   # one of them crashes its reader: find which
                         alone.extend(group)
@@ -548,11 +543,6 @@ class Sealed:
 
     def __init__(self, value: Any):
         self.value = value
-
-
-def run_sealed(func: Callable[[Any], Any], item: Sealed) -> Any:
-    """``func`` of a sealed item on a worker (its exception propagates, as a task's)."""
-    return func(item.value)
 
 
 def run_batch(func: Callable[[Any], Any], items: Sealed) -> list:
