@@ -56,6 +56,7 @@ the slow -> fast figure itself is measured on the synthetic pack only.
 Goals (issue): endurance within 5 %, voltage RMS <= 1.3 % on ~27 A flights.
 
 Usage: python benchmarks/slow_to_fast.py [--data DIR] [--cells samsung,enertech,...|none]
+       [--logs auto,shepherd-dynamic,shepherd-thermal|none] [--bootstrap N]
        [--plot FIGURE.png]
 """
 
@@ -296,12 +297,23 @@ def pct_rms(row, pack_mean_V):
     return float("nan") if value is None else 100.0 * value / pack_mean_V
 
 
+#: Models fitted to the real log, with their row labels.
+LOG_MODELS = {"auto": "auto, thermal prior (airflow)",
+              "shepherd-dynamic": "shepherd-dynamic (tau from the flight)",
+              "shepherd-thermal": "shepherd-thermal"}
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=None,
                         help="shared data folder (default: ../shared/data beside the repo)")
     parser.add_argument("--cells", default=",".join(SLOW_CELLS),
                         help="cells whose slowest run is fitted alone (default all; 'none')")
+    parser.add_argument("--logs", default=",".join(LOG_MODELS),
+                        help="models fitted to the real INA3221 log (default all: "
+                             f"{','.join(LOG_MODELS)}; 'none')")
+    parser.add_argument("--bootstrap", type=int, default=30,
+                        help="bootstrap replicas of the bench fits (default 30)")
     parser.add_argument("--plot", type=Path, default=None,
                         help="draw the auto paths (and the bench path before) flying the 27 A "
                              "flight to this PNG")
@@ -341,12 +353,13 @@ def main(argv=None):
                             bounds=dynamics_free(), bootstrap=0)),
             ("bench discharge, auto (shepherd-dynamic: R and Rp from the load step, Tremblay's "
              "filtered current; thermal prior: still air)",
-             lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30)),
+             lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=args.bootstrap)),
             ("bench discharge, shepherd-thermal (auto before; thermal prior: still air)",
-             lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30,
+             lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=args.bootstrap,
                             model="shepherd-thermal")),
             ("bench discharge, auto, cooling=None (held at the ambient: eq. 6)",
-             lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=30, cooling=None)),
+             lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=args.bootstrap,
+                            cooling=None)),
         ]
         print("| fitted on the slow drain | model | endurance error, fast drain | 95 % "
               "interval [s] (truth) | warnings | voltage RMS, fast drain | voltage RMS, "
@@ -373,7 +386,12 @@ def main(argv=None):
     names = [n for n in args.cells.split(",") if n and n != "none"]
     if names and data is not None and (data / "samsung30q_S001").is_dir():
         slow_cells(data, names)
-    if data is not None and (data / "flight_logs" / "ina3221_fpv_4s").is_dir():
+    log_models = [m for m in args.logs.split(",") if m and m != "none"]
+    unknown = sorted(set(log_models) - set(LOG_MODELS))
+    if unknown:
+        parser.error(f"--logs: unknown {', '.join(unknown)}; choose from "
+                     f"{', '.join(LOG_MODELS)} or 'none'")
+    if log_models and data is not None and (data / "flight_logs" / "ina3221_fpv_4s").is_dir():
         folder = data / "flight_logs" / "ina3221_fpv_4s"
         print("\n## Real logs: 29.csv fitted as a flight log, flying 29.csv and 28.csv\n")
         print("| fit of 29.csv | model | voltage RMS, 29.csv (same pack, 24 A) | voltage RMS, "
@@ -381,9 +399,8 @@ def main(argv=None):
         print("|---|---|---:|---:|")
         from dischargelab.flight import fit_flights
 
-        for label, model in (("auto, thermal prior (airflow)", "auto"),
-                             ("shepherd-dynamic (tau from the flight)", "shepherd-dynamic"),
-                             ("shepherd-thermal", "shepherd-thermal")):
+        for model in log_models:
+            label = LOG_MODELS[model]
             flights = flight_curves(folder / "29.csv", capacity_Ah=1.6)
             res = fit_flights(flights, model=model)
             cells = []
