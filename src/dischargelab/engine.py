@@ -429,7 +429,7 @@ def _dt_for(pack, st, state, steps_per_discharge, max_dt_s=MAX_DT_S):
     m = state["charge_Ah"].size
     end = st.end_s
     if st.kind == "profile":
-        t = np.asarray(st.profile_time_s, dtype=float)
+        t = st.profile_arrays[0]
         gaps = np.diff(np.r_[0.0, t])
         typical = float(np.median(gaps[gaps > 0])) if (gaps > 0).any() else 1.0
         return np.full(m, min(MAX_DT_S, max(typical, 1e-3)))
@@ -474,7 +474,7 @@ def _run_step(pack, st, k, state, active, ended, t_now, energy, vmin, peak_t, cu
         idx = running
         h = dt.copy()
         if st.kind == "profile":
-            t = np.asarray(st.profile_time_s, dtype=float)
+            t = st.profile_arrays[0]
             nxt = t[np.clip(np.searchsorted(t, t_in, side="right"), 0, t.size - 1)]
             h = np.where(nxt > t_in, np.minimum(nxt - t_in, dt), dt)
         if end is not None:
