@@ -29,6 +29,9 @@ Data sets (real ones from ``../shared/data``, simulated ones from ``tests/data/v
 * ``nmc``, ``lfp``, ``lco``: PyBaMM DFN virtual cells (``tests/data/virtual/index.json``:
   rate, current, ambient, cutoff); NMC 1C also at 10 and 40 degC ambient. The
   NMC mission (variable current) is not a constant-rate run and is not used.
+* ``lco-pouch``, ``nmc-pouch``, ``nca``, ``nmc532``, ``lfp-a123``: the PyBaMM cells of the
+  measured one-rate error at 25 degC, fitted on 1C + 3C (the two-rate pouch fits), 0.2C,
+  0.5C and 2C predicted.
 * ``nmc15`` ... ``lco35``: the same cells at 15 and 35 degC, fitted on 0.2C + 2C;
   ``lfp-spme``, ``lfp-spme15``: the LFP plateau set (SPMe, to 2.5 V, 5 s samples),
   fitted on 1C and on 0.2C + 2C.
@@ -165,6 +168,11 @@ EXTRA_VIRTUAL = {
 }
 EXTRA_TRAININGS = [("0.2C", "2C")]
 SPME_TRAININGS = [("1C",), ("0.2C", "2C")]
+#: Virtual cells of the measured one-rate error (0.2C-3C at 25 degC) fitted on 1C + 3C,
+#: the other runs (2C between them) predicted: the two-rate pouch fits.
+TWO_RATE_VIRTUAL = {"lco-pouch": "LCO-POUCH", "nmc-pouch": "NMC-POUCH", "nca": "NCA",
+                    "nmc532": "NMC532", "lfp-a123": "LFP-A123"}
+TWO_RATE_TRAININGS = [("1C", "3C")]
 #: Ambients of the main 25 degC virtual sets (NMC 1C also at 10 and 40 degC).
 MAIN_AMBIENTS_C = (10.0, 25.0, 40.0)
 
@@ -194,6 +202,8 @@ def load_virtual(chemistry: str, ambient_C: float | None = None):
         else:
             title = f"virtual {chemistry} {ambient_C:g}degC"
             trainings = SPME_TRAININGS if "SPMe" in chemistry else EXTRA_TRAININGS
+            if chemistry in TWO_RATE_VIRTUAL.values():
+                trainings = TWO_RATE_TRAININGS
         return (title, runs, trainings)
     return loader
 
@@ -203,6 +213,7 @@ SETS = {
     "enertech": load_enertech, "k2": load_k2,
     "nmc": load_virtual("NMC"), "lfp": load_virtual("LFP"), "lco": load_virtual("LCO"),
     **{key: load_virtual(name, amb) for key, (name, amb) in EXTRA_VIRTUAL.items()},
+    **{key: load_virtual(name, 25.0) for key, name in TWO_RATE_VIRTUAL.items()},
 }
 REAL_SETS = ("samsung", "samsung-notemp", "enertech", "k2")
 
@@ -477,6 +488,16 @@ def acceptance(rows, families):
                      f"{VIRTUAL_LIMIT:g} % ({len(sel)} runs in "
                      f"{len({r['set'] for r in sel})} sets): worst {fmt_worst(sel)} -> "
                      f"{verdict(good)}" + (f" [over 1 %: {per_set}]" if per_set else ""))
+    # 3. the two-rate pouch fits: 1C + 3C -> 2C within 2 % ("every multi-rate fit")
+    for fam in families:
+        sel = [r for r in rows if r["family"] == fam and r["train"] == ("1C", "3C")
+               and r["test"] == "2C" and r["set"] in TWO_RATE_VIRTUAL]
+        if sel:
+            w, n_fail = worst(sel)
+            good = w is not None and n_fail == 0 and abs(w["error_pct"]) <= VIRTUAL_LIMIT
+            each = ", ".join(f"{r['set']} {fmt_err(r)}" for r in sel)
+            lines.append(f"- two-rate virtual cells, {fam} fitted on 1C + 3C, held-out 2C within "
+                         f"{VIRTUAL_LIMIT:g} %: {each} -> {verdict(good)}")
     # 4. multi-rate fits on real cells (Samsung, Enertech) worst held-out <= 2 %
     parts = []
     for fam in families:
