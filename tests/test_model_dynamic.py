@@ -17,7 +17,7 @@ from dischargelab.models.dynamic import POLARISATION_TAU_S
 DYN = get_family("shepherd-dynamic")
 CELL = dict(E0_V=3.75, R_ohm=0.03, K_V_per_Ah=0.015, Rp_ohm=0.015, A_V=0.35, B_per_Ah=2.0, C_Ah=3.1,
             dE0_dT_V_per_K=0.0, dC_dT_Ah_per_K=0.0, beta_K=2500.0, Cth_J_per_K=1e6,
-            Rth_K_per_W=25.0, tau_s=POLARISATION_TAU_S, G_ct_per_A=0.0)
+            Rth_K_per_W=25.0, tau_s=POLARISATION_TAU_S)
 
 
 def _step_response(current_A, seconds):

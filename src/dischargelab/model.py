@@ -193,8 +193,7 @@ class Battery:
         added = {new: old for v, pairs in fam.upgrades.items() if version <= v
                  for new, old in pairs.items()}
         values = dict(data["parameters"])
-        values.update({n: o if isinstance(o, float) else values[o] for n, o in added.items()
-                       if n not in values and (isinstance(o, float) or o in values)})
+        values.update({n: values[o] for n, o in added.items() if n not in values and o in values})
         params = CellParameters.from_dict(values, fam.names)
         cov = None
         if data.get("covariance"):
@@ -212,19 +211,13 @@ class Battery:
             if cov.shape != (len(names), len(names)):
                 raise DataError(f"battery file covariance must be {len(names)}x{len(names)}, "
                                 f"got {cov.shape}")
-            # an older file's parameter that equalled another: the same row and column;
-            # one held at a constant: no variance
-            held = [n for n in fam.names if n not in names and isinstance(added.get(n), float)]
+            # an older file's parameter that equalled another: the same row and column
             source = [names.index(n) if n in names else
-                      names.index(added[n]) if added.get(n) in names else
-                      0 if n in held else -1 for n in fam.names]
+                      names.index(added[n]) if added.get(n) in names else -1 for n in fam.names]
             if len(set(names)) != len(names) or not set(names) <= set(fam.names) \
                     or min(source) < 0:
                 raise DataError("battery file covariance has unexpected parameter names")
             cov = cov[np.ix_(source, source)]
-            zero = [fam.names.index(n) for n in held]
-            cov[zero, :] = 0.0
-            cov[:, zero] = 0.0
         known = {"model", "model_version", "written_by", "name", "chemistry", "cells_series",
                  "strings_parallel", "parameters", "fit_currents_A", "covariance"}
         try:

@@ -298,9 +298,8 @@ class Family:
     steady_prior_carries: tuple = ()
     steady_prior_note: str = ""
     #: Parameters a battery file of an older :attr:`version` lacks: ``{version: {new
-    #: parameter: the parameter it equalled in files of that version and older, or the
-    #: float it was held at}}`` (:meth:`dischargelab.model.Battery.from_dict` copies the
-    #: value and covariance; a held float has no variance).
+    #: parameter: the parameter it equalled in files of that version and older}}``
+    #: (:meth:`dischargelab.model.Battery.from_dict` copies its value and covariance).
     upgrades: dict = {}
 
     # ---- parameters -------------------------------------------------------------

@@ -92,7 +92,7 @@ class ShepherdDynamic(ShepherdThermal):
     #: At several constant rates the filtered current equals the current after the first
     #: minute of each run: the fit is shepherd-thermal's, which ``auto`` already compares.
     several_rates_candidate = False
-    version = 3
+    version = 2
     title = ("modified Shepherd with Tremblay's filtered current, temperature and a lumped "
              "thermal model")
     description = ("eq. 6 whose polarisation (Rp + K (C/(C-q) - 1)) i* reads the current "
@@ -110,9 +110,7 @@ class ShepherdDynamic(ShepherdThermal):
     )
     #: Files of version 1 lack ``Rp_ohm``: Tremblay's polarisation resistance at full
     #: charge is ``K`` (the same random variable, so its covariance is K's).
-    #: Files of versions 1 and 2 have a fast drop linear in the current (``G_ct_per_A``
-    #: = 0, held).
-    upgrades = {1: {"Rp_ohm": "K_V_per_Ah"}, 2: {"G_ct_per_A": 0.0}}
+    upgrades = {1: {"Rp_ohm": "K_V_per_Ah"}}
     states = (State("charge_Ah", "Ah", "charge"), State("i_f_A", "A", "lowpass", tau="tau_s"),
               State("temperature_C", "degC", "thermal"))
 
