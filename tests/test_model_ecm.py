@@ -183,6 +183,27 @@ def test_heat_includes_the_diffusion_overpotential():
     assert ECM.heat_W(TRUE, state, 1.0) > 1.0 * TRUE["R0_ohm"] * 1.0 * 0.99
 
 
+def test_thermal_fit_reads_the_heat_of_the_rc_pairs_as_they_build():
+    """A slow RC pair (40 min) carries only part of its steady drop during a 1C or 2C
+    run: the regression of the logged temperature takes the heat the model makes along
+    the run (its filtered currents), so it gives back the heat capacity and thermal
+    resistance that wrote the temperature (read at the steady drop, the heat was too
+    large and the heat capacity came out several times too large)."""
+    from dischargelab.models.base import fit_lumped_thermal
+
+    true = dict(TRUE, R2_ohm=0.08, tau2_s=2400.0, Cth_J_per_K=45.0, Rth_K_per_W=12.0)
+    curves = []
+    for rate in (1.0, 2.0):
+        s = _discharge(true, rate * true["C_Ah"]).series
+        curves.append((s["time_s"], s["current_A"], s["voltage_V"], s["temperature_C"]))
+    data = _samples(curves, [true["U_full_V"]] * 2)
+    assert np.ptp(curves[1][3]) > 5.0
+    got = fit_lumped_thermal(ECM, dict(true, Cth_J_per_K=10.0, Rth_K_per_W=1.0), data)
+    assert got["heat_capacity_fitted"]
+    assert got["Cth_J_per_K"] == pytest.approx(45.0, rel=0.03)
+    assert got["Rth_K_per_W"] == pytest.approx(12.0, rel=0.05)
+
+
 # ---- (5) recovery of known parameters --------------------------------------------------------
 def _synthetic(rates_C=(0.2, 2.0), noise_V=0.001, seed=0):
     """Engine discharges to the cutoff from TRUE with Gaussian noise and a rest point."""
