@@ -22,6 +22,7 @@ BENCHMARKS = {
                            "leave one cell out"),
     "next_test.py": (["--cells", "enertech"], "Predicted within a factor"),
     "step_polarisation.py": (["--cells", "enertech"], "best alpha"),
+    "two_rate_residuals.py": (["--cases", "nca/shepherd"], "time-to-cutoff error"),
     "mission_speed.py": (["--repeats", "1"], "Table 5"),
     "io_read_speed.py": (["--repeats", "1", "--rows", "20000"], "ms"),
     "acquire_throughput.py": (["--seconds", "5"], "corrupt"),
