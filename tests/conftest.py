@@ -1,6 +1,8 @@
 """Shared fixtures: where the real measured data sets live."""
 
 import os
+import signal
+import threading
 from pathlib import Path
 
 import pytest
@@ -18,6 +20,34 @@ settings.register_profile(
 settings.load_profile("dischargelab")
 
 REPO = Path(__file__).resolve().parents[1]
+
+#: No test may run longer than this [s] (the slowest take about a minute on a busy 2-core
+#: machine): a test waiting on a server or a cluster that never answers fails, with the
+#: place it waited, instead of holding the suite until the CI job's own limit.
+TEST_LIMIT_S = int(os.environ.get("DISCHARGELAB_TEST_LIMIT_S", "600"))
+
+
+class TestTooLong(Exception):
+    """Raised in a test that ran past :data:`TEST_LIMIT_S`."""
+
+
+@pytest.fixture(autouse=True)
+def bounded_in_time(request):
+    """Every test is bounded in time (SIGALRM in the main thread, POSIX)."""
+    if not hasattr(signal, "SIGALRM") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def too_long(signum, frame):
+        raise TestTooLong(f"{request.node.nodeid} ran longer than {TEST_LIMIT_S} s")
+
+    previous = signal.signal(signal.SIGALRM, too_long)
+    signal.alarm(TEST_LIMIT_S)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def _find_shared_data() -> Path | None:
