@@ -100,6 +100,11 @@ def test_local_cluster_same_results_bounded_submission_and_a_crashing_task():
         assert "item 1 is odd" in str(refused[1])
 
         outcomes = dict(ex.map_unordered(crash_on_seven, range(12)))
+        # the workers that replaced the dead ones are forked from the fork server, like the
+        # first (spawned ones would import everything again: slow, and seen never to come up)
+        parents = {ppid for _, ppid in ex.map_unordered(parent_pid, range(8))}
+        if sys.platform != "win32":
+            assert os.getpid() not in parents, parents
         batched = dict(ex.map_unordered(crash_on_seven, range(12), per_task=4))
         grouped = dict(ex.map_unordered(square_slowly, range(30), per_task=4))
     assert sorted(grouped) == list(range(30))

@@ -186,15 +186,19 @@ class DaskExecutor:
         from distributed import Client, LocalCluster
 
         self.cluster = None
+        self._start_method = None
         try:
             if scheduler is None:
+                # a nanny reads the start method again each time it restarts a worker that
+                # died: it stays set while the cluster runs (else a restarted worker is
+                # spawned, importing everything again, instead of forked from the server)
+                self._start_method = dask.config.set(
+                    {"distributed.worker.multiprocessing-method": _start_method()})
                 # one task per worker at a time: a worker that dies takes only the task it
                 # was running with it (queued ones would count a death too)
                 with dask.config.set({"distributed.scheduler.allowed-failures":
                                       WORKER_DEATHS_ALLOWED,
                                       "distributed.scheduler.worker-saturation": 1.0,
-                                      "distributed.worker.multiprocessing-method":
-                                      _start_method(),
                                       **QUIET_WORKERS}):
                     # no dashboard; the status servers Dask always runs listen on
                     # loopback only, on free ports
@@ -336,6 +340,9 @@ class DaskExecutor:
         if self.cluster is not None:
             self.cluster.close()
             self.cluster = None
+        if getattr(self, "_start_method", None) is not None:
+            self._start_method.__exit__(None, None, None)
+            self._start_method = None
 
     def __enter__(self) -> DaskExecutor:
         return self
