@@ -13,6 +13,7 @@ from dischargelab.logbook.estimates import (
     OCV_AGEING_SD,
     OcvCurve,
     capacity_between_rests,
+    charge_start_corrections,
     counted_charge,
     regression_resistance,
     relaxation,
@@ -108,6 +109,45 @@ def test_relaxation_of_a_short_rest_uses_a_prior_wider_than_a_fit():
 
 
 # --------------------------------------------------------------------------- charge
+
+def _charge_starts(phases, *, current=3.0, dt=166.5, step_V=0.09, rise_V=0.055, seed=0):
+    """Starts of charges at ``current`` sampled every ``dt``, each stepping up after
+    ``phases[k] * dt`` into its first interval: the first sample lies ``step_V`` plus the
+    rise of the charged share of an interval above the rest (0.3 mV of noise)."""
+    rng = np.random.default_rng(seed)
+    starts = []
+    for p in phases:
+        first = 3.68 + step_V + rise_V * (1 - p) + rng.normal(0, 3e-4)
+        starts.append({"interval_s": dt, "rest_V": 3.68, "first_V": first, "first_A": current,
+                       "next_V": first + rise_V, "next_A": current, "next_interval_s": dt})
+    return starts
+
+
+def test_a_charge_start_between_two_samples_is_placed_by_the_first_ones_voltage():
+    """The trapezoid counts half an interval of current whenever the charger stepped up;
+    the first sample's voltage says how much of the interval was charging."""
+    phases = np.random.default_rng(3).uniform(0, 1, 40)
+    starts = _charge_starts(phases)
+    added = np.array(charge_start_corrections(starts))
+    truth = 3.0 * 166.5 * (0.5 - phases) / 3600.0   # what the trapezoid missed [Ah]
+    assert np.max(np.abs(truth)) > 0.05                # up to 0.07 Ah of a 1.7 Ah charge
+    # what is left: the like charges' median phase is 1/2 only to ~1/sqrt(4 n)
+    assert np.sqrt(np.mean((added - truth) ** 2)) < 0.3 * np.sqrt(np.mean(truth ** 2))
+    assert np.max(np.abs(added - truth)) < 0.02
+    # a first sample inside the charger's ramp: the start was just before it
+    ramp = dict(starts[0], first_A=0.4, first_V=3.69)
+    (placed,) = charge_start_corrections(starts[:20] + [ramp])[20:]
+    assert placed == pytest.approx((0.5 * 3.0 - 0.4) * 166.5 / 3600.0)
+
+
+def test_a_charge_start_is_placed_only_among_enough_like_charges():
+    starts = _charge_starts(np.linspace(0.05, 0.95, 7))
+    assert charge_start_corrections(starts) == [None] * 7          # 7 < 8 like charges
+    other = _charge_starts(np.linspace(0.05, 0.95, 8), current=1.5)
+    mixed = charge_start_corrections(starts + other)
+    assert mixed[:7] == [None] * 7 and all(a is not None for a in mixed[7:])
+    assert charge_start_corrections([None, None]) == [None, None]
+
 
 def test_counted_charge_is_exact_for_steady_samples_and_honest_for_sparse_ones():
     t = np.arange(0.0, 3601.0, 1.0)

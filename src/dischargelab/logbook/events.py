@@ -655,6 +655,8 @@ def _load_event(log: LogArrays, spans: list[Span], k: int, rests: dict, ambient,
     if sp.kind == "charge":
         details["charge"] = charge_figures(part.time_s, part.voltage_V, part.current_A,
                                            cells=cells)
+        if sp.rows >= 2 and k > 0 and spans[k - 1].kind == "rest" and spans[k - 1].rows:
+            details["charge"]["start"] = charge_start(log, sp.start)
     # what the load moved, with its first and last steps: from the sample before it to the
     # one after it (a coarse log loses up to a sample interval at each end), and its curve
     # over the same samples (the rests' voltages at its ends), so that the curve's charge
@@ -673,6 +675,16 @@ def _load_event(log: LogArrays, spans: list[Span], k: int, rests: dict, ambient,
         event["curve"] = compact_curve(sign * q, log.voltage_V[lo:hi], sign * i_b,
                                        int(min(CURVE_POINTS, hi - lo)))
     return event
+
+
+def charge_start(log: LogArrays, a: int) -> dict:
+    """The samples around a charge's start (row ``a`` its first, ``a - 1`` a rest's last):
+    what :func:`~dischargelab.logbook.estimates.charge_start_corrections` places the start
+    inside that sample interval with. Currents positive into the pack [A], voltages [V]."""
+    t, v, i = log.time_s, log.voltage_V, log.current_A
+    return {"interval_s": float(t[a] - t[a - 1]), "rest_V": float(v[a - 1]),
+            "first_V": float(v[a]), "first_A": float(-i[a]), "next_V": float(v[a + 1]),
+            "next_A": float(-i[a + 1]), "next_interval_s": float(t[a + 1] - t[a])}
 
 
 def _temperatures(temperature_C, rest: dict | None, ambient_C) -> dict:

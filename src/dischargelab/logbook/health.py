@@ -52,7 +52,8 @@ the database.
 * **Outliers.** An over- or undercharged cycle shows as a capacity off the local
   trend: residual from a robust line through the :data:`OUTLIER_NEIGHBOURS` events on
   each side, modified z-score ``0.6745 r / MAD`` above :data:`OUTLIER_Z` (Iglewicz &
-  Hoaglin 1993). Outliers are flagged and left out of the trend.
+  Hoaglin 1993), among the estimates made the same way from the same kind of event
+  (charges apart from discharges). Outliers are flagged and left out of the trend.
 
 References
 ----------
@@ -76,6 +77,7 @@ from .estimates import (
     OCV_AGEING_SD,
     OcvCurve,
     capacity_between_rests,
+    charge_start_corrections,
     resistance_at_reference,
     soc_reading,
     systematic_share,
@@ -491,6 +493,7 @@ class PackContext:
     prior: OcvCurve
     full_cell_V: float
     label_Ah: float | None = None
+    start_added_Ah: dict = field(default_factory=dict)   # position -> charge [Ah]
 
     def curve_at(self, position: int) -> OcvCurve:
         """The learned curve nearest in the pack's life (before preferred), else the prior."""
@@ -524,6 +527,9 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     h.soc_start, h.soc_end = soc_a, soc_b
     q = float(details.get("counted_Ah") or 0.0)
     q_sd = float(details.get("counted_sd_Ah") or 0.0)
+    added = ctx.start_added_Ah.get(position)
+    if added is not None:
+        q -= added       # a charge's counted charge is negative (into the pack)
     cap, interval, how = capacity_between_rests(q, q_sd, soc_a, sd_a, soc_b, sd_b)
     if cap is None:
         return how
@@ -539,6 +545,9 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
         h.notes.append(f"the samples ({sampling.get('period_s') or 0:.0f} s apart) do not "
                        f"follow the current: its charge is counted to +-{100 * q_sd / abs(q):.0f}"
                        " % (1 sd), and the interval widened")
+    if added is not None:
+        h.notes.append(f"its start placed between two samples by the first one's voltage "
+                       f"({added:+.3f} Ah to the trapezoids)")
     h.notes.append(f"state of charge through {curve.source}")
     return None
 
@@ -745,6 +754,10 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
             h.soc_start, h.soc_end = 1.0, 0.0
         out.append(h)
     ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah)
+    charges = [k for k, e in enumerate(ordered) if e.get("kind") == "charge"]
+    added = charge_start_corrections([((ordered[k].get("details") or {}).get("charge") or {})
+                                      .get("start") for k in charges])
+    ctx.start_added_Ah = {k: a for k, a in zip(charges, added) if a is not None}
     if ctx.chemistry != chemistry:
         counts = _cell_counts(ordered, cells, ctx.chemistry)
     for k, (e, h) in enumerate(zip(ordered, out)):
@@ -772,12 +785,14 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
     if reference:
         for h, efc in zip(out, equivalent_full_cycles(ordered, reference)):
             h.efc = float(efc)
-    # an estimate is compared with the others made the same way
+    # an estimate is compared with the others made the same way from the same kind of
+    # event: a local median over neighbours of unlike precision (a charge counted to 2 %,
+    # a mission seen by a few samples to 30 %) is not a trend the precise one sits off
     groups: dict = {}
     for k, h in enumerate(out):
         if h.capacity_Ah is not None:
-            groups.setdefault((h.capacity_method or "").split(" (")[0].split(",")[0],
-                              []).append(k)
+            groups.setdefault(((h.capacity_method or "").split(" (")[0].split(",")[0],
+                               h.kind == "charge"), []).append(k)
     for with_cap in groups.values():
         axis = [out[k].efc if out[k].efc is not None else k for k in with_cap]
         flags = flag_outliers(axis, [out[k].capacity_Ah for k in with_cap],
