@@ -14,7 +14,7 @@ BENCHMARKS = {
     "fit_speed.py": (["--repeats", "1", "--large-rows", "50000", "--families", "shepherd"],
                      "speed-up"),
     "fit_latency.py": (["--repeats", "1", "--bootstrap", "10"], "x the baseline"),
-    "slow_to_fast.py": (["--cells", "none", "--logs", "auto", "--bootstrap", "5"],
+    "slow_to_fast.py": (["--cells", "none", "--logs", "none", "--bootstrap", "5"],
                         "endurance error"),
     "accuracy.py": (["--sets", "enertech", "--families", "auto", "--bootstrap", "5"],
                     "endurance error"),
