@@ -186,13 +186,13 @@ class DaskExecutor:
         from distributed import Client, LocalCluster
 
         self.cluster = None
-        self._start_method = None
+        self._worker_start_setting = None
         try:
             if scheduler is None:
                 # a nanny reads the start method again each time it restarts a worker that
                 # died: it stays set while the cluster runs (else a restarted worker is
                 # spawned, importing everything again, instead of forked from the server)
-                self._start_method = dask.config.set(
+                self._worker_start_setting = dask.config.set(
                     {"distributed.worker.multiprocessing-method": _start_method()})
                 # one task per worker at a time: a worker that dies takes only the task it
                 # was running with it (queued ones would count a death too)
@@ -340,9 +340,9 @@ class DaskExecutor:
         if self.cluster is not None:
             self.cluster.close()
             self.cluster = None
-        if getattr(self, "_start_method", None) is not None:
-            self._start_method.__exit__(None, None, None)
-            self._start_method = None
+        if self._worker_start_setting is not None:
+            self._worker_start_setting.__exit__(None, None, None)
+            self._worker_start_setting = None
 
     def __enter__(self) -> DaskExecutor:
         return self
