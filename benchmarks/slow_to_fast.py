@@ -318,6 +318,11 @@ def main(argv=None):
                         help="draw the auto paths (and the bench path before) flying the 27 A "
                              "flight to this PNG")
     args = parser.parse_args(argv)
+    log_models = [m for m in args.logs.split(",") if m and m != "none"]
+    unknown = sorted(set(log_models) - set(LOG_MODELS))
+    if unknown:
+        parser.error(f"--logs: unknown {', '.join(unknown)}; choose from "
+                     f"{', '.join(LOG_MODELS)} or 'none'")
     data = args.data
     if data is None:
         for parent in HERE.parents:
@@ -386,11 +391,6 @@ def main(argv=None):
     names = [n for n in args.cells.split(",") if n and n != "none"]
     if names and data is not None and (data / "samsung30q_S001").is_dir():
         slow_cells(data, names)
-    log_models = [m for m in args.logs.split(",") if m and m != "none"]
-    unknown = sorted(set(log_models) - set(LOG_MODELS))
-    if unknown:
-        parser.error(f"--logs: unknown {', '.join(unknown)}; choose from "
-                     f"{', '.join(LOG_MODELS)} or 'none'")
     if log_models and data is not None and (data / "flight_logs" / "ina3221_fpv_4s").is_dir():
         folder = data / "flight_logs" / "ina3221_fpv_4s"
         print("\n## Real logs: 29.csv fitted as a flight log, flying 29.csv and 28.csv\n")
