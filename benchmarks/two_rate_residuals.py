@@ -28,6 +28,7 @@ sys.path.insert(0, str(HERE))
 
 import dischargelab as dl  # noqa: E402
 from _machine import machine_line  # noqa: E402
+from dischargelab.cell import charge_from_current  # noqa: E402
 from dischargelab.predict import predict  # noqa: E402
 from dischargelab.validate import measured_time_to_cutoff  # noqa: E402
 
@@ -45,12 +46,6 @@ def runs_of(cell: str) -> dict:
                 and e.get("rate_C") in (1.0, 2.0, 3.0):
             out[e["rate_C"]] = (dl.read(VIRTUAL / e["file"]), float(e["cutoff_V"]))
     return out
-
-
-def charge_Ah(d) -> np.ndarray:
-    """Charge drawn since the load start [Ah] (trapezoids)."""
-    i, t = np.asarray(d.current_A, float), np.asarray(d.time_s, float)
-    return np.r_[0.0, np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))] / 3600.0
 
 
 def main() -> None:
@@ -86,7 +81,7 @@ def main() -> None:
                   f"{'n/a' if t_sim is None else f'{t_sim:.1f} degC'} |")
             if axs is None:
                 continue
-            q = charge_Ah(d)
+            q = charge_from_current(d.time_s, d.current_A)
             sq, sv = np.asarray(sim.charge_Ah), np.asarray(sim.voltage_V)
             axs[0, j].plot(q, d.voltage_V, color=colour, lw=1.5,
                            label=f"{rate:g}C {role}: {err:+.2f} %")
