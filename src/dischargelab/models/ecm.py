@@ -195,6 +195,9 @@ class EquivalentCircuit(Family):
     """OCV(surface charge) + R0 + two RC pairs, a solid-diffusion state and a thermal state."""
 
     n_best = 3  # the cost has local minima in C (which OCV nodes the data reach)
+    #: Those minima are about 1 % of C apart and a few tenths of a percent wide (the OCV
+    #: nodes near empty are 1 % apart): -6 % to +6 % in steps of 0.25 %.
+    capacity_scan = tuple(1.0 + 0.0025 * k for k in range(-24, 25))
     #: One constant current cannot show the cell's dynamics: at a constant current the
     #: time since the load started and the charge drawn are proportional, so the rise of
     #: an RC pair's voltage or of the diffusion lead is a function of the charge, which
