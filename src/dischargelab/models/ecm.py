@@ -4,8 +4,8 @@ Per cell, discharge current ``i`` > 0, bulk discharged charge ``q`` [Ah],
 capacity ``C`` [Ah], cell temperature ``T``::
 
     i_k' = (i - i_k) / tau_k            k = 1, 2  (RC pairs)    [A]
-    i_d' = (i - i_d) / tau_d                        (diffusion)  [A]
-    q_s  = q + k_s tau_d i_d / 3600                 (surface charge) [Ah]
+    i_n' = (i - i_n) / (c_n tau_d)      n = 1..4  (diffusion modes) [A]
+    q_s  = q + k_s tau_d sum_n w_n i_n / 3600     (surface charge) [Ah]
     V    = U(q_s / C) - f(T) (R0 i + R1 i_1 + R2 i_2)
     f(T) = exp(beta (1/T - 1/T_ref))                (Arrhenius, T in K)
 
@@ -21,10 +21,13 @@ cannot do. For a spherical particle of radius ``R`` and diffusivity ``D`` under 
 constant current, the surface leads the volume average by the charge drawn in
 ``R^2 / (15 D)`` once the transient has decayed, and the transient decays with
 the slowest diffusion mode, ``tau_d = R^2 / (mu_1^2 D)``, ``mu_1 = 4.4934`` the
-first positive root of ``tan(mu) = mu`` [5]_. One lowpass state of time constant
-``tau_d`` with the steady lead ``k_s i tau_d / 3600`` [Ah],
-``k_s = mu_1^2 / 15 = 1.346`` (:data:`SURFACE_LEAD_PER_TAU`), keeps both with one
-parameter.
+first positive root of ``tan(mu) = mu`` [5]_: the steady lead is
+``k_s i tau_d / 3600`` [Ah], ``k_s = mu_1^2 / 15 = 1.346`` (:data:`SURFACE_LEAD_PER_TAU`),
+one parameter for both. The lead builds as the sphere's does: each mode ``n`` carries
+the share ``w_n = 10 / mu_n^2`` of it with the time constant ``c_n tau_d``,
+``c_n = (mu_1 / mu_n)^2``. The slowest mode carries only half; three modes and the rest
+lumped into one (:data:`DIFFUSION_MODES`) follow the sphere within 1.2 % of the steady
+lead from ``tau_d / 20`` on (5.3 % before). With the slowest mode alone, a LiFePO4 cell fitted on 1C + 3C missed 2C by -3 %.
 
 The open-circuit voltage is piecewise linear on the fixed grid
 :data:`OCV_NODES` of ``x = q_s / C`` (denser near full and empty)::
@@ -220,7 +223,8 @@ class EquivalentCircuit(Family):
                          "fit that keeps the series resistance the load step showed")
 
     name = "ecm"
-    version = 1
+    #: 2: the surface lead builds with the sphere's diffusion modes (the same parameters).
+    version = 2
     title = "equivalent circuit (OCV + R0 + 2 RC) with solid diffusion + lumped thermal model"
     description = ("piecewise-linear OCV read at a diffusion-lagged surface charge, series R and "
                    "two RC pairs (Arrhenius in T), lumped thermal state: rate-dependent capacity "
