@@ -383,7 +383,7 @@ class EquivalentCircuit(Family):
     def start_grid(self, data: Samples, free_nonlinear):
         q = data.q_max
         # the capacity sets which OCV nodes the data fall on: it gets the most values
-        grid = {"tau1_s": [5.0, 30.0], "tau2_s": [400.0], "tau_d_s": [30.0, 300.0, 3000.0],
+        grid = {"tau1_s": [5.0, 30.0], "tau2_s": [400.0], "tau_d_s": [10.0, 30.0, 300.0, 3000.0],
                 "C_Ah": [f * q for f in (1.01, 1.03, 1.06, 1.1, 1.2)], "beta_K": [BETA_PRIOR_K]}
         return {k: v for k, v in grid.items() if k in free_nonlinear}
 
