@@ -178,6 +178,10 @@ def _ocv_slope(x, drops_V):
     """``dU/dx`` [V] of :func:`open_circuit_voltage` (0 outside the grid)."""
     x = np.asarray(x, dtype=float)
     lo, hi = OCV_NODES[:-1], OCV_NODES[1:]
+    if all(np.ndim(d) == 0 for d in drops_V):  # one parameter set: look the interval up
+        k = np.searchsorted(OCV_NODES, x, side="right") - 1
+        slopes = np.r_[-np.asarray(drops_V, dtype=float) / (hi - lo), 0.0]
+        return slopes[np.where((k >= 0) & (k < lo.size), k, lo.size)]
     stacked = np.stack(np.broadcast_arrays(*[np.asarray(d, dtype=float) for d in drops_V]),
                        axis=-1)
     inside = (x[..., None] >= lo) & (x[..., None] < hi)
