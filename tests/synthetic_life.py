@@ -147,8 +147,8 @@ class _Logger:
         # the charge current, the temperature as it is)
         grid_q = np.linspace(q, 0.0, 400)
         calm = {k: np.full(grid_q.size, float(v[0])) for k, v in self.state.items()}
-        calm.update(charge_Ah=grid_q, i_rc1_A=np.full(grid_q.size, -i_cc),
-                    i_rc2_A=np.full(grid_q.size, -i_cc), i_diff_A=np.full(grid_q.size, -i_cc))
+        calm.update({st.name: np.full(grid_q.size, -i_cc) for st in FAMILY.states
+                     if st.kind == "lowpass"}, charge_Ah=grid_q)
         v = FAMILY.voltage(p, calm, -i_cc)
         over = np.flatnonzero(v >= spec.cv_V)
         q_cv = float(grid_q[over[0]]) if over.size else 0.0

@@ -53,10 +53,14 @@ def test_bootstrap_method_is_checked():
         fit_battery(synthetic_curve(3.0), bootstrap=2, bootstrap_method="jackknife")
 
 
-@pytest.mark.parametrize("model", ["shepherd", "ecm"])
-def test_warm_started_fold_predicts_like_a_searched_one(model):
+@pytest.mark.parametrize(("model", "tolerance"), [("shepherd", 2e-3), ("ecm", 5e-3)])
+def test_warm_started_fold_predicts_like_a_searched_one(model, tolerance):
     """A held-out fold (the 6 A curve's last fifth left out) started from the fit to
-    all data predicts that curve's end like the same fold fitted from the search."""
+    all data predicts that curve's end like the same fold fitted from the search, and
+    fits as well. On these curves (the paper's model, not the ``ecm``) the ``ecm`` has two
+    equally good folds, 3.84 and 3.90 mV: the fast RC pair at 5 s or at 100 s, where it
+    overlaps the diffusion's fast modes. The warm start keeps the full fit's (5 s); the
+    search takes the other. Their ends differ by 0.4 %."""
     from dataclasses import replace
 
     from dischargelab.simulate import simulate_current
@@ -67,12 +71,14 @@ def test_warm_started_fold_predicts_like_a_searched_one(model):
     keep = high.time_s <= 0.8 * high.time_s[-1]
     short = replace(high, time_s=high.time_s[keep], voltage_V=high.voltage_V[keep],
                     current_A=high.current_A[keep])
-    times = []
+    times, rmse = [], []
     for start in (None, full.parameters.as_dict()):
         fold = fit_family([curves[0], short], model=model, start=start)
         sim = simulate_current(fold.battery, 6.0, cutoff_pack_V=float(high.voltage_V[-1]))
         times.append(sim.time_to_cutoff_s)
-    assert times[1] == pytest.approx(times[0], rel=2e-3)
+        rmse.append(fold.rmse_V)
+    assert times[1] == pytest.approx(times[0], rel=tolerance)
+    assert rmse[1] <= 1.02 * rmse[0]
     assert times[0] == pytest.approx(high.time_s[-1], rel=0.02)
 
 

@@ -208,7 +208,7 @@ class _Pack:
             if st.kind == "charge":
                 new[name] = x + i * dt / 3600.0
             elif st.kind == "lowpass":
-                tau = np.asarray(self.p[st.tau], dtype=float)
+                tau = st.time_constant(self.p)
                 with np.errstate(divide="ignore", over="ignore", under="ignore"):
                     decay = np.where(tau > 0, np.exp(-dt / np.where(tau > 0, tau, 1.0)), 0.0)
                 new[name] = i + (x - i) * decay

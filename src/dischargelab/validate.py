@@ -226,7 +226,7 @@ def _constant_current_voltage(battery: Battery, prediction: SimulationResult, t,
         if st.kind == "charge":
             state[st.name] = cell * t / 3600.0
         elif st.kind == "lowpass":
-            tau = float(prm[st.tau])
+            tau = float(st.time_constant(prm))
             state[st.name] = cell * (1.0 - np.exp(-t / tau)) if tau > 0 else np.full(t.size, cell)
         else:
             state[st.name] = np.interp(t, prediction.time_s, prediction.temperature_C)

@@ -62,6 +62,34 @@ def guess_parameters(curves, cells_series: int = 1, strings_parallel: int = 1,
     return get_family(model).guess(stack)
 
 
+#: Local minima of the capacity scan refined (the lowest first).
+SCAN_MINIMA_REFINED = 3
+
+
+def _scan_capacity(model: _Model, best, lo, hi):
+    """The searched solution ``best``, or a lower one refined from the lowest local minima
+    of the cost over the family's :attr:`~dischargelab.models.base.Family.capacity_scan`
+    around it (the other parameters held); with the number of model evaluations spent."""
+    factors = model.family.capacity_scan
+    if not factors or "C_Ah" not in model.nonlinear:
+        return best, 0
+    k = model.nonlinear.index("C_Ah")
+    trials = np.repeat(best.x[None, :], len(factors), axis=0)
+    trials[:, k] = np.clip(best.x[k] * np.asarray(factors), lo[k], hi[k])
+    cost = 0.5 * model.grid_costs(trials)
+    nfev = len(factors)
+    padded = np.r_[np.inf, cost, np.inf]
+    minima = np.flatnonzero((cost < padded[:-2]) & (cost <= padded[2:]) & np.isfinite(cost))
+    for j in minima[np.argsort(cost[minima])][:SCAN_MINIMA_REFINED]:
+        if trials[j, k] == best.x[k]:
+            continue
+        sol = _varpro_solve(model, trials[j], lo, hi, ftol=COARSE_FTOL)
+        nfev += sol.nfev
+        if sol.cost < best.cost:
+            best = sol
+    return best, nfev
+
+
 def _starts(model: _Model, bounds: dict, guess: dict | None):
     """Grid of starting points for the nonlinear parameters (clipped into bounds)."""
     grid = model.family.start_grid(model.s, model.nonlinear)
@@ -260,6 +288,8 @@ def fit_once(curves, *, cells_series: int = 1, strings_parallel: int = 1,
             nfev += sol.nfev
             if best is None or sol.cost < best.cost:
                 best = sol
+        best, scanned = _scan_capacity(coarse, best, lo, hi)
+        nfev += scanned
         sol = _varpro_solve(mdl, _defined_start(mdl, best.x, hi), lo, hi)
         nfev += sol.nfev
         theta = sol.x

@@ -92,6 +92,11 @@ class State:
     unit: str
     kind: str
     tau: str | None = None  # parameter holding the time constant of a lowpass state [s]
+    tau_scale: float = 1.0  # the state's time constant is ``tau_scale`` times that parameter
+
+    def time_constant(self, p):
+        """Time constant [s] of a lowpass state under parameters ``p`` (scalar or draws)."""
+        return np.asarray(p[self.tau], dtype=float) * self.tau_scale
 
     def __post_init__(self):
         if self.kind not in STATE_KINDS:
@@ -265,6 +270,10 @@ class Family:
     version: int = 1
     #: Best grid starts refined by the solver (more where the cost has local minima).
     n_best: int = 1
+    #: Capacities, as multiples of the searched solution's, whose cost is evaluated before
+    #: the refinement, which starts from the best of them (empty: none). For a family
+    #: whose cost has minima in ``C_Ah`` narrower than its grid's steps.
+    capacity_scan: tuple[float, ...] = ()
     title: str = ""
     description: str = ""
     parameters: tuple[Parameter, ...] = ()
@@ -460,7 +469,8 @@ def fit_lumped_thermal(family: Family, p, data: Samples):
     if not data.has_temperature:
         return None
     rows = {True: ([], []), False: ([], [])}
-    lowpass = {s.name: filtered_samples(data, p[s.tau])[0] for s in family.states
+    lowpass = {s.name: filtered_samples(data, float(s.time_constant(p)))[0]
+               for s in family.states
                if s.kind == "lowpass"}
     for k in range(data.n_curves):
         sel = (data.curve == k) & ~data.is_rest
