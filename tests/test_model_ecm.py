@@ -69,7 +69,7 @@ def _time_to_cutoff(p, current_A, cutoff=CUTOFF_V):
 
 def _diffusion(value):
     """Every diffusion mode's filtered current at ``value`` [A] (a settled surface lead)."""
-    return {name: value for name in DIFFUSION_STATES}
+    return dict.fromkeys(DIFFUSION_STATES, value)
 
 
 def _filtered_states(p, data):

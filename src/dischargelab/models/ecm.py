@@ -27,7 +27,8 @@ one parameter for both. The lead builds as the sphere's does: each mode ``n`` ca
 the share ``w_n = 10 / mu_n^2`` of it with the time constant ``c_n tau_d``,
 ``c_n = (mu_1 / mu_n)^2``. The slowest mode carries only half; three modes and the rest
 lumped into one (:data:`DIFFUSION_MODES`) follow the sphere within 1.2 % of the steady
-lead from ``tau_d / 20`` on (5.3 % before). With the slowest mode alone, a LiFePO4 cell fitted on 1C + 3C missed 2C by -3 %.
+lead from ``tau_d / 20`` on (5.3 % before). With the slowest mode alone, a LiFePO4 cell
+fitted on 1C + 3C missed 2C by -3 %.
 
 The open-circuit voltage is piecewise linear on the fixed grid
 :data:`OCV_NODES` of ``x = q_s / C`` (denser near full and empty)::
