@@ -271,8 +271,9 @@ class Family:
     #: Best grid starts refined by the solver (more where the cost has local minima).
     n_best: int = 1
     #: Capacities, as multiples of the searched solution's, whose cost is evaluated before
-    #: the refinement, which starts from the best of them (empty: none). For a family
-    #: whose cost has minima in ``C_Ah`` narrower than its grid's steps.
+    #: the refinement (the other parameters held); the lowest local minima among them are
+    #: refined too, and the best result kept (empty: none). For a family whose cost has
+    #: minima in ``C_Ah`` narrower than its grid's steps.
     capacity_scan: tuple[float, ...] = ()
     title: str = ""
     description: str = ""

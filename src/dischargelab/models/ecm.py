@@ -200,7 +200,8 @@ def _ocv_parameters():
 
 
 class EquivalentCircuit(Family):
-    """OCV(surface charge) + R0 + two RC pairs, a solid-diffusion state and a thermal state."""
+    """OCV(surface charge) + R0 + two RC pairs, solid diffusion (a sphere's modes) and a
+    thermal state."""
 
     n_best = 3  # the cost has local minima in C (which OCV nodes the data reach)
     #: Those minima are about 1 % of C apart and a few tenths of a percent wide (the OCV
