@@ -8,8 +8,10 @@ import pytest
 
 import dischargelab as dl
 from dischargelab.fit import choose_model, rate_capacity_error, selection_score
+from dischargelab.fit.auto import candidate_forms
 
 VIRTUAL = Path(__file__).resolve().parent / "data" / "virtual"
+SAMSUNG_COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 
 def _without_temperature(path):
@@ -65,3 +67,37 @@ def test_auto_picks_the_family_that_shapes_the_lfp_plateau():
         measured = truth.time_s[-1] - truth.time_s[0]
         predicted = res.battery.predict(current=current, cutoff=2.5, ambient=25.0)
         assert abs(predicted.time_to_cutoff_s / measured - 1) < 0.02, rate
+
+
+def test_candidate_forms_leave_out_only_what_the_caller_does_not_hold():
+    forms = candidate_forms(["shepherd", "ecm"])
+    assert forms == {"shepherd": ("shepherd", {}), "ecm": ("ecm", {}),
+                     "ecm without the slow RC pair": ("ecm", {"R2_ohm": 0.0, "tau2_s": 400.0})}
+    # a slow pair the caller fixes or bounds is theirs: no form leaves it out
+    assert list(candidate_forms(["ecm"], fixed={"R2_ohm": 0.05})) == ["ecm"]
+    assert list(candidate_forms(["ecm"], bounds={"tau2_s": (200.0, 900.0)})) == ["ecm"]
+
+
+@pytest.mark.slow
+def test_auto_leaves_out_a_slow_rc_pair_that_shapes_the_ocv(shared_data):
+    """Samsung 30Q C/10 + 4C with its temperature: the full ecm puts ~130 mOhm in a slow RC
+    pair that shapes the C/10 run's start (the OCV's curvature) and lets the 4C run's
+    self-heating take it away again; flown at 1C it sags ~150 mV too much. Without the
+    pair it flies 1C-3C as measured, and the held-out error shows it."""
+    folder = shared_data / "samsung30q_S001"
+    runs = {r: dl.read(folder / f"Q30_S001_{r}.csv", columns=SAMSUNG_COLUMNS)
+            for r in ("C10", "1C", "2C", "3C", "4C")}
+    full = dl.fit([runs["C10"], runs["4C"]], model="ecm", bootstrap=0)
+    res = dl.fit([runs["C10"], runs["4C"]], bootstrap=0)
+    assert res.model == "ecm" and res.fixed["R2_ohm"] == 0.0, res.notes[0]
+    assert "'ecm without the slow RC pair' chosen automatically" in res.notes[0]
+    assert any(n.startswith("R2_ohm, tau2_s held at 0, 400") for n in res.notes)
+    for name, current in (("1C", 3.0), ("2C", 6.0), ("3C", 9.0)):
+        run = runs[name]
+        (case,) = dl.validate(res.battery, run, cutoff=2.5)
+        (before,) = dl.validate(full.battery, run, cutoff=2.5)
+        assert case.to_dict()["voltage_rmse_pct"] < 1.0 < before.to_dict()["voltage_rmse_pct"]
+        measured = run.time_s[np.argmax(run.voltage_V <= 2.5)] - run.time_s[0]
+        predicted = res.battery.predict(current=current, cutoff=2.5,
+                                        ambient=float(run.temperature_C[0]))
+        assert abs(predicted.time_to_cutoff_s / measured - 1) < 0.015, name

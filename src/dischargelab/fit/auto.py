@@ -91,7 +91,8 @@ def choose_model(curves, cooling: str | None = "still-air") -> tuple[list[str], 
     temperature: 1C-4C within -3.0 %, where eq. 6 held at the ambient misses 4C by
     -19 %); ``shepherd`` when ``cooling`` is None. Two or more curves at different
     currents: every family that the data can feed and that competes on several rates
-    (``Family.several_rates_candidate``), compared by held-out error.
+    (``Family.several_rates_candidate``) and its simpler forms (:func:`candidate_forms`),
+    compared by held-out error.
     """
     from ..models import FAMILIES
 
@@ -112,6 +113,23 @@ def choose_model(curves, cooling: str | None = "still-air") -> tuple[list[str], 
     names = [n for n, f in FAMILIES.items() if f.several_rates_candidate
              and (has_temp or not f.needs_temperature)]
     return names, "several rates: the family with the smallest held-out error"
+
+
+def candidate_forms(names, fixed: dict | None = None,
+                    bounds: dict | None = None) -> dict[str, tuple[str, dict]]:
+    """``{label: (family name, parameters held)}``: each family of ``names`` and its
+    simpler forms (``Family.several_rates_variants``, labelled ``"<family> without <term>"``)
+    whose parameters the caller neither fixes nor bounds."""
+    from ..models import get_family
+
+    taken = set(fixed or {}) | set(bounds or {})
+    forms = {}
+    for name in names:
+        forms[name] = (name, {})
+        for left_out, held in get_family(name).several_rates_variants.items():
+            if not taken & set(held):
+                forms[f"{name} without {left_out}"] = (name, dict(held))
+    return forms
 
 
 def fit_with_model_error(curves, model_error: bool = True, **kw) -> FitResult:
@@ -145,15 +163,20 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
     fits, scores = {}, {}
     # the linearised bootstrap costs little: every candidate gets it, no refit of the best
     linear = kw.get("bootstrap_method", "linearised") == "linearised"
-    for name in names:
+    forms = candidate_forms(names, kw.get("fixed"), kw.get("bounds"))
+    for label, (name, held) in forms.items():
+        args = kw if linear else dict(kw, bootstrap=0, progress=None)
+        if held:  # a simpler form starts from its family's fit (the same data)
+            args = dict(args, fixed={**held, **(kw.get("fixed") or {})})
+            if name in fits and args.get("start") is None:
+                args["start"] = fits[name].parameters.as_dict()
         try:
-            fits[name] = fit_with_model_error(
-                curves, model=name, **(kw if linear else dict(kw, bootstrap=0, progress=None)))
+            fits[label] = fit_with_model_error(curves, model=name, **args)
         except FitError:
             continue
-        err = fits[name].model_error or {}
-        scores[name] = selection_score(err.get("held_out_rms"), err.get("end_rms"),
-                                       err.get("rate_rms"), len(curves))
+        err = fits[label].model_error or {}
+        scores[label] = selection_score(err.get("held_out_rms"), err.get("end_rms"),
+                                        err.get("rate_rms"), len(curves))
     if not fits:
         raise FitError("no model family could be fitted to these data")
     order = sorted(fits, key=lambda n: (scores[n], list(fits).index(n)))
@@ -165,9 +188,15 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
         why += (f", preferring physically plausible parameters within "
                 f"{100 * PHYSICAL_PREFERENCE:g} points of the best")
     res = fits[best]
+    name, held = forms[best]
     if kw.get("bootstrap") and not linear:  # the bootstrap; the held-out error is known
-        res = fit_family(curves, model=best, **kw)
+        res = fit_family(curves, model=name, **(dict(kw, fixed={**held, **(kw.get("fixed")
+                                                                       or {})}) if held else kw))
         res.model_error = fits[best].model_error
+    if held:
+        res.notes.insert(0, f"{', '.join(held)} held at "
+                            f"{', '.join(f'{v:g}' for v in held.values())}: {best}, whose "
+                            f"held-out error was smaller than with it")
     def row(n):
         err = fits[n].model_error or {}
         return (f"{n} {_pct(scores[n])} (ends {_pct(err.get('end_rms'))}, rate-capacity "

@@ -290,6 +290,13 @@ class Family:
     #: False for a family that ``model="auto"`` does not compare on several rates (where
     #: it would only repeat another family's fit).
     several_rates_candidate: bool = True
+    #: Simpler forms of the family that ``model="auto"`` also fits to several rates,
+    #: keeping whichever form has the smaller held-out error
+    #: (:func:`dischargelab.fit.auto.fit_auto`): ``{what is left out: {parameter: value
+    #: that makes its effect absent}}``. For a term that several rates can still confuse
+    #: with another (a slow RC pair with the open-circuit voltage's curvature at a slow
+    #: rate), whose fit then extrapolates worse than the family without it.
+    several_rates_variants: dict = {}
     #: Growth with ln(extrapolation ratio) of the relative error of a time to cutoff
     #: predicted from a fit to ONE rate, for a sloped discharge curve
     #: (:func:`dischargelab.uncertainty.extrapolation_growth`; calibrated by
