@@ -132,6 +132,11 @@ def candidate_forms(names, fixed: dict | None = None,
     return forms
 
 
+def _holding(kw: dict, held: dict) -> dict:
+    """Fit arguments ``kw`` with the parameters ``held`` added to its ``fixed`` (a copy)."""
+    return dict(kw, fixed={**held, **(kw.get("fixed") or {})}) if held else dict(kw)
+
+
 def fit_with_model_error(curves, model_error: bool = True, **kw) -> FitResult:
     """:func:`fit_family` plus, with several rates, its held-out model error."""
     res = fit_family(curves, **kw)
@@ -165,11 +170,10 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
     linear = kw.get("bootstrap_method", "linearised") == "linearised"
     forms = candidate_forms(names, kw.get("fixed"), kw.get("bounds"))
     for label, (name, held) in forms.items():
-        args = kw if linear else dict(kw, bootstrap=0, progress=None)
-        if held:  # a simpler form starts from its family's fit (the same data)
-            args = dict(args, fixed={**held, **(kw.get("fixed") or {})})
-            if name in fits and args.get("start") is None:
-                args["start"] = fits[name].parameters.as_dict()
+        args = _holding(kw if linear else dict(kw, bootstrap=0, progress=None), held)
+        if held and name in fits and args.get("start") is None:
+            # a simpler form starts from its family's fit (the same data)
+            args["start"] = fits[name].parameters.as_dict()
         try:
             fits[label] = fit_with_model_error(curves, model=name, **args)
         except FitError:
@@ -190,8 +194,7 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
     res = fits[best]
     name, held = forms[best]
     if kw.get("bootstrap") and not linear:  # the bootstrap; the held-out error is known
-        res = fit_family(curves, model=name, **(dict(kw, fixed={**held, **(kw.get("fixed")
-                                                                       or {})}) if held else kw))
+        res = fit_family(curves, model=name, **_holding(kw, held))
         res.model_error = fits[best].model_error
     if held:
         res.notes.insert(0, f"{', '.join(held)} held at "
