@@ -13,6 +13,12 @@ its own data cannot measure. This script measures it on every cell with a rate s
   pouch (Ai2020) and the LFP cell again (3C, 40 degC) at 25 and 40 degC; each with its
   temperature and with the temperature column dropped.
 
+Every series can also be measured with its rest sample before the load dropped (``--rest
+without`` or ``both``): a logger started with the load on writes no rest voltage, and then
+nothing in one constant current tells the series resistance from E0. Those fits take the
+law of their class measured on the runs as logged (as the package does; with ``--rest
+without`` alone, on themselves); the acceptance is printed for each kind apart.
+
 Every run of a series (one cell at one ambient) is fitted alone (``dischargelab.fit``,
 each family, ``bootstrap=30``) and predicts every other run of the series at its mean
 current, cutoff and ambient (``Battery.predict``). The relative error of the time to
@@ -43,7 +49,7 @@ runs a factor 2-5 apart; the median model error (``FitResult.model_error``) of e
 class is written to the same file.
 
 Usage: python benchmarks/one_rate_errors.py [--write] [--families shepherd,...]
-       [--cells samsung,...] [--json rows.json]
+       [--cells samsung,...] [--rest as-logged|without|both] [--json rows.json]
 """
 
 import os
@@ -113,6 +119,7 @@ class Series:
     title: str
     runs: dict
     temperature: bool
+    rest: bool = True
 
 
 def real_series(data: Path):
@@ -150,7 +157,16 @@ def virtual_series():
 def without_temperature(series: Series) -> Series:
     runs = {k: accuracy.make_run(k, replace(r.discharge, temperature_C=None), r.cutoff_V,
                                  r.ambient_C) for k, r in series.runs.items()}
-    return Series(series.cell, series.title + ", no temperature", runs, False)
+    return Series(series.cell, series.title + ", no temperature", runs, False, series.rest)
+
+
+def without_rest(series: Series) -> Series:
+    """The series as a logger started with the load on writes it: no rest sample before
+    the load step."""
+    runs = {k: accuracy.make_run(k, replace(r.discharge, rest_voltage_V=None), r.cutoff_V,
+                                 r.ambient_C) for k, r in series.runs.items()}
+    return Series(series.cell, series.title + ", no rest sample", runs, series.temperature,
+                  False)
 
 
 def delivered_Ah(run) -> float:
@@ -234,6 +250,7 @@ def one_rate_rows(series: Series, family: str):
             except dl.DischargelabError:
                 t, feat = float("nan"), {}
             rows.append(dict(cell=series.cell, series=series.title, family=family,
+                             rest=series.rest,
                              model=model, fitted=key, target=target_key,
                              ratio=target.current_A / run.current_A,
                              error=t / target.measured_s - 1.0, predicted_s=t,
@@ -434,6 +451,10 @@ def main(argv=None):
     parser.add_argument("--cells", default=None,
                         help="only series whose title contains one of these (comma list)")
     parser.add_argument("--no-two-rate", action="store_true", help="skip the two-rate fits")
+    parser.add_argument("--rest", choices=("as-logged", "without", "both"), default="as-logged",
+                        help="the runs as logged (a rest sample before the load; the default), "
+                             "with that sample dropped (a logger started with the load on), or "
+                             "both")
     parser.add_argument("--cache", type=Path,
                         help="keep the fitted battery files here and reuse those made by the "
                              "same model and fit code (a law can then be measured again "
@@ -456,6 +477,8 @@ def main(argv=None):
     series = real_series(args.data) if (args.data / "samsung30q_S001").is_dir() else []
     series += virtual_series()
     series += [without_temperature(s) for s in series if s.temperature]
+    if args.rest != "as-logged":
+        series = ([] if args.rest == "without" else series) + [without_rest(s) for s in series]
     if args.cells:
         wanted = [w.lower() for w in args.cells.split(",")]
         series = [s for s in series if any(w in s.title.lower() for w in wanted)]
@@ -469,12 +492,15 @@ def main(argv=None):
               file=sys.stderr)
     # auto on one rate is ONE_RATE_FAMILY (choose_model): its rows are that family's
     rows += [dict(r, family="auto") for r in rows if r["family"] == ONE_RATE_FAMILY]
-    tables = loco_tables([r for r in rows if r["family"] != "auto"], families)
+    # the law is measured on the runs as logged (the package's), and applied to both kinds
+    logged = [r for r in rows if r["family"] != "auto" and r["rest"]] or \
+        [r for r in rows if r["family"] != "auto"]
+    tables = loco_tables(logged, families)
     for r in rows:
         r["loco"] = tables[r["cell"]]
     for cell, table in tables.items():
         apply_law(table, [r for r in rows if r["cell"] == cell])
-    full = law([r for r in rows if r["family"] != "auto"])
+    full = law(logged)
     two_law = two_rate_law(two)
 
     print(f"## One-rate extrapolation: the law from every cell ({len(rows)} pairs, "
@@ -484,7 +510,12 @@ def main(argv=None):
     print_errors_by_ratio([r for r in rows if r["family"] != "auto" and r["ratio"] > 1])
     print("\n## Acceptance: one-rate 95 % intervals, x2-x4 up, each cell's law measured "
           "without it (leave one cell out)\n")
-    print_acceptance(rows, families)
+    for label, rest in (("the runs as logged, a rest sample before the load", True),
+                        ("the same runs without their rest sample", False)):
+        part = [r for r in rows if r["rest"] is rest]
+        if part:
+            print(f"\n{label}:\n")
+            print_acceptance(part, families)
     print("\n## Per class\n")
     print_classes(rows)
     if two:
@@ -504,7 +535,7 @@ def main(argv=None):
     if args.write:
         write_table(doc)
     if args.json:
-        keep = ("cell", "series", "family", "model", "fitted", "target", "ratio", "error",
+        keep = ("cell", "series", "rest", "family", "model", "fitted", "target", "ratio", "error",
                 "class", "plateau", "temperature", "covered", "half_width_pct", "collapse",
                 "shift", "peak_rise_K", "capacity_Ah", "fit_rise_K", "predicted_s",
                 "measured_s")

@@ -18,12 +18,14 @@ voltages, current; no temperature):
   pack stays under 3.3 V/cell for 10 s, in flight, 10 Hz;
 * **27 A flight**: 200 s around 27 A (+-8 A, bursts to 60 A) from full, in flight, 10 Hz.
 
-The slow drain is fitted (``dischargelab.fit``) five ways: as a flight log (``auto``:
+The slow drain is fitted (``dischargelab.fit``) six ways: as a flight log (``auto``:
 ecm with its RC pairs held absent and its diffusion lead at the steady prior, the thermal
 prior for airflow), the same with ecm's RC
 pairs and diffusion state fitted anyway (their bounds given), as a bench discharge
 (``auto``: shepherd-dynamic, eq. 6 with Tremblay's filtered current and the load step's
-series and polarisation resistances, with the thermal prior for still air), as a bench
+series and polarisation resistances, with the thermal prior for still air), the same
+without its rest sample (a logger started with the load on: the build over the first
+minutes still gives the polarisation resistance, nothing gives the series one), as a bench
 discharge forced to shepherd-thermal (what ``auto`` chose before: eq. 6, its polarisation
 present at once with the current, the series resistance left to the fit), and as a bench
 discharge with the cell held at the ambient (``cooling=None``: the behaviour without a
@@ -68,6 +70,7 @@ import argparse
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -210,8 +213,6 @@ def dynamics_free() -> dict:
 def slow_cells(data: Path, names):
     """Slowest run of each cell fitted as a flight log's steady drain would be and as a
     bench discharge, predicting the faster runs: one table row per cell and way."""
-    from dataclasses import replace
-
     import accuracy
 
     print("\n## Slow drains of measured and virtual cells (temperature dropped): the "
@@ -359,6 +360,10 @@ def main(argv=None):
             ("bench discharge, auto (shepherd-dynamic: R and Rp from the load step, Tremblay's "
              "filtered current; thermal prior: still air)",
              lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=args.bootstrap)),
+            ("bench discharge without its rest sample (a logger started with the load on), "
+             "auto: Rp from the build, R not separable from E0",
+             lambda: dl.fit(replace(slow_discharge(slow), rest_voltage_V=None), cells=CELLS,
+                            bootstrap=args.bootstrap)),
             ("bench discharge, shepherd-thermal (auto before; thermal prior: still air)",
              lambda: dl.fit(slow_discharge(slow), cells=CELLS, bootstrap=args.bootstrap,
                             model="shepherd-thermal")),

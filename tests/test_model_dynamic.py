@@ -105,6 +105,24 @@ def test_without_a_rest_sample_the_resistance_is_not_made_up():
     res = dl.fit(drain, model="shepherd-dynamic", bootstrap=0, cooling=None)
     assert not any("from the load step" in n for n in res.notes)
     assert any("E0 and R are not separable" in w for w in res.warnings)
+    assert res.parameters["R_ohm"] == 0.0
+
+
+def test_without_a_rest_sample_the_polarisation_build_still_shows_rp():
+    """A logger started with the load on: the build over the first minutes (its curvature
+    against the open-circuit voltage's slope) still gives Rp; R goes to E0."""
+    bare = replace(_slow_drain(), rest_voltage_V=None)
+    res = dl.fit(bare, model="shepherd-dynamic", bootstrap=0, cooling=None)
+    assert res.parameters["Rp_ohm"] == pytest.approx(CELL["Rp_ohm"], rel=0.15)
+    assert "Rp_ohm" in res.fixed and res.fixed["R_ohm"] == 0.0
+    assert any("from the polarisation building" in n for n in res.notes)
+    # a log that starts after the build has passed shows none of it
+    late = _slow_drain()
+    skip = late.time_s >= 10 * POLARISATION_TAU_S
+    cut = Discharge(late.time_s[skip] - late.time_s[skip][0], late.voltage_V[skip],
+                    late.current_A[skip], None, None, "late start")
+    res = dl.fit(cut, model="shepherd-dynamic", bootstrap=0, cooling=None)
+    assert res.parameters["Rp_ohm"] < 0.1 * CELL["Rp_ohm"]
 
 
 def test_a_varying_current_fits_the_time_constant():

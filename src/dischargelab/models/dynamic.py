@@ -148,10 +148,12 @@ class ShepherdDynamic(ShepherdThermal):
         if not varying_current(data):
             fixed["tau_s"] = POLARISATION_TAU_S
             step = load_step(data, fixed.get("beta_K", BETA_PRIOR_K))
-            if step is not None:
-                fixed["R_ohm"], fixed["Rp_ohm"] = step
-            else:  # nothing shows the build: the polarisation at full charge comes with R
+            if step is None:  # nothing shows the build: the polarisation comes with R
                 fixed["Rp_ohm"] = 0.0
+            else:  # R is left to the fit (to E0) where no rest sample shows it
+                r_ohm, fixed["Rp_ohm"] = step
+                if r_ohm is not None:
+                    fixed["R_ohm"] = r_ohm
         return fixed
 
     def fit_notes(self, data: Samples, fixed: dict) -> list[str]:
@@ -161,7 +163,11 @@ class ShepherdDynamic(ShepherdThermal):
                          "which measured cells' polarisation builds after a load step): one "
                          "constant current cannot show it")
         step = load_step(data, fixed.get("beta_K", BETA_PRIOR_K))
-        if step is not None and fixed.get("R_ohm") == step[0]:
+        if step is not None and step[0] is None and fixed.get("Rp_ohm") == step[1]:
+            notes.append(f"Rp_ohm = {1000 * step[1]:.4g} mOhm from the polarisation building "
+                         "over the first minutes of the load (no rest sample before it: the "
+                         "series resistance cannot be told from E0)")
+        elif step is not None and fixed.get("R_ohm") == step[0]:
             notes.append(f"R_ohm = {1000 * step[0]:.4g} mOhm and Rp_ohm = {1000 * step[1]:.4g} "
                          "mOhm from the load step (the voltage drop over the current in the "
                          "first minutes, read as R + Rp (1 - exp(-t/tau)) plus the open-circuit "
@@ -173,11 +179,13 @@ class ShepherdDynamic(ShepherdThermal):
         return notes
 
 
-def load_step(data: Samples, beta_K: float) -> tuple[float, float] | None:
+def load_step(data: Samples, beta_K: float) -> tuple[float | None, float] | None:
     """Series and polarisation resistance [ohm] shown by the load step of one-rate data,
     read at the reference temperature (Arrhenius ``beta_K``); the means over the curves
-    that have a rest sample and a load step. None without one, or when the step is not a
-    drop.
+    that have a rest sample and a load step. ``(None, Rp)`` when no curve has a rest
+    sample: the polarisation building over the first minutes still shows ``Rp``, but
+    nothing separates ``R`` from ``E0``. None without a load step, or when the step is not
+    a drop.
 
     The apparent resistance ``r(t) = (V_rest - V(t)) / i`` over :data:`TRANSIENT_S` is
     fitted (linear least squares) as ``R + Rp (1 - exp(-t/tau)) + s t`` with ``tau`` at
@@ -192,38 +200,63 @@ def load_step(data: Samples, beta_K: float) -> tuple[float, float] | None:
     0. A slow drain shows nothing else that separates ``R`` and ``Rp`` from ``E0`` (one
     current), and a fit left to choose gives the step to the curve shape where eq. (6)
     misfits the open-circuit voltage (``R`` at 0 on a LiPo pack's slow drain).
+
+    Without a rest sample (a logger started with the load on) the voltage itself is fitted
+    as ``c - f i Rp (1 - exp(-t/tau)) - s t``, its time counted from the first load
+    sample: the build's curvature gives ``Rp``, while ``c`` holds ``E0 - R i`` (a log that
+    starts after the build has passed reads ``Rp`` near 0).
     """
+    rested = [k for k in range(data.n_curves) if np.any((data.curve == k) & data.is_rest)]
     r_s, rp_s = [], []
-    for k in range(data.n_curves):
+    for k in rested or range(data.n_curves):
         mine = data.curve == k
         rest = np.flatnonzero(mine & data.is_rest)
         load = np.flatnonzero(mine & ~data.is_rest)
-        if rest.size == 0 or load.size < 2:
+        if load.size < 2:
             continue
         on = load[data.current[load] >= 0.5 * np.median(data.current[load])]
         t = data.time[on]
         if t.size == 0 or t[0] > STEP_WINDOW_S:
             continue
         f = arrhenius(data.temperature[on], beta_K)
-        r = (data.voltage[rest[0]] - data.voltage[on]) / (f * data.current[on])
-        after = np.flatnonzero(t >= TRANSIENT_S[0])
-        end = TRANSIENT_S[1]
-        if after.size:
-            end = max(end, min(t[after[min(TRANSIENT_SAMPLES, after.size) - 1]],
-                               TRANSIENT_S[2]))
-        w = (t >= TRANSIENT_S[0]) & (t <= end)
-        if np.count_nonzero(w) >= 4:
-            basis = np.column_stack([np.ones(w.sum()), -np.expm1(-t[w] / POLARISATION_TAU_S),
-                                     t[w]])
-            (r0, rp, _), *_ = np.linalg.lstsq(basis, r[w], rcond=None)
+        w = _transient_window(t)
+        if rest.size:
+            r = (data.voltage[rest[0]] - data.voltage[on]) / (f * data.current[on])
+            if np.count_nonzero(w) >= 4:
+                (r0, rp, _), *_ = np.linalg.lstsq(_transient_basis(t[w], 1.0), r[w],
+                                                  rcond=None)
+            else:
+                r0, rp = r[0], 0.0
+            r_s.append(float(r0))
+        elif np.count_nonzero(w) >= 4:
+            load_A = f[w] * data.current[on][w]
+            (_, rp, _), *_ = np.linalg.lstsq(_transient_basis(t[w], -load_A),
+                                             data.voltage[on][w], rcond=None)
         else:
-            r0, rp = r[0], 0.0
-        r_s.append(float(r0))
+            continue
         rp_s.append(max(float(rp), 0.0))
+    upper = ShepherdThermal().parameter("R_ohm").upper
+    if not rested:
+        return None if not rp_s else (None, float(min(np.mean(rp_s), upper)))
     if not r_s or not np.mean(r_s) > 0:
         return None
-    upper = ShepherdThermal().parameter("R_ohm").upper
     return float(min(np.mean(r_s), upper)), float(min(np.mean(rp_s), upper))
+
+
+def _transient_window(t: np.ndarray) -> np.ndarray:
+    """Samples of the load step's transient (:data:`TRANSIENT_S`), ``t`` [s] from the load
+    start."""
+    after = np.flatnonzero(t >= TRANSIENT_S[0])
+    end = TRANSIENT_S[1]
+    if after.size:
+        end = max(end, min(t[after[min(TRANSIENT_SAMPLES, after.size) - 1]], TRANSIENT_S[2]))
+    return (t >= TRANSIENT_S[0]) & (t <= end)
+
+
+def _transient_basis(t: np.ndarray, scale) -> np.ndarray:
+    """Columns of the step's response: a constant, ``scale (1 - exp(-t/tau))`` (the
+    polarisation building) and ``t`` (the open-circuit voltage's slope)."""
+    return np.column_stack([np.ones(t.size), -scale * np.expm1(-t / POLARISATION_TAU_S), t])
 
 
 def varying_current(data: Samples) -> bool:
