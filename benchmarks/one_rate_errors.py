@@ -154,19 +154,23 @@ def virtual_series():
     return out
 
 
-def without_temperature(series: Series) -> Series:
-    runs = {k: accuracy.make_run(k, replace(r.discharge, temperature_C=None), r.cutoff_V,
+def _dropped(series: Series, suffix: str, **discharge) -> Series:
+    """The series with ``discharge``'s fields of every run's Discharge set (to None)."""
+    runs = {k: accuracy.make_run(k, replace(r.discharge, **discharge), r.cutoff_V,
                                  r.ambient_C) for k, r in series.runs.items()}
-    return Series(series.cell, series.title + ", no temperature", runs, False, series.rest)
+    return replace(series, title=series.title + suffix, runs=runs,
+                   temperature=series.temperature and "temperature_C" not in discharge,
+                   rest=series.rest and "rest_voltage_V" not in discharge)
+
+
+def without_temperature(series: Series) -> Series:
+    return _dropped(series, ", no temperature", temperature_C=None)
 
 
 def without_rest(series: Series) -> Series:
     """The series as a logger started with the load on writes it: no rest sample before
     the load step."""
-    runs = {k: accuracy.make_run(k, replace(r.discharge, rest_voltage_V=None), r.cutoff_V,
-                                 r.ambient_C) for k, r in series.runs.items()}
-    return Series(series.cell, series.title + ", no rest sample", runs, series.temperature,
-                  False)
+    return _dropped(series, ", no rest sample", rest_voltage_V=None)
 
 
 def delivered_Ah(run) -> float:
