@@ -484,9 +484,7 @@ def build_health(row: dict, events: list[dict], model: dict | None, eol: float) 
             notes = [f"reference capacity: {fallback}"]
     with_cap = [e for e in per_event if e.capacity_Ah is not None and not e.outlier
                 and e.efc is not None]
-    capacity_trend = _trend(with_cap, [e.capacity_Ah for e in with_cap],
-                            [e.capacity_interval95 for e in with_cap],
-                            systematic=shared_errors(with_cap))
+    capacity_trend = capacity_over_life(with_cap)
     r_values, r_intervals, basis, with_r = _resistances(per_event)
     resistance_trend = _trend(with_r, r_values, r_intervals,
                               nugget_share=RESISTANCE_SCATTER_SHARE)
@@ -555,6 +553,23 @@ def _trend(chosen: list[EventHealth], values: list, intervals: list,
     return smooth([e.efc for e in chosen], values, lo, hi, **options)
 
 
+def capacity_over_life(with_cap: list[EventHealth]) -> Smoothed | None:
+    """The capacity trend over the pack's life from its events' estimates (the one place
+    it is made: the pack's figures and the benchmarks read it)."""
+    return _trend(with_cap, [e.capacity_Ah for e in with_cap],
+                  [e.capacity_interval95 for e in with_cap], systematic=shared_errors(with_cap))
+
+
+def capacity_now(with_cap: list[EventHealth]) -> tuple[float, list[float]] | None:
+    """Capacity today [Ah] and its 95 % interval from ``with_cap`` (events with an
+    estimate, no outliers, in order), read at the last one's EFC; None without any."""
+    trend = capacity_over_life(with_cap)
+    if trend is None:
+        return None
+    value, interval = trend.interval95(max(e.efc for e in with_cap))
+    return float(value), [float(interval[0]), float(interval[1])]
+
+
 def shared_errors(events: list[EventHealth]) -> list[float]:
     """The part of each capacity estimate's error [Ah] that every estimate read through the
     same open-circuit voltage curve shares (``capacity_systematic``; 0 when none)."""
@@ -621,4 +636,4 @@ def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eo
 
 
 __all__ = ["Health", "Forecast", "PackTable", "EventTable", "Pack", "scale_parameters",
-           "build_health", "DEFAULT_EOL"]
+           "build_health", "capacity_now", "capacity_over_life", "DEFAULT_EOL"]
