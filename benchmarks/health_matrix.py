@@ -13,10 +13,10 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   the sampling period (30-200 s, the missions' power steps between samples), the ambient
   (0 and 45 degC), short rests (60 s), shallow missions.
 * **The shared eVTOL lives** (CMU, VAH27 and VAH30; Bills et al. 2023): as logged,
-  resampled to 30 s and 60 s (the first sample at or after each tick, as a slower logger
-  would keep), and with the routine charges ending at 4.0 V: every voltage of the
-  routine moved to the state of charge a 4.0 V constant-voltage end leaves (the generic
-  Li-ion curve's drop over the charge not put in, at each sample's state of charge
+  resampled to 30 s and 60 s (interpolated between the logged samples, 166.5 s apart),
+  and with the routine charges ending at 4.0 V: every voltage of the routine moved to
+  the state of charge a 4.0 V constant-voltage end leaves (the cell's own curve, from
+  its latest C/5 test, over the charge not put in, at each sample's state of charge
   counted from the charge's end), the tests untouched.
 
 Prints per condition: blocks, capacity now's error against the next test (median and
@@ -81,45 +81,51 @@ REAL = {f"{cell} {how}": (cell, period, cv)
 # --------------------------------------------------------------------------- real variants
 
 def resample(frame: pd.DataFrame, period_s: float) -> pd.DataFrame:
-    """The first sample at or after each ``period_s`` tick (a slower logger)."""
+    """The log on a ``period_s`` grid, each column interpolated linearly between its
+    samples (the shared eVTOL logs hold one sample every 166.5 s: a finer grid adds no
+    information, and an estimator must not read it as a load resolved)."""
     t = frame["time_s"].to_numpy(float)
-    tick = np.floor((t - t[0]) / period_s)
-    keep = np.r_[True, np.diff(tick) > 0]
-    return frame[keep].reset_index(drop=True)
+    grid = np.arange(t[0], t[-1], period_s)
+    return pd.DataFrame({c: np.interp(grid, t, frame[c].to_numpy(float)) if c != "time_s"
+                         else grid for c in frame.columns})
 
 
 def routine_cv(frame: pd.DataFrame, tests: list[dict], cv_cell_V: float,
                full_cell_V: float = 4.2) -> pd.DataFrame:
     """The log as if the routine charges had stopped at ``cv_cell_V`` (module docstring):
-    between tests, every voltage moves down by the generic Li-ion curve's drop between
-    the state of charge counted from the last charge's end and that less the charge a
+    between two tests, every voltage moves down by the cell's own curve's drop (the
+    earlier test's C/5 discharge, whose resistive drop cancels in a difference) between
+    the state of charge counted from the last charge's end and that less the share a
     ``cv_cell_V`` end leaves out. The tests (and their charges) keep their voltages."""
-    from dischargelab.ocv import ocv_from_soc
-
-    soc = np.linspace(0.0, 1.0, 2001)
-    ocv = ocv_from_soc(soc, "li-ion")
-    top = float(ocv[-1])
-    # the share left out: where the curve is cv_cell_V below the full voltage's reading
-    short = 1.0 - float(np.interp(top - (full_cell_V - cv_cell_V), ocv, soc))
     t = frame["time_s"].to_numpy(float)
     i = frame["current_A"].to_numpy(float)
     v = frame["voltage_V"].to_numpy(float).copy()
-    in_test = np.zeros(t.size, bool)
+    curves = []
     for test in tests:
+        a, b = test["start"], test["stop"]
+        q = np.r_[0.0, np.cumsum(np.diff(t[a:b]) * 0.5 * (i[a + 1:b] + i[a:b - 1]))] / 3600
+        soc = 1.0 - q / q[-1]
+        curve = (soc[::-1], v[a:b][::-1], float(q[-1]))
+        # the share left out: where the curve lies (full - cv) below its start
+        top = float(np.median(v[a:b][:3]))
+        short = 1.0 - float(np.interp(top - (full_cell_V - cv_cell_V), curve[1], curve[0]))
+        curves.append((curve, short))
+    in_test = np.zeros(t.size, bool)
+    which = np.zeros(t.size, int)
+    for k, test in enumerate(tests):
         in_test[max(test["start"] - 1, 0):test["cut_stop"]] = True
+        which[test["start"]:] = k
     dq = np.r_[0.0, np.diff(t) * 0.5 * (i[1:] + i[:-1]) / 3600.0]
-    capacity = 3.0
     removed = 0.0
     for k in range(t.size):
         removed = max(removed + dq[k], 0.0)
-        charging_top = i[k] < -0.02 and v[k] >= full_cell_V - 0.01
-        if charging_top:
+        if i[k] < -0.02 and v[k] >= full_cell_V - 0.01:
             removed = 0.0  # a charge's constant-voltage end: full in the logged life
         if in_test[k]:
             continue
-        s = max(1.0 - removed / capacity, 0.0)
-        drop = np.interp(s, soc, ocv) - np.interp(max(s - short, 0.0), soc, ocv)
-        v[k] -= drop
+        (soc, volts, capacity), short = curves[which[k]]
+        at = max(1.0 - removed / capacity, 0.0)
+        v[k] -= np.interp(at, soc, volts) - np.interp(max(at - short, 0.0), soc, volts)
     out = frame.copy()
     out["voltage_V"] = v
     return out
@@ -191,9 +197,10 @@ def blocks(db: Path, truth: list[dict]) -> list[dict]:
             out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": None,
                         "low": None, "high": None, "why": "no estimate"})
             continue
-        value, (low, high) = now
-        out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": value,
-                    "low": low, "high": high, "why": ""})
+        low, high = now.interval95()
+        out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": now.value_Ah,
+                    "low": low, "high": high, "why": "", "trend_sd": now.trend_sd_Ah,
+                    "drift_unit": now.drift_unit_Ah, "quantile": now.quantile})
     return out
 
 
@@ -208,6 +215,50 @@ def summary(name: str, rows: list[dict]) -> str:
             f"{np.abs(err).max():.2f} % | {np.sum(np.abs(err) <= 2)}/{len(got)} | "
             f"{cover.sum()}/{len(got)} ({cover.mean():.0%}) | {np.median(half):.1f} % | "
             f"{err.mean():+.2f} % |")
+
+
+#: Drift shares tried by the calibration (results.DRIFT_SHARE).
+SHARES = np.round(np.arange(0.0, 2.01, 0.05), 2)
+
+
+def needed_share(rows: pd.DataFrame, coverage: float = 0.9) -> float:
+    """The smallest drift share whose band holds the next test in ``coverage`` of the
+    blocks (inf when none does)."""
+    got = rows.dropna(subset=["now_Ah"])
+    if got.empty:
+        return 0.0
+    for share in SHARES:
+        sd = np.hypot(got["trend_sd"], share * got["drift_unit"])
+        held = (got["now_Ah"] - got["truth_Ah"]).abs() <= got["quantile"] * sd
+        if held.mean() >= coverage:
+            return float(share)
+    return float("inf")
+
+
+def calibration(rows: pd.DataFrame) -> None:
+    """The drift share each condition needs, the share chosen without it (the largest
+    the other synthetic conditions need) and the coverage that gives it; each real cell
+    checked at the share the other cell needs."""
+    if rows.empty or "drift_unit" not in rows:
+        return
+    from dischargelab.logbook.results import DRIFT_SHARE
+
+    need = {c: needed_share(g) for c, g in rows.groupby("condition", sort=False)}
+    synthetic = [c for c in need if c in SYNTHETIC]
+    print(f"\n## The drift share (in use: {DRIFT_SHARE})\n")
+    print("| condition | needs | chosen without it | band holds the test at that share |")
+    print("|---|---|---|---|")
+    for c, n in need.items():
+        if c in SYNTHETIC:
+            others = [need[o] for o in synthetic if o != c]
+        else:
+            cell = c.split()[0]
+            others = [need[o] for o in need if o not in SYNTHETIC and not o.startswith(cell)]
+        chosen = max(others) if others else float("nan")
+        got = rows[(rows["condition"] == c)].dropna(subset=["now_Ah"])
+        sd = np.hypot(got["trend_sd"], chosen * got["drift_unit"])
+        held = ((got["now_Ah"] - got["truth_Ah"]).abs() <= got["quantile"] * sd).mean()
+        print(f"| {c} | {n:.2f} | {chosen:.2f} | {held:.0%} |")
 
 
 def main(argv=None) -> None:
@@ -242,6 +293,7 @@ def main(argv=None) -> None:
         print(summary(name, rows), flush=True)
     if args.rows:
         pd.DataFrame(every).to_csv(args.rows, index=False)
+    calibration(pd.DataFrame(every))
     print(f"\n(total {time.perf_counter() - started:.0f} s; {load_avg()})")
 
 

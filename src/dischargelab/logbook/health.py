@@ -536,7 +536,8 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     sampling = details.get("sampling") or {}
     fade = _fade_since(curve, cap, ctx)
     read = [s for s, anchored in ((soc_a, begins_full), (soc_b, ends_full)) if not anchored]
-    h.capacity_systematic = systematic_share(curve, read, soc_a - soc_b, fade)
+    # the curve's ageing after the last full discharge is the trend's (results.DRIFT_SHARE)
+    h.capacity_systematic = systematic_share(curve, read, soc_a - soc_b, None)
     if fade:
         interval = widen(cap, interval, OCV_AGEING_SD * fade)
     h.capacity_Ah, h.capacity_interval95 = cap, interval
@@ -611,8 +612,7 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
                                                 soc_a, sd_a, soc_b, sd_b)
     if cap is None:
         return how + " (read from its loaded end: no rest after it)"
-    h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b,
-                                             _fade_since(curve, cap, ctx))
+    h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b, None)
     h.capacity_Ah, h.capacity_interval95 = cap, interval
     h.capacity_method = "rest before, loaded end"
     h.notes.append(f"no rest after it: its end is the last loaded voltage plus the resistive "
