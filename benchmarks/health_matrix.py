@@ -17,7 +17,9 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   and with the routine charges ending at 4.0 V: every voltage of the routine moved to
   the state of charge a 4.0 V constant-voltage end leaves (the cell's own curve, from
   its latest C/5 test, over the charge not put in, at each sample's state of charge
-  counted from the charge's end), the tests untouched.
+  counted from the charge's end), the tests untouched; its blocks end at the first test
+  after a mission that the shift takes below the cutoff (a cell charged to 4.0 V would
+  have stopped there, which a shift cannot show).
 
 Prints per condition: blocks, capacity now's error against the next test (median and
 largest), blocks within 2 %, the band's coverage of the next test, its median half
@@ -69,6 +71,9 @@ SYNTHETIC = {
     "rests of 60 s": dict(rest_s=60.0),
     "shallow missions (60 %)": dict(mission_scale=0.6),
 }
+
+#: The eVTOL cells' cutoff [V].
+CUTOFF_CELL_V = 2.5
 
 #: Real conditions: name -> (cell file, resampling period [s] or None, routine CV [V] or None).
 REAL = {f"{cell} {how}": (cell, period, cv)
@@ -159,6 +164,12 @@ def real_log(cell: str, period, cv):
              for x in tests]
     if cv is not None:
         frame = routine_cv(frame, tests, cv)
+        # the emulation holds while every mission ends above the cutoff: a cell charged
+        # to 4.0 V that ran deeper would have stopped, which a shift cannot show
+        below = np.flatnonzero(frame["voltage_V"].to_numpy(float) < CUTOFF_CELL_V)
+        if below.size:
+            stop = float(frame["time_s"].iloc[below[0]])
+            truth = [x for x in truth if x["start_s"] <= stop]
     if period is not None:
         frame = resample(frame, period)
     return frame, truth

@@ -24,8 +24,10 @@ the database.
   pack's own, learned from its slow full discharge nearest in its life
   (:meth:`~dischargelab.logbook.estimates.OcvCurve.from_discharge`, the drop added
   back measured :data:`SETTLE_S` into the load), else the chemistry's generic curve.
-  A charge that ends in a constant-voltage taper at the pack's full voltage ends
-  full (``FULL_SOC`` of :mod:`.estimates`), as a charger and a fuel gauge define it.
+  A charge that ends in a constant-voltage taper at the chemistry's charge voltage
+  ends full (``FULL_SOC`` of :mod:`.estimates`), as a charger and a fuel gauge define
+  it; one that stops lower (a charger set to 4.0 V, a storage charge) is read through
+  the curve like any other rest.
 * **Partial discharges without a rest after them** (a bench discharge stopped under
   load). The charge drawn divided by the share of the capacity it used, read from the
   pack's full discharges whose voltage curves over the same charge match it best
@@ -116,8 +118,9 @@ SOON_S = 30.0
 #: capacity nor a full discharge.
 FIRST_ESTIMATES = 5
 
-#: A charge ends full when its highest voltage per cell is within this of the pack's
-#: full voltage (its full discharges' rest voltage, else the chemistry's charge voltage).
+#: A charge ends full when its highest voltage per cell is within this of the chemistry's
+#: charge voltage (:func:`dischargelab.ocv.charge_cell_V`): a charger's regulation and the
+#: leads' drop at the taper's end current, not a lower stop voltage.
 FULL_VOLTAGE_MARGIN_CELL_V = 0.03
 
 #: Standard deviation of a loaded end voltage read through the open-circuit voltage, as a
@@ -693,11 +696,10 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
 
     top = highest_rest_cell_V(ordered, cells, chemistry)
     prior = OcvCurve.prior(chemistry, top)
+    # full is the chemistry's charge voltage: a constant-voltage end lower (a charger set
+    # to 4.0 or 4.1 V, a storage charge) leaves the pack part-charged, whatever the pack's
+    # first full discharge started from
     full_cell = charge_cell_V(chemistry, top)
-    if fulls:
-        e = fulls[0][1]
-        if e.get("rest_voltage_V"):
-            full_cell = float(e["rest_voltage_V"]) / pack_cells(e, cells, chemistry)
     return PackContext(cells=cells, chemistry=chemistry, model=model, fulls=fulls,
                        curves=curves, prior=prior, full_cell_V=full_cell, label_Ah=label_Ah)
 
@@ -750,7 +752,10 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
             h.resistance_interval95 = [e["resistance_low_ohm"], e["resistance_high_ohm"]]
         if full:
             h.capacity_Ah, h.capacity_interval95 = full_capacity(e)
-            h.capacity_method = "coulomb count"
+            # a full discharge at a high rate (a mission run to its cutoff) delivers less
+            # than a slow one: a kind of estimate of its own
+            h.capacity_method = "coulomb count" if is_slow(e, h.capacity_Ah) else \
+                "coulomb count at a high rate"
             h.soc_start, h.soc_end = 1.0, 0.0
         out.append(h)
     ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah)
