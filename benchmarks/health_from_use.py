@@ -70,22 +70,16 @@ CMU_LABEL_AH = 3.0
 
 def capacity_now(events) -> tuple[float | None, float | None]:
     """Capacity today [Ah] and its standard deviation as the logbook would have said it
-    when ``events`` were all it held: the life trend (:func:`dischargelab.logbook.trend.
-    smooth`, as ``Logbook.health`` makes it) over their non-outlier estimates, read at
-    the last one's EFC (no later event informs it)."""
-    from dischargelab.logbook.results import shared_errors
-    from dischargelab.logbook.trend import smooth
+    when ``events`` were all it held (:func:`dischargelab.logbook.results.capacity_now`,
+    as ``Logbook.health`` makes it), read at the last one's EFC."""
+    from dischargelab.logbook.results import capacity_now as now_of
 
-    est = [e for e in events if e.capacity_Ah is not None and not e.outlier
-           and e.efc is not None]
-    if not est:
+    now = now_of([e for e in events if e.capacity_Ah is not None and not e.outlier
+                  and e.efc is not None])
+    if now is None:
         return None, None
-    lo = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[0] for e in est]
-    hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1] for e in est]
-    trend = smooth([e.efc for e in est], [e.capacity_Ah for e in est], lo, hi,
-                   systematic=shared_errors(est))
-    value, interval = trend.interval95(max(e.efc for e in est))
-    return float(value), float((interval[1] - interval[0]) / 3.92)
+    low, high = now.interval95()
+    return now.value_Ah, (high - low) / (2 * now.quantile)
 
 
 def block_mean(capacity, low, high) -> tuple[float, float]:
