@@ -35,6 +35,14 @@ today's value, elsewhere the running mean over the :data:`SYSTEMATIC_WINDOW` nea
 estimates on each side. Without it ~1,000 estimates read through one
 curve make a band of +-1 % that misses the truth by 4 % (the CMU eVTOL cells).
 
+Kinds of estimate: estimates made differently (a charge, a load between two rests, a full
+discharge) may each sit off the values' scale by an offset of their own kind. Each kind
+given an ``offset_sd`` is one more state, constant over the life, with that prior standard
+deviation: ``estimate_k = level(x_k) + offset_kind(k) + e_k``. Where kinds overlap the
+offsets are learned from the data; where the scale's own kind is missing they stay at their
+prior, and the level's variance carries it (a difference between kinds is never a trend).
+Estimates at one EFC are each an observation.
+
 Outliers: the errors are taken as Student's t with :data:`T_DOF` degrees of freedom,
 fitted by iteratively reweighting each event's variance (the EM algorithm of the
 t model: weight ``(nu + 1) / (nu + r^2)`` for a standardised residual ``r``), so an
