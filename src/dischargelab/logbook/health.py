@@ -95,6 +95,7 @@ from .references import (
     learned_curve,
     matched_capacity,
     partial_capacity,
+    run_to_empty_capacity,
     settled_drop,
 )
 
@@ -623,12 +624,54 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
     return None
 
 
+#: Standard deviation of the state of charge a discharge run to its cutoff ends at, on
+#: the scale of the pack's curve (a full discharge at another rate or temperature ends a
+#: little above or below its empty).
+EMPTY_SOC_SD = 0.02
+
+
+def _empty_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int,
+                        position: int) -> str | None:
+    """Capacity of a load from a rest to its cutoff (a discharge from a storage or part
+    charge run to empty): laid on the pack's full discharges at its rate when it has
+    some (:func:`~.references.run_to_empty_capacity`), else its start read through the
+    curve and its end empty."""
+    details = e.get("details") or {}
+    before = details.get("rest_before")
+    if before is None and e.get("rest_voltage_V") is not None:   # a bench file's rest sample
+        before = {"relaxed_V": float(e["rest_voltage_V"]), "current_A": 0.0,
+                  "temperature_C": e.get("temperature_start_C")}
+    if before is None or not e.get("reaches_knee") or h.full or \
+            not ends_empty(e, n_cells, ctx.chemistry):
+        return "not run to empty from a rest"
+    cap, interval, how = run_to_empty_capacity(e, [(f, c) for _, f, c in ctx.fulls], n_cells)
+    if cap is not None:
+        h.capacity_Ah, h.capacity_interval95, h.capacity_method = cap, interval, how
+        h.soc_start, h.soc_end = float(e.get("discharged_Ah") or 0.0) / cap, 0.0
+        return None
+    curve = ctx.curve_at(position)
+    soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=e.get("resistance_ohm"))
+    q = float(details.get("counted_Ah") or e.get("discharged_Ah") or 0.0)
+    cap, interval, how = capacity_between_rests(q, float(details.get("counted_sd_Ah") or 0.0),
+                                                soc_a, sd_a, 0.0, EMPTY_SOC_SD)
+    if cap is None:
+        return how
+    h.soc_start, h.soc_end = soc_a, 0.0
+    h.capacity_systematic = systematic_share(curve, [soc_a], soc_a, None)
+    h.capacity_Ah, h.capacity_interval95 = cap, interval
+    h.capacity_method = "rest before, run to empty"
+    h.notes.append(f"from a rest at {soc_a:.0%} to the cutoff, read through {curve.source}")
+    return None
+
+
 def _capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, position: int) -> None:
     """The event's capacity by the first method that applies (module docstring)."""
     if h.kind not in ("discharge", "flight", "charge"):
         return
     why = _rest_capacity(e, h, ctx, n_cells, position)
     if why is None:
+        return
+    if h.kind != "charge" and _empty_end_capacity(e, h, ctx, n_cells, position) is None:
         return
     if h.kind != "charge" and ctx.fulls and \
             not ((e.get("details") or {}).get("rest_after") and
