@@ -87,6 +87,7 @@ from .estimates import (
 )
 from .references import (
     RELAXED_S,
+    SAME_RATE_SHARE,
     SETTLE_S,
     VOLTAGE_SD_CELL_V,
     ReferenceCurve,
@@ -747,6 +748,20 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
                        curves=curves, prior=prior, full_cell_V=full_cell, label_Ah=label_Ah)
 
 
+def _rate_kinds(ordered: list[dict], out: list[EventHealth]) -> None:
+    """Full discharges much faster than the pack's slowest ones (a mission run to its
+    cutoff beside C/5 capacity tests) deliver less by the rate-capacity effect: their
+    coulomb count is a kind of estimate of its own."""
+    rates = {k: float(ordered[k].get("mean_current_A") or 0.0) / h.capacity_Ah
+             for k, h in enumerate(out) if h.full and h.capacity_Ah}
+    if not rates:
+        return
+    slowest = min(rates.values())
+    for k, rate in rates.items():
+        if rate > (1.0 + SAME_RATE_SHARE) * slowest:
+            out[k].capacity_method = "coulomb count at a high rate"
+
+
 def highest_rest_cell_V(ordered: list[dict], cells: int | None, chemistry: str | None
                         ) -> float | None:
     """The highest rest voltage per cell the pack's events show [V] (the rest before each
@@ -797,10 +812,10 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
             h.capacity_Ah, h.capacity_interval95 = full_capacity(e)
             # a full discharge at a high rate (a mission run to its cutoff) delivers less
             # than a slow one: a kind of estimate of its own
-            h.capacity_method = "coulomb count" if is_slow(e, h.capacity_Ah) else \
-                "coulomb count at a high rate"
+            h.capacity_method = "coulomb count"
             h.soc_start, h.soc_end = 1.0, 0.0
         out.append(h)
+    _rate_kinds(ordered, out)
     ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah)
     charges = [k for k, e in enumerate(ordered) if e.get("kind") == "charge"]
     added = charge_start_corrections([((ordered[k].get("details") or {}).get("charge") or {})
