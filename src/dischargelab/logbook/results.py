@@ -485,6 +485,8 @@ def build_health(row: dict, events: list[dict], model: dict | None, eol: float) 
     with_cap = [e for e in per_event if e.capacity_Ah is not None and not e.outlier
                 and e.efc is not None]
     capacity_trend = capacity_over_life(with_cap)
+    if capacity_trend is not None:
+        notes += _scale_notes(with_cap, capacity_trend)
     r_values, r_intervals, basis, with_r = _resistances(per_event)
     resistance_trend = _trend(with_r, r_values, r_intervals,
                               nugget_share=RESISTANCE_SCATTER_SHARE)
@@ -589,6 +591,25 @@ DRIFT_SHARE = 0.3
 #: 20 % over 1,000 EFC, the slow end of Li-ion cycle lives (estimates read through an
 #: aged curve can hide the fade they should show).
 FADE_FLOOR_PER_EFC = 2e-4
+
+
+def _scale_notes(with_cap: list[EventHealth], trend: Smoothed) -> list[str]:
+    """One line on what capacity today's scale rests on, when it is not a recent slow full
+    discharge."""
+    last = max(e.efc for e in with_cap)
+    if not any(estimate_kind(e) == REFERENCE_KIND for e in with_cap):
+        return ["capacity today: no slow full discharge yet; its scale rests on "
+                f"{len({estimate_kind(e) for e in with_cap})} kind(s) of estimate whose "
+                "offsets are not measured, and the band carries them (a full discharge "
+                "from full to empty measures them)"]
+    anchor = _anchor(with_cap)
+    extra = DRIFT_SHARE * float(drift_unit(trend, anchor, [last])[0])
+    value = float(trend.at(last)[0][0])
+    if extra <= 0.005 * value:
+        return []
+    return [f"capacity today: {last - anchor:.0f} EFC since the last slow full discharge; "
+            f"its band includes +-{1.96 * extra / value:.1%} for the curves' ageing since "
+            "(another full discharge resets it)"]
 
 
 def _anchor(with_cap: list[EventHealth]) -> float:
