@@ -174,7 +174,9 @@ def packs_cmd(eol, db, as_json):
         refresh_stale(lb)
         result = lb.packs(eol=eol)
     if as_json:
-        print_json(result.to_dict())
+        data = result.to_dict()
+        data["rows"] = [dict(r, text=pack_text(r)) for r in data["rows"]]
+        print_json(data)
         return
     rows = []
     for r in result.rows:

@@ -133,6 +133,7 @@ class MissionResult:
             "energy_used_Wh": self.simulation.energy_Wh_total,
             "stretch": self.stretch,
             "model": m.battery.model,
+            "model_family": m.battery.family.title,
             "ambient_C": m.resolved_ambient_C,
             "peak_temperature_C": self.simulation.peak_temperature_C,
             "phases": self.phases,

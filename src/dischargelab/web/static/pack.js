@@ -159,6 +159,9 @@
     const cannot = r.cannot_deliver ? r.cannot_deliver.message : null;
     const rows = [["Mission", r.mission]];
     if (cannot) rows.push(["Cannot fly", cannot]);
+    const unc = r.uncertainty;
+    rows.push(["Model", (r.model_family ? r.model_family + " (" + r.model + ")" : r.model) || DL.MISSING],
+              ["Interval", unc && unc.available ? unc.method : "none (no parameter draws flown)"]);
     rows.push(["Completed", r.completed ? "yes" : "no (" + r.ended_by + ")"],
               ["Flight time", DL.clock(r.flight_time_s)], ["Endurance to cutoff", DL.clock(r.endurance_s)],
               ["Charge used", DL.num(r.charge_used_Ah, 3) + " Ah"], ["State of charge at the end", DL.num(r.soc_end_pct, 1) + " %"],
