@@ -205,7 +205,7 @@ def fitted_data(battery: Battery) -> list[str]:
             continue
         name = Path(str(entry.get("source") or entry.get("name") or f"curve {k + 1}")).name
         label = entry.get("name")
-        text = name if not label or label == name else f"{label} ({name})"
+        text = name if not label or label in (name, Path(name).stem) else f"{label} ({name})"
         if k < len(currents) and currents[k]:
             text += f" at {currents[k]:.3g} A per cell"
         out.append(text)

@@ -85,6 +85,9 @@ def _print_fit(result, battery_path=None):
                     ["parameter", "value", "std. error", "95 % interval"], rows))
     out.print(f"RMSE {result.rmse_V * 1000:.2f} mV per cell "
               f"({result.rmse_V * result.cells_series * 1000:.1f} mV pack)")
+    from ..report import model_statement
+
+    out.print(model_statement(result.battery), markup=False)
     if result.model_error:
         from ..uncertainty import held_out_summary
 
