@@ -552,9 +552,9 @@ def _validation_cards(cases) -> list[tuple[str, str, str]]:
     held, seen, unknown = split_by_fit(cases)
     cards = []
     for group, head, note in (
-            (held, "validation on data the fit did not see: mean endurance error", ""),
-            (seen, "fit check on data the fit saw (not a validation): mean endurance error",
-             ""),
+            (held, "held-out validation: mean endurance error", ", not in the fit"),
+            (seen, "fit check, not a validation: mean endurance error",
+             ", data the fit saw"),
             (unknown, "measured discharges: mean endurance error",
              "; the battery file does not record its data, so whether the fit saw them is "
              "unknown")):
@@ -663,6 +663,9 @@ def build_report(battery, *, mission_result=None, validation=None, title: str | 
                           _minutes(mission_result.stretch["margin_s"]), "beyond the plan"))
     if validation:
         cards += _validation_cards(validation)
+    methods = interval_methods(battery)
+    cards.append(("model", battery.model, f"{battery.family.title}; prediction intervals: "
+                                          f"{methods['predictions']}"))
     flown = mission_result.mission.battery if mission_result is not None else battery
     cards.append(("pack" + (" as flown" if mission_result is not None else ""),
                   f"{flown.cells_series}S{flown.strings_parallel}P",

@@ -66,14 +66,19 @@ def test_demo_headline_is_a_held_out_validation_named_with_the_model_used(tmp_pa
     # the one validation card is held-out data: 1C, which the fit did not see
     assert len(validation) == 1
     label, value, note = validation[0]
-    assert label.startswith("validation on data the fit did not see")
-    assert "Q30_S001_1C.csv" in note and not any(name in note for name in seen)
+    assert label.startswith("held-out validation")
+    assert "Q30_S001_1C.csv" in note and "not in the fit" in note
+    assert not any(name in note for name in seen)
     assert re.fullmatch(r"\d+\.\d %", value)
     assert not any("fit check" in x for x in labels)
+    # the headline names the model family and the interval method of battery.json
+    n_boot = len(battery.extra["bootstrap"]["samples"])
+    model = [c for c in cards(page) if c[0] == "model"]
+    assert len(model) == 1 and model[0][1] == battery.model
+    assert battery.family.title in model[0][2] and f"{n_boot} bootstrap refits" in model[0][2]
     # the footer and the facts name the family, the data and the interval method used
     text = footer(page)
     assert battery.family.title in text and f"'{battery.model}'" in text
-    n_boot = len(battery.extra["bootstrap"]["samples"])
     assert f"{n_boot} bootstrap refits" in text
     for name in seen:
         assert name in text
@@ -110,9 +115,10 @@ def test_report_of_an_ecm_bootstrap_fit_says_so_and_tells_validation_from_fit_ch
     assert battery.family.title in done.stdout and "12 bootstrap refits" in done.stdout
     # 3C was not fitted: a validation; 1C was: a fit check, never called a validation
     by_label = {c[0]: c for c in cards(page)}
-    held = [c for k, c in by_label.items() if k.startswith("validation on data")]
+    held = [c for k, c in by_label.items() if k.startswith("held-out validation")]
     check = [c for k, c in by_label.items() if k.startswith("fit check")]
     assert len(held) == 1 and "Q30_S001_3C.csv" in held[0][2] and "1C" not in held[0][2]
+    assert by_label["model"][1] == "ecm" and "12 bootstrap refits" in by_label["model"][2]
     assert len(check) == 1 and "Q30_S001_1C.csv" in check[0][2]
     assert ">Validation against measured discharges<" not in page
 
