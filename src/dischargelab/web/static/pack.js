@@ -129,7 +129,7 @@
       new LinePlot($("plot-model"), {xLabel: "discharged charge [Ah]", yLabel: "pack voltage [V]"})
         .draw({series: m.curves.map((c, k) => ({x: c.charge_Ah, y: c.voltage_V, color: COLORS[k % COLORS.length],
                                                   label: DL.num(c.c_rate, 1) + "C (" + DL.num(c.current_A, 1) + " A)"}))});
-      $("model-note").textContent = m.note || "";
+      $("model-note").textContent = [m.statement, m.note].filter(Boolean).join(" ");
     } else {
       $("model-name").textContent = "";
       new LinePlot($("plot-model"), {}).draw({series: [], empty: d.model_note || "no model fitted yet — Refit"});
