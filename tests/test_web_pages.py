@@ -10,7 +10,6 @@ same database, formatted as the page formats it.
 from __future__ import annotations
 
 import hashlib
-import math
 import shutil
 import sqlite3
 from pathlib import Path
@@ -23,6 +22,7 @@ pytest.importorskip("starlette")
 
 import dischargelab as dl
 from dischargelab.engine import Step
+from dischargelab.formatting import MISSING, interval, number, pack_text
 from dischargelab.simulate import simulate
 from web_helpers import CSP_PROBE, Browser, ServerProcess, multipart, plot_state
 
@@ -56,21 +56,16 @@ def synthetic_discharge(path: Path, capacity_scale: float = 1.0) -> Path:
 
 
 def num(value, digits: int) -> str:
-    """Python's twin of the pages' DL.num (toFixed; '–' for no value)."""
-    if value is None or not math.isfinite(value):
-        return "–"
-    return f"{value:.{digits}f}"
+    """What the pages write for a number: the one formatter's (DL.num is its twin)."""
+    return number(value, digits)
 
 
 def list_row(row: dict) -> list[str]:
-    """A row of the pack list as the page writes it, from ``Logbook.packs()``."""
-    frac = row["capacity_fraction"]
-    iv = row["eol_efc_interval95"]
-    return [row["name"], str(row["events"]), num(row["efc"], 1), num(row["capacity_Ah"], 3),
-            "–" if frac is None else f"{math.floor(frac * 100 + 0.5)} %",
-            "–" if row["resistance_ohm"] is None else num(row["resistance_ohm"] * 1000, 1),
-            num(row["eol_efc"], 0),
-            "–" if not iv else f"{num(iv[0], 0)} – {num(iv[1], 0)}"]
+    """A row of the pack list as every view writes it, from ``Logbook.packs()``."""
+    text = pack_text(row)
+    return [row["name"], str(row["events"]), text["efc"], text["capacity_Ah"],
+            text["capacity_fraction"], text["resistance_ohm"], text["eol_efc"],
+            text["eol_efc_interval95"]]
 
 
 def content(path: Path) -> str:
@@ -139,7 +134,7 @@ def test_pack_list_shows_the_databases_numbers(server, browser, db):
     assert [r["name"] for r in expected] == ["cell C", "zippy 2S"]
     assert rows == [list_row(r) for r in expected]
     assert expected[0]["eol_efc"] is not None and expected[1]["eol_efc"] is None
-    assert rows[0][2] != "–" and rows[1][6] == "–"
+    assert rows[0][2] != MISSING and rows[1][6] == MISSING
     assert browser.text("count") == "2 packs"
     fill = browser.js("const f = document.querySelector('#packs .bar > span'); return f."
                       "getBoundingClientRect().width / f.parentNode.getBoundingClientRect().width;")
@@ -167,7 +162,7 @@ def test_pack_page_reads_without_writing_then_refits_and_flies(server, browser, 
     fc = health["forecast"]
     assert browser.text("m-eol") == num(fc["eol_efc"], 0)
     lo, hi = fc["eol_efc_interval95"]
-    assert browser.text("m-eol-iv") == f"EFC (95 %: {num(lo, 0)}–{num(hi, 0)})"
+    assert browser.text("m-eol-iv") == f"EFC (95 %: {interval([lo, hi], 0)})"
     assert browser.text("pack-summary") == f"{len(CYCLES)} events"
     events = browser.js("return [...document.querySelectorAll('#events tbody tr')].map("
                         "r => [...r.cells].map(c => c.textContent));")
@@ -359,15 +354,21 @@ def test_pack_page_plots_zoom_pan_and_read_out(server, browser, db):
                             "u.valToPos(arguments[1], 'y')];", x_value, y_value)
         return round(px - width / 2), round(py - height / 2)
 
-    # hover: the legend reads the point under the cursor
+    # before any hover the legend reads each series' last value; hovering reads the point
+    # under the cursor
+    read_legend = ("[...document.querySelectorAll('#plot-capacity .u-legend .u-series "
+                   ".u-value')].map(v => v.textContent)")
+    idle = browser.js(f"return {read_legend};")
+    last_full = [e for e in events if e["kind"] == "full" and not e.get("outlier")][-1]
+    assert float(idle[capacity]) == pytest.approx(last_full["capacity_Ah"], abs=0.001)
     event = events[2]
     ActionChains(browser.driver).move_to_element_with_offset(over, *at(
         event["efc"], event["capacity_Ah"])).perform()
-    legend = browser.wait_for("(() => { const l = [...document.querySelectorAll('#plot-capacity "
-                              ".u-legend .u-series .u-value')].map(v => v.textContent); "
-                              f"return l[{capacity}] !== '–' && l; }})()", 5, "a read-out")
-    assert float(legend[capacity]) == pytest.approx(event["capacity_Ah"], abs=0.001)
-    assert float(legend[0]) == pytest.approx(event["efc"], abs=0.5)
+    legend = browser.wait_for(f"(() => {{ const l = {read_legend}; return Math.abs("
+                              f"parseFloat(l[{capacity}]) - {event['capacity_Ah']}) < 0.001 "
+                              f"&& l; }})()", 5, "a read-out")
+    pixel = (full["x"][1] - full["x"][0]) / width        # the cursor moves by whole pixels
+    assert float(legend[0]) == pytest.approx(event["efc"], abs=max(0.5, 1.5 * pixel))
 
     # drag across the first half: zoom in, and the y axis fits the points left in view
     ActionChains(browser.driver).move_to_element_with_offset(over, -width // 2 + 5, 0) \

@@ -215,6 +215,54 @@ def plot_ocv(battery, ax=None, reference=None, points: int = 201):
     return ax
 
 
+#: Phase shades: calm blues, greens, greys and violets; no red, orange or yellow, which
+#: read as warnings (the cutoff line and reserve marker carry those).
+PHASE_COLORS = ("#dbe8f6", "#dcefe1", "#e8e4f3", "#e3e6ea", "#d5ecef", "#eef0d9", "#e9e0ee",
+                "#d9e3ec")
+#: Rows of phase labels under the top of a mission plot before a label is left out.
+PHASE_LABEL_ROWS = 3
+
+
+def _label_phases(ax, spans) -> None:
+    """Phase names over their bands, none overlapping: each goes in the first of
+    :data:`PHASE_LABEL_ROWS` rows (from the top) where it clears the labels already there,
+    turned upright in a band too narrow for it; a label with no room is left out (the
+    phase table names every phase)."""
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    trans = ax.get_xaxis_transform()
+    x0, x1 = ax.get_xlim()
+    taken = [[] for _ in range(PHASE_LABEL_ROWS)]      # (left, right) in display pixels
+    for a, b, name in spans:
+        lo, hi = max(a, x0), min(b, x1)
+        if hi <= lo:
+            continue
+        centre = 0.5 * (lo + hi)
+        band = ax.transData.transform([(lo, 0), (hi, 0)])[:, 0]
+        for row in range(PHASE_LABEL_ROWS):
+            label = ax.text(centre, 0.985 - 0.07 * row, name, ha="center", va="top",
+                            fontsize=8, transform=trans, clip_on=True)
+            box = label.get_window_extent(renderer)
+            if box.width > band[1] - band[0] + 2:   # wider than its band: upright
+                label.set_rotation(90)
+                label.set_y(0.985)
+                box = label.get_window_extent(renderer)
+                if box.width > band[1] - band[0] + 2 or row:
+                    label.remove()
+                    continue
+            clash = any(box.x0 < right + 3 and box.x1 > left - 3 for left, right in taken[row])
+            if label.get_rotation() == 90:   # an upright label spans every row's height
+                clash = clash or any(box.x0 < right + 3 and box.x1 > left - 3
+                                     for r in taken for left, right in r)
+            if clash:
+                label.remove()
+                continue
+            rows = range(PHASE_LABEL_ROWS) if label.get_rotation() == 90 else (row,)
+            for r in rows:
+                taken[r].append((box.x0, box.x1))
+            break
+
+
 def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool = True):
     """Pack voltage through a flight with the phases shaded (like the paper's Fig. 11).
 
@@ -230,7 +278,6 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
     label_phases : bool
         Write phase names in the shaded bands wide enough to hold them.
     """
-    plt = pyplot()
     ax = _axes(ax, figsize=(10, 5.5))
     sim = result.simulation
     mission = result.mission
@@ -240,19 +287,16 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
     for row in result.phases:
         if row["phase"] not in names:
             names.append(row["phase"])
-    palette = plt.get_cmap("tab20")
-    color_of = {n: palette((2 * k + 1) % 20) for k, n in enumerate(names)}
+    color_of = {n: PHASE_COLORS[k % len(PHASE_COLORS)] for k, n in enumerate(names)}
     v_lo = min(float(np.min(sim.voltage_V)), mission.cutoff_pack_V)
     v_hi = float(np.max(sim.voltage_V))
     pad = 0.08 * max(v_hi - v_lo, 0.05 * v_hi)
+    spans = []
     for row in result.phases:
         a, b = row["start_s"] / 60.0, row["end_s"] / 60.0
-        ax.axvspan(a, b, color=color_of[row["phase"]], alpha=0.45, lw=0)
-        if label_phases and (b - a) > 0.012 * total and row["repetition"] in (None, 1):
-            narrow = (b - a) < 0.09 * total
-            ax.text(0.5 * (a + b), 0.985, row["phase"], ha="center", va="top", fontsize=8,
-                    rotation=90 if narrow else 0, transform=ax.get_xaxis_transform(),
-                    clip_on=True)
+        ax.axvspan(a, b, color=color_of[row["phase"]], alpha=0.9, lw=0)
+        if label_phases and (b - a) > 0.005 * total and row["repetition"] in (None, 1):
+            spans.append((a, b, row["phase"]))
     ax.plot(minutes, sim.voltage_V, color="k", lw=1.6, label="pack voltage")
     ax.axhline(mission.cutoff_pack_V, color="tab:red", ls="--", lw=1.0,
                label=f"cutoff {mission.cutoff_pack_V:.2f} V ({mission.cutoff_cell_V:g} V/cell)")
@@ -263,17 +307,26 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
     if np.isfinite(result.cutoff_time_s):
         ax.axvline(result.cutoff_time_s / 60.0, color="tab:red", ls=":", lw=1.2,
                    label=f"cutoff reached ({result.cutoff_time_s / 60:.1f} min)")
-    x_max = total
     st = result.stretch
+    latest = None
     if st is not None and st["binding"] != "infeasible" and \
             abs(result.endurance_s - result.flight_time_s) > 1.0:
         latest = result.endurance_s / 60.0
-        x_max = max(total, latest * 1.02)
-        ax.axvline(latest, color="tab:orange", ls="--", lw=1.2,
-                   label=f"latest landing with the longest {st['phase']} "
-                         f"({latest:.1f} min, {st['binding']})")
+        text = f"latest landing with the longest {st['phase']} ({latest:.1f} min, " \
+               f"{st['binding']})"
+        if latest <= total:
+            ax.axvline(latest, color="tab:purple", ls="--", lw=1.2, label=text)
+        else:
+            # the axis ends with the flight: the later landing is marked at its right edge
+            ax.annotate(f"{text} \u2192", xy=(1.0, 0.5), xycoords="axes fraction",
+                        xytext=(-4, 0), textcoords="offset points", ha="right", va="center",
+                        fontsize=8, color="tab:purple",
+                        bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "tab:purple",
+                              "lw": 0.8})
     ax.set_ylim(v_lo - pad, v_hi + 2.2 * pad)
-    ax.set_xlim(0, x_max)
+    ax.set_xlim(0, total)
+    if spans:
+        _label_phases(ax, spans)
     ax.set_xlabel("time [min]")
     ax.set_ylabel(f"pack voltage [V] ({mission.battery.cells_series}S"
                   f"{mission.battery.strings_parallel}P)")

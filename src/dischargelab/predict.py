@@ -194,12 +194,26 @@ def beta_sensitivity(battery: Battery, run, time_s: float) -> dict | None:
     return out
 
 
-def extrapolation_warning(battery: Battery, cell_current_A: float, side: str) -> str:
-    """The one wording of the extrapolation warning (predict, curves, endurance)."""
+def extrapolation_warning(battery: Battery, cell_current_A: float, side: str,
+                          interval_ratio: float | None = None) -> str:
+    """The one wording of the extrapolation warning (predict, curves, endurance).
+
+    ``interval_ratio``: the ratio the interval was widened with when it is not this
+    current's own (a mission's, weighted over its phases), so that the warning and the
+    interval name the same number.
+    """
+    from .formatting import ratio
+
     fitted = ", ".join(f"{x:.3g}" for x in battery.fit_currents_A)
+    if interval_ratio is None:
+        widens = (f"the interval widens with the extrapolation ratio "
+                  f"({ratio(battery.extrapolation_ratio(cell_current_A))})")
+    else:
+        widens = (f"the interval widens with the mission's extrapolation ratio "
+                  f"({ratio(interval_ratio)}, its phases' ratios weighted by the charge they "
+                  f"draw)")
     return (f"extrapolation: {cell_current_A:.3g} A per cell is far {side} the fitted currents "
-            f"({fitted} A); the interval widens with the extrapolation ratio "
-            f"(x{battery.extrapolation_ratio(cell_current_A):.1f}); check with validate")
+            f"({fitted} A); {widens}; check with validate")
 
 
 def default_cutoff(battery: Battery, cutoff=None, cutoff_pack=None) -> dict:

@@ -192,10 +192,70 @@ PARAMETER_HEADERS = ["parameter", "meaning", "unit", "value", "std. error", "95 
                      "95 % high", "status"]
 
 
+def fitted_data(battery: Battery) -> list[str]:
+    """The data the fit saw, as the battery file records it: one name per curve (with
+    its cell current when known); empty when the file records none (a preset)."""
+    sources = battery.extra.get("source")
+    if not isinstance(sources, list):
+        return []
+    currents = list(battery.fit_currents_A)
+    out = []
+    for k, entry in enumerate(sources):
+        if not isinstance(entry, dict):
+            continue
+        name = Path(str(entry.get("source") or entry.get("name") or f"curve {k + 1}")).name
+        label = entry.get("name")
+        text = name if not label or label in (name, Path(name).stem) else f"{label} ({name})"
+        if k < len(currents) and currents[k]:
+            text += f" at {currents[k]:.3g} A per cell"
+        out.append(text)
+    return out
+
+
+def interval_methods(battery: Battery) -> dict:
+    """How the intervals of this battery are made, from what its file holds.
+
+    Returns
+    -------
+    dict
+        ``parameters``: the parameters' 95 % intervals; ``predictions``: the draws
+        predictions and missions are flown with (before the model error is added).
+    """
+    boot = battery.extra.get("bootstrap")
+    n_boot = len(boot.get("samples") or []) if isinstance(boot, dict) else 0
+    if battery.covariance is None and not n_boot:
+        none = "none: the battery file holds no covariance or refits (a preset or a " \
+               "hand-written file)"
+        return {"parameters": none, "predictions": none}
+    parameters = ("from the fit's parameter covariance (Student t)"
+                  if isinstance(battery.extra.get("ci95"), dict) or battery.covariance
+                  is not None else "unavailable")
+    predictions = (f"{n_boot} bootstrap refits stored by the fit" if n_boot
+                   else "sampling the fit's parameter covariance")
+    return {"parameters": parameters, "predictions": predictions}
+
+
+def model_statement(battery: Battery) -> str:
+    """One sentence naming the model family, the data fitted and the interval method."""
+    data = fitted_data(battery)
+    methods = interval_methods(battery)
+    fitted = (f"fitted on {len(data)} measured discharge(s): {'; '.join(data)}" if data
+              else "not fitted to data recorded in the battery file")
+    return (f"Model: {battery.family.title} (model '{battery.model}'), {fitted}. "
+            f"Parameter intervals: {methods['parameters']}; prediction intervals: "
+            f"{methods['predictions']}.")
+
+
 def _battery_facts(battery: Battery) -> list[tuple[str, str]]:
     """The summary rows under the parameter table (label, value); add a row here."""
     extra = battery.extra
-    facts = []
+    methods = interval_methods(battery)
+    facts = [("model family", f"{battery.family.title} ({battery.model})")]
+    data = fitted_data(battery)
+    if data:
+        facts.append(("fitted on", "; ".join(data)))
+    facts += [("parameter intervals (95 %)", methods["parameters"]),
+              ("prediction intervals", methods["predictions"])]
     if extra.get("rmse_V") is not None:
         facts.append(("fit RMSE", f"{1000 * float(extra['rmse_V']):.2f} mV per cell"))
     error = extra.get("model_error")
@@ -206,7 +266,7 @@ def _battery_facts(battery: Battery) -> list[tuple[str, str]]:
         facts.append(("thermal model", f"heat capacity {float(thermal['Cth_J_per_K']):.3g} J/K, "
                       f"thermal resistance {float(thermal['Rth_K_per_W']):.3g} K/W "
                       f"({thermal.get('source', '')})"))
-    if battery.fit_currents_A:
+    if battery.fit_currents_A and not data:
         facts.append(("fitted at (cell current)",
                       ", ".join(f"{x:.3g} A" for x in battery.fit_currents_A)))
     if extra.get("n_samples"):
@@ -471,6 +531,40 @@ def _mission_section(result) -> str:
     return "".join(parts)
 
 
+def split_by_fit(cases) -> tuple[list, list, list]:
+    """Validation cases as (held out, seen by the fit, unknown): a case is held out only
+    when the battery file records the data its fit saw and this file is not among them."""
+    held = [c for c in cases if c.summary.get("in_fit") is False]
+    seen = [c for c in cases if c.summary.get("in_fit") is True]
+    unknown = [c for c in cases if c.summary.get("in_fit") is None]
+    return held, seen, unknown
+
+
+def _case_names(cases) -> str:
+    return ", ".join(f"{Path(c.summary['file']).name} ({c.summary['current_A']:.3g} A)"
+                     for c in cases)
+
+
+def _validation_cards(cases) -> list[tuple[str, str, str]]:
+    """Headline cards: "validation" only for data the fit did not see."""
+    from .validate import summarise
+
+    held, seen, unknown = split_by_fit(cases)
+    cards = []
+    for group, head, note in (
+            (held, "held-out validation: mean endurance error", ", not in the fit"),
+            (seen, "fit check, not a validation: mean endurance error",
+             ", data the fit saw"),
+            (unknown, "measured discharges: mean endurance error",
+             "; the battery file does not record its data, so whether the fit saw them is "
+             "unknown")):
+        if group:
+            agg = summarise([c.summary for c in group])
+            cards.append((head, f"{_fmt(agg['mean_abs_endurance_error_pct'], '.1f')} %",
+                          _case_names(group) + note))
+    return cards
+
+
 def _validation_section(cases) -> str:
     from .plot import plot_validation
     from .validate import summarise
@@ -486,13 +580,22 @@ def _validation_section(cases) -> str:
                      _fmt(s["voltage_max_error_operational_pct"], ".2f"),
                      {True: "yes", False: "no", None: "?"}[s["in_fit"]]])
         warnings += [f"{Path(s['file']).name}: {w}" for w in s["warnings"]]
-    agg = summarise([c.summary for c in cases])
-    parts = ["<h2>Validation against measured discharges</h2>",
+    held, seen, unknown = split_by_fit(cases)
+    means = []
+    for group, what in ((held, "on the files the fit did not see (validation)"),
+                        (seen, "on the files the fit saw (a fit check, not a validation)"),
+                        (unknown, "on files the battery file cannot tell apart from its "
+                                  "fitted data")):
+        if group:
+            agg = summarise([c.summary for c in group])
+            means.append(f"{_fmt(agg['mean_abs_endurance_error_pct'], '.2f')} % {what}")
+    head = ("Validation against measured discharges" if held and not seen and not unknown
+            else "Measured discharges against the model")
+    parts = [f"<h2>{head}</h2>",
              f'<p class="sub">Model driven with each measured current; endurance to '
              f"{cases[0].summary['cutoff_cell_V']:g} V per cell. Voltage errors in % of the "
              f"measured voltage; 'operational' is the part above 20 % state of charge (paper "
-             f"4.4). Mean absolute endurance error "
-             f"{_fmt(agg['mean_abs_endurance_error_pct'], '.2f')} %.</p>",
+             f"4.4). Mean absolute endurance error {'; '.join(means)}.</p>",
              _table(["file", "current [A]", "profile", "measured", "predicted", "error [s]",
                      "error [%]", "V RMS [%]", "V max [%]", "V max >20% SOC [%]", "in fit"],
                     rows),
@@ -559,12 +662,10 @@ def build_report(battery, *, mission_result=None, validation=None, title: str | 
             cards.append((f"margin on {mission_result.stretch['phase']}",
                           _minutes(mission_result.stretch["margin_s"]), "beyond the plan"))
     if validation:
-        from .validate import summarise
-
-        agg = summarise([c.summary for c in validation])
-        cards.append(("validation: mean endurance error",
-                      f"{_fmt(agg['mean_abs_endurance_error_pct'], '.1f')} %",
-                      f"{agg['files']} measured discharge(s)"))
+        cards += _validation_cards(validation)
+    methods = interval_methods(battery)
+    cards.append(("model", battery.model, f"{battery.family.title}; prediction intervals: "
+                                          f"{methods['predictions']}"))
     flown = mission_result.mission.battery if mission_result is not None else battery
     cards.append(("pack" + (" as flown" if mission_result is not None else ""),
                   f"{flown.cells_series}S{flown.strings_parallel}P",
@@ -586,12 +687,32 @@ def build_report(battery, *, mission_result=None, validation=None, title: str | 
         f"<h1>{_e(title)}</h1><p class=\"sub\">Generated {now} by dischargelab "
         f"{_e(__version__)}.</p><div class=\"cards\">{card_html}</div>"
         + "".join(sections) +
-        "<footer>Model: modified Shepherd (Tremblay) battery model, eq. (6) of "
-        "&ldquo;Measuring battery discharge characteristics for accurate UAV endurance "
-        "estimation&rdquo;; endurance by simulating each flight phase; intervals by sampling "
-        "the fit covariance. Predictions away from the fitted currents and temperatures are "
-        "extrapolations: keep a reserve.</footer></main></body></html>\n"
+        f"<footer>{_e(_footer(battery, mission_result))}</footer></main></body></html>\n"
     )
+
+
+PAPER = ("\u201cMeasuring battery discharge characteristics for accurate UAV endurance "
+         "estimation\u201d")
+
+
+def _footer(battery: Battery, mission_result=None) -> str:
+    """What was done, generated from the battery file and the mission's result."""
+    parts = [model_statement(battery)]
+    if battery.model == "shepherd":
+        parts.append(f"The model is eq. (6) of {PAPER}.")
+    elif battery.model.startswith("shepherd"):
+        parts.append(f"The model extends eq. (6) of {PAPER}.")
+    if mission_result is not None:
+        unc = mission_result.uncertainty or {}
+        how = ("no interval (no draws asked for)" if not unc else
+               f"the 95 % interval from {unc.get('method')}"
+               + (f", including {' + '.join(unc['interval_includes'])}"
+                  if unc.get("interval_includes") else "")
+               if unc.get("available") else f"no interval: {unc.get('reason', '')}")
+        parts.append(f"Endurance by simulating each flight phase (as in {PAPER}); {how}.")
+    parts.append("Predictions away from the fitted currents and temperatures are "
+                 "extrapolations: keep a reserve.")
+    return " ".join(parts)
 
 
 def write_report(path, battery, **kwargs) -> Path:
@@ -606,4 +727,5 @@ def write_report(path, battery, **kwargs) -> Path:
     return write_text(path, text)
 
 
-__all__ = ["build_report", "write_report"]
+__all__ = ["build_report", "write_report", "model_statement", "interval_methods",
+           "fitted_data", "split_by_fit"]

@@ -47,6 +47,7 @@ import numpy as np
 from . import engine
 from .cell import CellParameters
 from .errors import DataError, SimulationError
+from .formatting import ratio as format_ratio
 from .onerate import FLAT_PLATEAU_RATIO, one_rate_law
 
 if TYPE_CHECKING:
@@ -432,11 +433,11 @@ def model_error_info(battery: Battery, ratio: float, side: str | None = None) ->
                 "extrapolation_ratio": float(ratio), "growth_per_log_ratio": float(growth),
                 "one_rate_class": law["name"], "measured_cells": len(law.get("cells", [])),
                 "label": f"model error ({source} on {len(law.get('cells', []))} other cells, "
-                         f"extrapolation x{ratio:.1f})"}
+                         f"extrapolation {format_ratio(ratio)})"}
     sd = base * (1.0 + extrapolation_growth(battery, source) * log_ratio)
     return {"relative_sd": sd, "base_relative_sd": base, "source": source, "dof": dof,
             "extrapolation_ratio": float(ratio),
-            "label": f"model error ({source}, extrapolation x{ratio:.1f})"}
+            "label": f"model error ({source}, extrapolation {format_ratio(ratio)})"}
 
 
 def half_width_pct(sd: float, level: float = 0.95, dof: float | None = None) -> float:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import click
 
 from ..errors import DischargelabError
+from ..formatting import interval, number, pack_text
 from .common import (
     CONTEXT,
     err,
@@ -61,15 +62,8 @@ def refresh_stale(lb, names=None) -> None:
             raise
 
 
-def _num(value, digits: int = 3, scale: float = 1.0) -> str:
-    return "-" if value is None else f"{value * scale:.{digits}f}"
-
-
-def _interval(pair, digits: int = 0) -> str:
-    if not pair:
-        return "-"
-    lo, hi = pair
-    return f"{_num(lo, digits)} - {'open' if hi is None else _num(hi, digits)}"
+_num = number          # one rounding and one open interval for every view (formatting.py)
+_interval = interval
 
 
 @click.group("logbook", context_settings=CONTEXT)
@@ -180,13 +174,16 @@ def packs_cmd(eol, db, as_json):
         refresh_stale(lb)
         result = lb.packs(eol=eol)
     if as_json:
-        print_json(result.to_dict())
+        data = result.to_dict()
+        data["rows"] = [dict(r, text=pack_text(r)) for r in data["rows"]]
+        print_json(data)
         return
-    rows = [[r["name"], r["events"], _num(r["efc"], 0), _num(r["capacity_Ah"]),
-             _interval(r["capacity_interval95"], 3), _num(r["capacity_fraction"], 1, 100),
-             _num(r["resistance_ohm"], 1, 1000), _num(r["eol_efc"], 0),
-             _interval(r["eol_efc_interval95"])]
-            for r in result.rows]
+    rows = []
+    for r in result.rows:
+        text = pack_text(r)
+        rows.append([r["name"], r["events"], text["efc"], text["capacity_Ah"],
+                     text["capacity_interval95"], text["capacity_fraction"].removesuffix(" %"),
+                     text["resistance_ohm"], text["eol_efc"], text["eol_efc_interval95"]])
     out.print(table("Packs", ["pack", "events", "EFC", "capacity today [Ah]", "95 % interval",
                               "of reference [%]", "resistance [mOhm]", "end of life [EFC]",
                               "95 % interval"], rows))

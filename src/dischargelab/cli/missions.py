@@ -35,10 +35,10 @@ from .common import (
 def demo_cmd(out_dir, force, as_json):
     """Run the whole method on the bundled Samsung 30Q data (C/10, 1C, 4C).
 
-    Fits the cell on 1C alone and on all three rates together, predicts each
-    measured rate, flies the paper's Table 5 mission and a survey mission on a
-    4S2P pack of the fitted cells, and writes battery files, plots and an HTML
-    report to --out.
+    Fits the cell on 1C alone and on C/10 + 4C, predicts each measured rate (1C
+    held out from the second fit: the report's validation), flies the paper's
+    Table 5 mission and a survey mission on a 4S2P pack of the fitted cells, and
+    writes battery files, plots and an HTML report to --out.
 
     \b
     Example:
@@ -82,6 +82,9 @@ def print_mission(result) -> None:
         out.print(f"cannot fly: {result.cannot_deliver['message']}", markup=False)
     rows = [["battery", f"{m.battery.name or '-'} ({m.battery.cells_series}S"
                         f"{m.battery.strings_parallel}P, {m.capacity_Ah:.3f} Ah)"],
+            ["model", f"{m.battery.family.title} ({m.battery.model})"],
+            ["interval method", (unc.get("method") or "-") if unc and unc.get("available")
+             else "none"],
             ["cutoff / reserve", f"{m.cutoff_cell_V:g} V/cell ({m.cutoff_pack_V:.2f} V pack) / "
                                  f"{m.reserve_pct:g} %"],
             ["flight as planned", f"{duration_text(result.flight_time_s)}"
@@ -274,7 +277,10 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
             write_report(tmp, bat if bat.name else label, mission_result=result,
                          validation=cases, title=title, cutoff_cell_V=cutoff)
         path = Path(output)
+    from ..report import model_statement
+
     summary = {"report": str(path), "bytes": path.stat().st_size,
+               "model_statement": model_statement(bat),
                "mission": None if result is None else result.to_dict(),
                "validation": [c.summary for c in cases],
                "validation_summary": summarise([c.summary for c in cases]) if cases else None}
@@ -284,6 +290,7 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
         print_json(summary)
         return
     out.print(f"report written: {path} ({summary['bytes'] / 1024:.0f} KiB)", markup=False)
+    out.print(summary["model_statement"], markup=False)
     if result is not None:
         print_mission(result)
 

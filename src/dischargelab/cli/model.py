@@ -85,6 +85,9 @@ def _print_fit(result, battery_path=None):
                     ["parameter", "value", "std. error", "95 % interval"], rows))
     out.print(f"RMSE {result.rmse_V * 1000:.2f} mV per cell "
               f"({result.rmse_V * result.cells_series * 1000:.1f} mV pack)")
+    from ..report import model_statement
+
+    out.print(model_statement(result.battery), markup=False)
     if result.model_error:
         from ..uncertainty import held_out_summary
 
@@ -549,12 +552,27 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
              f(r["voltage_rmse_pct"], ".2f"), f(r["voltage_max_error_pct"], ".2f"),
              f(r["voltage_max_error_operational_pct"], ".2f"),
              {True: "yes", False: "no", None: "?"}[r["in_fit"]]] for r in rows]
-    out.print(table(f"Validation to {cutoff:g} V/cell ({bat.cells_series}S{bat.strings_parallel}P)",
+    seen = [r for r in rows if r["in_fit"] is True]
+    held = [r for r in rows if r["in_fit"] is False]
+    what = "Validation" if held and not seen and len(held) == len(rows) else \
+        "Measured against predicted"
+    out.print(table(f"{what} to {cutoff:g} V/cell ({bat.cells_series}S{bat.strings_parallel}P)",
                     ["file", "current [A]", "measured [s]", "predicted [s]", "95 % interval [s]",
                      "covered", "error [s]", "error [%]", "V RMS [%]", "V max [%]",
                      "V max >20% SOC [%]", "in fit"], body))
-    out.print(f"mean |endurance error| {f(summary['mean_abs_endurance_error_pct'], '.2f')} %, "
-              f"worst {f(summary['max_abs_endurance_error_pct'], '.2f')} %", markup=False)
+    from ..report import model_statement
+
+    out.print(model_statement(bat), markup=False)
+    groups = [(held, "on files the fit did not see (validation)"),
+              (seen, "on files the fit saw (a fit check, not a validation)"),
+              ([r for r in rows if r["in_fit"] is None],
+               "(the battery file does not record the data its fit saw)")]
+    for group, label in groups:
+        if group:
+            part = summarise(group)
+            out.print(f"mean |endurance error| {label}: "
+                      f"{f(part['mean_abs_endurance_error_pct'], '.2f')} %, worst "
+                      f"{f(part['max_abs_endurance_error_pct'], '.2f')} %", markup=False)
     cov = summary["coverage"]
     if cov["runs"]:
         parts = (["parameters"] if any("parameters" in r["interval_includes"] for r in rows)

@@ -105,7 +105,8 @@ def _thin(values, points: int = CURVE_POINTS) -> list:
 
 def model_curves(pack: Pack) -> dict | None:
     """The pack's stored model scaled to today, as curves at :data:`CURVE_C_RATES`:
-    ``{"name", "family", "cells_series", "strings_parallel", "capacity_Ah", "note",
+    ``{"name", "family", "statement" (the model family, the data fitted and the interval
+    method, in words), "cells_series", "strings_parallel", "capacity_Ah", "note",
     "curves": [{"c_rate", "current_A", "time_to_cutoff_s", "charge_Ah", "voltage_V"}]}``;
     ``{"note": why}`` when it cannot be scaled; None without a stored model when the pack
     has a full discharge to fit one to. A pack that only flies gets its chemistry's prior
@@ -117,11 +118,13 @@ def model_curves(pack: Pack) -> dict | None:
     except DischargelabError as exc:
         return {"note": str(exc)}
     from ..predict import default_cutoff
+    from ..report import model_statement
     from ..simulate import curve_family
 
     currents = [c * battery.rated_capacity_Ah for c in CURVE_C_RATES]
     curves = curve_family(battery, currents, **default_cutoff(battery))
     return {"name": battery.name, "family": battery.model,
+            "statement": model_statement(battery),
             "cells_series": battery.cells_series, "strings_parallel": battery.strings_parallel,
             "capacity_Ah": battery.capacity_Ah, "note": battery.extra.get("note"),
             "curves": [{"c_rate": c, "current_A": sim.to_dict().get("current_A"),

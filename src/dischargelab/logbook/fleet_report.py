@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
+from ..formatting import pack_text
 from .results import _clean, build_health
 
 #: Width and height of a sparkline [px].
@@ -116,14 +117,15 @@ class FleetReport:
             status = ("logged" if r.get("observed") else "-" if left is None
                       else f"{left:.0f}")
             cls = ' class="due"' if r["name"] in due else ""
+            text = pack_text(r)     # the figures as every view writes them
             body.append(
                 f"<tr{cls}><td>{_e(r['name'])}</td><td>{r['events']}</td>"
-                f"<td>{_n(r['efc'], 0)}</td><td>{_n(r['capacity_Ah'], 3)} Ah "
+                f"<td>{text['efc']}</td><td>{text['capacity_Ah']} Ah "
                 f"({_span_of(r.get('capacity_interval95'))})</td>"
-                f"<td>{_n(r['capacity_fraction'], 1, 100)} %</td>"
-                f"<td>{_n(r['resistance_ohm'], 1, 1000)} m&Omega;</td>"
+                f"<td>{text['capacity_fraction']}</td>"
+                f"<td>{text['resistance_ohm']} m&Omega;</td>"
                 f"<td>{_e(_shape(r))}</td>"
-                f"<td>{_n(r['eol_efc'], 0)}</td><td>{_interval(r['eol_efc_interval95'])}</td>"
+                f"<td>{text['eol_efc']}</td><td>{_e(text['eol_efc_interval95'])}</td>"
                 f"<td>{status}</td><td>{_spark_capacity(r)}</td><td>{_spark_resistance(r)}</td>"
                 "</tr>")
         failed = "".join(f'<p class="warn">{_e(p)}: {_e(reason)}</p>'
@@ -175,13 +177,6 @@ def _e(text) -> str:
 
 def _n(value, digits: int, scale: float = 1.0) -> str:
     return "-" if value is None else f"{value * scale:.{digits}f}"
-
-
-def _interval(pair) -> str:
-    if not pair:
-        return "-"
-    lo, hi = pair
-    return f"{_n(lo, 0)} - {'open' if hi is None else _n(hi, 0)}"
 
 
 def _scale(values, lo_px: float, hi_px: float, pad: float = 0.05):

@@ -133,6 +133,7 @@ class MissionResult:
             "energy_used_Wh": self.simulation.energy_Wh_total,
             "stretch": self.stretch,
             "model": m.battery.model,
+            "model_family": m.battery.family.title,
             "ambient_C": m.resolved_ambient_C,
             "peak_temperature_C": self.simulation.peak_temperature_C,
             "phases": self.phases,
@@ -216,7 +217,9 @@ def extrapolation_warnings(battery: Battery, phase_rows: list[dict]) -> list[str
     """Warn when phase cell currents lie far outside the currents the battery was fitted at.
 
     See :meth:`dischargelab.model.Battery.extrapolation` (more than 2x above the
-    highest or below half the lowest fitted cell current).
+    highest or below half the lowest fitted cell current). The ratio the warning names
+    is the mission's (:func:`mission_extrapolation_ratio`), the one its interval is
+    widened with.
     """
     fitted = [abs(x) for x in battery.fit_currents_A if x]
     if not fitted:
@@ -231,13 +234,15 @@ def extrapolation_warnings(battery: Battery, phase_rows: list[dict]) -> list[str
             found[side].setdefault(row["phase"], cell)
     from ..predict import extrapolation_warning
 
+    mission_ratio = mission_extrapolation_ratio(battery, phase_rows)
     out = []
     for side, phases in found.items():
         if phases:
             # the phase furthest out speaks for the group, in the one wording of predict/curves
             worst = max(phases.values(), key=battery.extrapolation_ratio)
             names = ", ".join(f"{n} ({c:.3g} A)" for n, c in phases.items())
-            out.append(f"{extrapolation_warning(battery, worst, side)} [phases: {names}]")
+            out.append(f"{extrapolation_warning(battery, worst, side, mission_ratio)} "
+                       f"[phases: {names}]")
     return out
 
 

@@ -24,6 +24,7 @@ from starlette.responses import JSONResponse, Response
 from starlette.routing import Route
 
 from ..errors import DischargelabError, MissingExtraError
+from ..formatting import pack_text
 from .body import check_length, error, read_json
 from .guard import RequestRefused
 from .limits import Limits
@@ -198,6 +199,8 @@ class PackPages:
         # the rows are the stored figures' JSON as read (plain, no NaN): sent as they are
         rows = await self._call(self.workers.read, request,
                                 lambda: self.logbook().packs(recompute=False).rows)
+        # each figure also as the one text every view writes (formatting.py)
+        rows = [dict(r, text=pack_text(r)) for r in rows]
         data = {"rows": rows}
         if any(r.get("recomputing") for r in rows):
             self.refresh_soon()
@@ -212,6 +215,7 @@ class PackPages:
         figures = lb.figures(name, recompute=False)
         summary = figures.summary or {"name": name,
                                       "events": len(lb.events(name).to_dict()["events"])}
+        summary = dict(summary, text=pack_text(summary))
         out = {"name": name, "summary": summary,
                "health": figures.health, "model": None, "model_note": None,
                "recomputing": figures.recomputing, "error": figures.error}

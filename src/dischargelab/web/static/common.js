@@ -20,13 +20,30 @@
                       body: JSON.stringify(data || {})});
   }
 
+  // The twins of dischargelab/formatting.py: one mark for no value, toFixed's rounding (the
+  // exact value, half away from zero), an unbounded end of an interval written "open".
+  const MISSING = "-", OPEN = "open", SEPARATOR = " - ";
+
   function num(v, digits) {
-    if (v === null || v === undefined || !isFinite(v)) return "–";
+    if (v === null || v === undefined || !isFinite(v)) return MISSING;
     return Number(v).toFixed(digits === undefined ? 3 : digits);
   }
 
+  function interval(pair, digits, scale) {
+    if (!pair || pair.length !== 2 || (pair[0] === null && pair[1] === null)) return MISSING;
+    const k = scale === undefined ? 1 : scale;
+    return pair.map(v => (v === null || v === undefined ? OPEN : num(v * k, digits))).join(SEPARATOR);
+  }
+
+  // a figure as the server wrote it (the JSON's ``text``), else written here the same way
+  function text(obj, key, digits, scale) {
+    if (obj && obj.text && typeof obj.text[key] === "string") return obj.text[key];
+    const v = obj ? obj[key] : null;
+    return (v === null || v === undefined) ? MISSING : num(v * (scale === undefined ? 1 : scale), digits);
+  }
+
   function clock(seconds) {
-    if (seconds === null || seconds === undefined || !isFinite(seconds)) return "–";
+    if (seconds === null || seconds === undefined || !isFinite(seconds)) return MISSING;
     const s = Math.max(0, Math.floor(seconds));
     const h = Math.floor(s / 3600), m = Math.floor(s / 60) % 60, r = s % 60;
     return h + ":" + String(m).padStart(2, "0") + ":" + String(r).padStart(2, "0");
@@ -49,5 +66,5 @@
     box.className = "message " + (kind || "error");
   }
 
-  global.DL = {api, postJSON, num, clock, el, showMessage};
+  global.DL = {api, postJSON, num, interval, text, clock, el, showMessage, MISSING};
 })(window);

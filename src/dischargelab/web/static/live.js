@@ -49,14 +49,14 @@
   function render() {
     drawPending = false;
     const r = L.last, s = L.status || {};
-    $("m-voltage").textContent = r ? DL.num(r[F.v], 3) : "–";
-    $("m-cell").textContent = r ? DL.num(r[F.cell], 3) : "–";
-    $("m-current").textContent = r ? DL.num(r[F.i], 2) : "–";
-    $("m-power").textContent = r ? DL.num(r[F.p], 1) : "–";
-    $("m-charge").textContent = r ? DL.num(r[F.ah], 4) : "–";
-    $("m-energy").textContent = r ? DL.num(r[F.wh], 3) : "–";
-    $("m-temp").textContent = r ? DL.num(r[F.temp], 1) : "–";
-    $("m-elapsed").textContent = r ? DL.clock(r[F.t]) : "–";
+    $("m-voltage").textContent = r ? DL.num(r[F.v], 3) : DL.MISSING;
+    $("m-cell").textContent = r ? DL.num(r[F.cell], 3) : DL.MISSING;
+    $("m-current").textContent = r ? DL.num(r[F.i], 2) : DL.MISSING;
+    $("m-power").textContent = r ? DL.num(r[F.p], 1) : DL.MISSING;
+    $("m-charge").textContent = r ? DL.num(r[F.ah], 4) : DL.MISSING;
+    $("m-energy").textContent = r ? DL.num(r[F.wh], 3) : DL.MISSING;
+    $("m-temp").textContent = r ? DL.num(r[F.temp], 1) : DL.MISSING;
+    $("m-elapsed").textContent = r ? DL.clock(r[F.t]) : DL.MISSING;
     const limits = (s.info || {}).limits || {};
     const cutoff = limits.cutoff_pack_V;
     voltagePlot.draw({
@@ -95,12 +95,12 @@
     badge.className = "badge " + cls;
     const info = s.info || {};
     $("where").textContent = info.port ? (info.demo ? "virtual logger (" + (info.battery || "") + ", time ×" + DL.num(info.speed, 0) + ")" : info.port) + " → " + (info.out || "") : "";
-    $("s-link").textContent = s.link || "–";
-    $("s-rate").textContent = s.rate_Hz === null || s.rate_Hz === undefined ? "–" : DL.num(s.rate_Hz, 1) + " samples/s";
-    $("s-lost").textContent = (s.frames_lost ?? "–") + " / " + (s.frames_corrupt ?? "–");
-    $("s-safety").textContent = s.safety || (s.active ? "within limits" : "–");
-    $("s-min").textContent = s.min_voltage_V === null || s.min_voltage_V === undefined ? "–" : DL.num(s.min_voltage_V, 3) + " V";
-    $("m-eta").textContent = s.time_to_cutoff_s === null || s.time_to_cutoff_s === undefined ? "–" : DL.clock(s.time_to_cutoff_s);
+    $("s-link").textContent = s.link || DL.MISSING;
+    $("s-rate").textContent = s.rate_Hz === null || s.rate_Hz === undefined ? DL.MISSING : DL.num(s.rate_Hz, 1) + " samples/s";
+    $("s-lost").textContent = (s.frames_lost ?? DL.MISSING) + " / " + (s.frames_corrupt ?? DL.MISSING);
+    $("s-safety").textContent = s.safety || (s.active ? "within limits" : DL.MISSING);
+    $("s-min").textContent = s.min_voltage_V === null || s.min_voltage_V === undefined ? DL.MISSING : DL.num(s.min_voltage_V, 3) + " V";
+    $("m-eta").textContent = s.time_to_cutoff_s === null || s.time_to_cutoff_s === undefined ? DL.MISSING : DL.clock(s.time_to_cutoff_s);
     $("m-eta-method").textContent = s.time_to_cutoff_method ? "(" + s.time_to_cutoff_method + ")" : "";
     $("eta-meter").title = ETA_HOW[s.time_to_cutoff_method] || "";
     $("start").disabled = !s.can_start;

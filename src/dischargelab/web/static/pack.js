@@ -64,15 +64,15 @@
     const withR = events.filter(e => e[rKey] !== null && e[rKey] !== undefined && e.efc !== null);
     $("pack-summary").textContent = [s.events + (s.events === 1 ? " event" : " events"),
       s.chemistry, s.cells ? s.cells + (s.cells === 1 ? " cell" : " cells") + " in series" : null].filter(Boolean).join(" · ");
-    $("m-capacity").textContent = DL.num(s.capacity_Ah, 3);
-    $("m-health").textContent = s.capacity_fraction === null || s.capacity_fraction === undefined ? "Ah" : "Ah (" + DL.num(s.capacity_fraction * 100, 0) + " %)";
+    $("m-capacity").textContent = DL.text(s, "capacity_Ah", 3);
+    $("m-health").textContent = s.capacity_fraction === null || s.capacity_fraction === undefined ? "Ah" : "Ah (" + DL.text(s, "capacity_fraction", 0, 100) + ")";
     $("m-reference").textContent = DL.num(s.reference_capacity_Ah, 3);
-    $("m-efc").textContent = DL.num(s.efc, 1);
-    $("m-resistance").textContent = s.resistance_ohm === null || s.resistance_ohm === undefined ? "–" : DL.num(s.resistance_ohm * 1000, 1);
-    $("m-eol").textContent = fc ? DL.num(fc.eol_efc, 0) : "–";
-    $("m-eol-iv").textContent = fc && fc.eol_efc_interval95 ? "EFC (95 %: " + DL.num(fc.eol_efc_interval95[0], 0) + "–" + DL.num(fc.eol_efc_interval95[1], 0) + ")" : "EFC";
+    $("m-efc").textContent = DL.text(s, "efc", 1);
+    $("m-resistance").textContent = DL.text(s, "resistance_ohm", 1, 1000);
+    $("m-eol").textContent = fc ? DL.num(fc.eol_efc, 0) : DL.MISSING;
+    $("m-eol-iv").textContent = fc && fc.eol_efc_interval95 ? "EFC (95 %: " + DL.interval(fc.eol_efc_interval95, 0) + ")" : "EFC";
     const civ = h.capacity_now_interval95;
-    $("m-capacity-iv").textContent = civ ? "95 %: " + DL.num(civ[0], 3) + "–" + DL.num(civ[1], 3) : "";
+    $("m-capacity-iv").textContent = civ ? "95 %: " + DL.interval(civ, 3) : "";
     const lines = [];
     if (h.capacity_now_Ah !== null && h.capacity_now_Ah !== undefined) lines.push("Capacity today from " + fromEvents(h.capacity_from) + ".");
     if (h.resistance_now_ohm !== null && h.resistance_now_ohm !== undefined) lines.push("Resistance today (" + h.resistance_basis + ") from " + fromEvents(h.resistance_from) + ".");
@@ -106,7 +106,8 @@
     const rt = h.trend && h.trend.resistance;
     const rBands = rt && rt.efc.length > 1 ? [{x: rt.efc, lo: rt.lo.map(v => v * 1000), hi: rt.hi.map(v => v * 1000), color: "rgba(5,150,105,0.13)"}] : [];
     const rSeries = rt && rt.efc.length > 1 ? [{x: rt.efc, y: rt.value.map(v => v * 1000), color: "#059669", width: 1.2, label: "trend and 95 % band"}] : [];
-    new LinePlot($("plot-resistance"), {xLabel: "equivalent full cycles [EFC]", yLabel: "resistance [mΩ]" + (refR ? " at reference conditions" : "")})
+    $("resistance-basis").textContent = refR ? "(at reference conditions)" : "";
+    new LinePlot($("plot-resistance"), {xLabel: "equivalent full cycles [EFC]", yLabel: "resistance [mΩ]"})
       .draw({series: rSeries.concat(byKind(withR, rKey, refR ? "resistance_ref_interval95" : "resistance_interval95", 1000)), bands: rBands,
              xMin: 0, empty: "no load steps to measure resistance yet"});
 
@@ -115,7 +116,7 @@
     if (cells.length) {
       const spread = e => [e.cells.rest_spread_V, e.cells.spread_V].find(v => v !== null && v !== undefined);
       const withSpread = cells.filter(e => spread(e) !== undefined);
-      new LinePlot($("plot-cells"), {xLabel: "equivalent full cycles [EFC]", yLabel: "rest-voltage spread between cells [mV]"})
+      new LinePlot($("plot-cells"), {xLabel: "equivalent full cycles [EFC]", yLabel: "rest-voltage spread [mV]"})
         .draw({series: [{x: withSpread.map(e => e.efc), y: withSpread.map(e => spread(e) * 1000), color: "#7c3aed", points: true, label: "cell spread"}],
                xMin: 0, empty: "no rest voltages per cell yet"});
       const drifting = cells.filter(e => e.cells.drift);
@@ -128,7 +129,7 @@
       new LinePlot($("plot-model"), {xLabel: "discharged charge [Ah]", yLabel: "pack voltage [V]"})
         .draw({series: m.curves.map((c, k) => ({x: c.charge_Ah, y: c.voltage_V, color: COLORS[k % COLORS.length],
                                                   label: DL.num(c.c_rate, 1) + "C (" + DL.num(c.current_A, 1) + " A)"}))});
-      $("model-note").textContent = m.note || "";
+      $("model-note").textContent = [m.statement, m.note].filter(Boolean).join(" ");
     } else {
       $("model-name").textContent = "";
       new LinePlot($("plot-model"), {}).draw({series: [], empty: d.model_note || "no model fitted yet — Refit"});
@@ -144,10 +145,10 @@
         DL.el("td", {text: e.source || ""}), DL.el("td", {text: (e.start || "").replace("T", " ").slice(0, 19)}),
         DL.el("td", {text: e.kind || ""}), DL.el("td", {class: "num", text: DL.num(e.discharged_Ah, 3)}),
         DL.el("td", {class: "num", text: DL.num(e.capacity_Ah, 3)}),
-        DL.el("td", {class: "num", text: e.capacity_interval95 ? DL.num(e.capacity_interval95[0], 3) + " – " + DL.num(e.capacity_interval95[1], 3) : "–"}),
-        DL.el("td", {class: "num", text: e.resistance_ohm === null || e.resistance_ohm === undefined ? "–" : DL.num(e.resistance_ohm * 1000, 1)}),
+        DL.el("td", {class: "num", text: DL.interval(e.capacity_interval95, 3)}),
+        DL.el("td", {class: "num", text: DL.text(e, "resistance_ohm", 1, 1000)}),
         DL.el("td", {class: "num", text: DL.num(e.efc, 1)}), DL.el("td", {text: e.outlier ? "outlier" : (e.capacity_note || "")}),
-        DL.el("td", {class: "num", text: e.resistance_ref_ohm === null || e.resistance_ref_ohm === undefined ? "–" : DL.num(e.resistance_ref_ohm * 1000, 1)}),
+        DL.el("td", {class: "num", text: DL.text(e, "resistance_ref_ohm", 1, 1000)}),
       ]));
     }
   }
@@ -158,6 +159,9 @@
     const cannot = r.cannot_deliver ? r.cannot_deliver.message : null;
     const rows = [["Mission", r.mission]];
     if (cannot) rows.push(["Cannot fly", cannot]);
+    const unc = r.uncertainty;
+    rows.push(["Model", (r.model_family ? r.model_family + " (" + r.model + ")" : r.model) || DL.MISSING],
+              ["Interval", unc && unc.available ? unc.method : "none (no parameter draws flown)"]);
     rows.push(["Completed", r.completed ? "yes" : "no (" + r.ended_by + ")"],
               ["Flight time", DL.clock(r.flight_time_s)], ["Endurance to cutoff", DL.clock(r.endurance_s)],
               ["Charge used", DL.num(r.charge_used_Ah, 3) + " Ah"], ["State of charge at the end", DL.num(r.soc_end_pct, 1) + " %"],

@@ -7,18 +7,14 @@
   let chosen = null;
   let again = null;
 
-  function healthCell(fraction) {
-    if (fraction === null || fraction === undefined || !isFinite(fraction)) return DL.el("td", {text: "–"});
+  function healthCell(r) {
+    const fraction = r.capacity_fraction;
+    if (fraction === null || fraction === undefined || !isFinite(fraction)) return DL.el("td", {text: DL.MISSING});
     const pct = Math.round(fraction * 100);
     const fill = DL.el("span");
     fill.style.width = Math.max(0, Math.min(100, pct)) + "%";   // CSSOM: the CSP allows no inline style
     const bar = DL.el("span", {class: "bar" + (fraction < 0.8 ? " bad" : fraction < 0.9 ? " warn" : "")}, [fill]);
-    return DL.el("td", {}, [DL.el("span", {class: "health", text: pct + " %"}), bar]);
-  }
-
-  function interval(iv, digits) {
-    if (!iv || iv.length !== 2) return "–";
-    return DL.num(iv[0], digits) + " – " + DL.num(iv[1], digits);
+    return DL.el("td", {}, [DL.el("span", {class: "health", text: DL.text(r, "capacity_fraction")}), bar]);
   }
 
   async function load() {
@@ -37,12 +33,12 @@
         body.append(DL.el("tr", {"data-pack": r.name}, [
           DL.el("td", {}, nameCell),
           DL.el("td", {class: "num", text: String(r.events)}),
-          DL.el("td", {class: "num", text: DL.num(r.efc, 1)}),
-          DL.el("td", {class: "num", text: DL.num(r.capacity_Ah, 3)}),
-          healthCell(r.capacity_fraction),
-          DL.el("td", {class: "num", text: r.resistance_ohm === null || r.resistance_ohm === undefined ? "–" : DL.num(r.resistance_ohm * 1000, 1)}),
-          DL.el("td", {class: "num", text: DL.num(r.eol_efc, 0)}),
-          DL.el("td", {class: "num", text: interval(r.eol_efc_interval95, 0)}),
+          DL.el("td", {class: "num", text: DL.text(r, "efc", 1)}),
+          DL.el("td", {class: "num", text: DL.text(r, "capacity_Ah", 3)}),
+          healthCell(r),
+          DL.el("td", {class: "num", text: DL.text(r, "resistance_ohm", 1, 1000)}),
+          DL.el("td", {class: "num", text: DL.text(r, "eol_efc", 0)}),
+          DL.el("td", {class: "num", text: r.text ? r.text.eol_efc_interval95 : DL.interval(r.eol_efc_interval95, 0)}),
         ]));
         names.append(DL.el("option", {value: r.name}));
       }

@@ -10,7 +10,7 @@
 // yFit: false does not widen the y axis. Drawing again with the same kind of series only
 // swaps the data (cheap: the live page appends points several times a second) and keeps
 // the reader's zoom.
-// Reading: hover shows every series' value at the cursor; drag selects a range to zoom in,
+// Reading: the legend shows every series' last value, and hovering its value at the cursor; drag selects a range to zoom in,
 // the wheel zooms at the cursor, shift + drag pans, a double click shows everything again.
 "use strict";
 
@@ -54,10 +54,46 @@
   function increasing(x) { return x.length > 0 && scan(x).increasing && finite(x[x.length - 1]); }
 
   function num(v, span) {
-    if (!finite(v)) return "–";
+    if (!finite(v)) return MISSING;
     const scale = Math.abs(span || v) || 1;
     const digits = Math.max(0, Math.min(6, 3 - Math.floor(Math.log10(scale))));
     return Number(v).toFixed(digits);
+  }
+
+  const MISSING = "-";                  // formatting.py's mark for no value (DL.MISSING)
+  const AXIS_FONT = "12px system-ui, sans-serif";
+  const AXIS_LABEL_FONT = "bold 12px system-ui, sans-serif";
+  const LABEL_PX = 12, MIN_LABEL_PX = 9;
+  const X_AXIS_ROOM = 90;               // the x axis, its label and a margin [px]: not y's room
+
+  function textWidth(text, font) {
+    if (!measurer) measurer = document.createElement("canvas").getContext("2d");
+    measurer.font = font;
+    return measurer.measureText(String(text || "")).width;
+  }
+
+  // an axis label's font, smaller (down to MIN_LABEL_PX) when the label is longer than its room
+  function labelFont(text, room) {
+    const width = textWidth(text, AXIS_LABEL_FONT);
+    const px = width > room ? Math.max(MIN_LABEL_PX, Math.floor(LABEL_PX * room / width)) : LABEL_PX;
+    return "bold " + px + "px system-ui, sans-serif";
+  }
+
+  function lastValue(values) {
+    if (!values) return null;
+    for (let i = values.length - 1; i >= 0; i--) if (finite(values[i])) return values[i];
+    return null;
+  }
+
+  let measurer = null;                  // a canvas context that measures text
+
+  // the y axis as wide as its widest tick value (uPlot's fixed size cuts long ones off)
+  function fitValues(u, values, axisIdx, cycleNum) {
+    const axis = u.axes[axisIdx];
+    if (cycleNum > 1) return axis._size;              // settled: keep the width found
+    let widest = 0;
+    for (const v of values || []) if (v) widest = Math.max(widest, textWidth(v, AXIS_FONT));
+    return Math.ceil(widest) + (axis.ticks.size || 10) + (axis.gap || 5) + 8;
   }
 
   function clock(seconds, step) {
@@ -164,11 +200,16 @@
     _options(prep) {
       const o = this.opts;
       const xAxis = {label: o.xLabel, stroke: "#374151", grid: {stroke: "#e5e7eb"},
-                     ticks: {stroke: "#9ca3af"}};
+                     ticks: {stroke: "#9ca3af"}, font: AXIS_FONT,
+                     labelFont: labelFont(o.xLabel, Math.max(200, this.box.clientWidth || 600) - 80)};
+      // away from the cursor the legend reads each series' last value
       const xValue = {label: o.xTime ? "time" : (o.xLabel || "x"),
-                      value: (u, v) => (!finite(v) ? "–" : o.xTime
-                        ? clock(v, (u.scales.x.max - u.scales.x.min) / 200)
-                        : num(v, u.scales.x.max - u.scales.x.min))};
+                      value: (u, v, si, i) => {
+                        if (i === null || i === undefined) return "last values";
+                        return !finite(v) ? MISSING : o.xTime
+                          ? clock(v, (u.scales.x.max - u.scales.x.min) / 200)
+                          : num(v, u.scales.x.max - u.scales.x.min);
+                      }};
       if (o.xTime) {
         xAxis.label = o.xLabel || "time [h:mm:ss]";
         xAxis.incrs = TIME_STEPS;
@@ -182,7 +223,10 @@
         const color = s.color || "#2563eb";
         const entry = {label: s.label || "", stroke: color, width: s.width || 1.6,
                        dash: s.dash || undefined, auto: s.yFit !== false, spanGaps: false,
-                       value: (u, v) => (finite(v) ? num(v, u.scales.y.max - u.scales.y.min) : "–")};
+                       value: (u, v, si, i) => {
+                         if (i === null || i === undefined) v = lastValue(u.data[si]);
+                         return finite(v) ? num(v, u.scales.y.max - u.scales.y.min) : MISSING;
+                       }};
         if (s.points) {
           entry.paths = () => null;
           entry.points = {show: true, size: 2 * (s.radius || 3.5), width: 1.5, stroke: color,
@@ -198,7 +242,8 @@
         series,
         scales: {x: {time: false}, y: {range: (u, lo, hi) => this._yRange(u, lo, hi)}},
         axes: [xAxis, {label: o.yLabel, stroke: "#374151", grid: {stroke: "#e5e7eb"},
-                       ticks: {stroke: "#9ca3af"}, size: 56}],
+                       ticks: {stroke: "#9ca3af"}, size: fitValues, font: AXIS_FONT,
+                       labelFont: labelFont(o.yLabel, this.height - X_AXIS_ROOM), labelSize: 20}],
         legend: {show: true, live: true},
         cursor: {drag: {x: true, y: false, setScale: true}, dataIdx: (u, si, i) => this._nearest(u, si, i)},
         hooks: {

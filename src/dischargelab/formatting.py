@@ -1,0 +1,131 @@
+"""How a number is written: one rounding per quantity, one mark for "no value", one open
+interval, one unit text.
+
+The terminal, the text fields of the JSON answers, the HTML report and the pages all
+write numbers through here, so a figure reads the same wherever it is shown (the pages
+show the ``text`` the JSON API carries, and ``web/static/common.js`` holds the twin of
+:func:`number` and :func:`interval` for the numbers they draw).
+
+Plain functions of values, no imports from the rest of the package (bottom layer).
+"""
+
+from __future__ import annotations
+
+import math
+from decimal import ROUND_HALF_UP, Decimal
+
+#: Written where a value is unknown.
+MISSING = "-"
+#: Written for the end of an interval that is not bounded (e.g. a forecast whose upper end
+#: lies beyond anything simulated).
+OPEN = "open"
+#: Between the two ends of an interval.
+SEPARATOR = " - "
+
+#: Decimals, scale and unit of the quantities shown in more than one place:
+#: ``name: (decimals, scale, unit)``; the value shown is ``value * scale``.
+QUANTITIES: dict[str, tuple[int, float, str]] = {
+    "efc": (1, 1.0, "EFC"),
+    "eol_efc": (0, 1.0, "EFC"),
+    "capacity_Ah": (3, 1.0, "Ah"),
+    "capacity_fraction": (0, 100.0, "%"),
+    "resistance_ohm": (1, 1000.0, "mOhm"),
+    "discharged_Ah": (3, 1.0, "Ah"),
+}
+
+
+def _finite(value) -> bool:
+    if value is None or isinstance(value, bool):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except (TypeError, ValueError):
+        return False
+
+
+def number(value, digits: int = 3, scale: float = 1.0) -> str:
+    """``value * scale`` with ``digits`` decimals; :data:`MISSING` for None, NaN or inf.
+
+    Rounds the exact binary value half away from zero, as JavaScript's ``toFixed``
+    does, so that the pages' helper writes the same digits.
+    """
+    if not _finite(value):
+        return MISSING
+    exact = Decimal(float(value) * scale)
+    return f"{exact.quantize(Decimal(1).scaleb(-digits), rounding=ROUND_HALF_UP):f}"
+
+
+def quantity(name: str, value, unit: bool = False) -> str:
+    """A value of a quantity of :data:`QUANTITIES` at its decimals (and with its unit)."""
+    digits, scale, text = QUANTITIES[name]
+    shown = number(value, digits, scale)
+    if unit and shown != MISSING:
+        return f"{shown} {text}" if text != "%" else f"{shown} %"
+    return shown
+
+
+def interval(pair, digits: int = 0, scale: float = 1.0) -> str:
+    """``low - high``; an end that is None (unbounded) is written :data:`OPEN`,
+    no interval at all :data:`MISSING`."""
+    if not pair:
+        return MISSING
+    lo, hi = pair
+    if lo is None and hi is None:
+        return MISSING
+    ends = [OPEN if end is None else number(end, digits, scale) for end in (lo, hi)]
+    return SEPARATOR.join(ends)
+
+
+def quantity_interval(name: str, pair) -> str:
+    """:func:`interval` at the decimals and scale of a quantity of :data:`QUANTITIES`."""
+    digits, scale, _ = QUANTITIES[name]
+    return interval(pair, digits, scale)
+
+
+def ratio(value) -> str:
+    """An extrapolation (or any) ratio: ``x1.4``."""
+    return MISSING if not _finite(value) else f"x{float(value):.1f}"
+
+
+def percent(value, digits: int = 1, signed: bool = False) -> str:
+    """A percentage: ``12.3 %`` (``+12.3 %`` when signed)."""
+    if not _finite(value):
+        return MISSING
+    text = number(value, digits)
+    if signed and not text.startswith("-") and float(text) != 0:
+        text = "+" + text
+    return f"{text} %"
+
+
+def duration(seconds) -> str:
+    """A duration: ``12 min 03 s`` (``1 h 02 min 03 s`` from an hour)."""
+    if not _finite(seconds):
+        return MISSING
+    sign = "-" if seconds < 0 else ""
+    total = int(round(abs(float(seconds))))
+    h, rest = divmod(total, 3600)
+    m, s = divmod(rest, 60)
+    return f"{sign}{h} h {m:02d} min {s:02d} s" if h else f"{sign}{m} min {s:02d} s"
+
+
+def pack_text(row: dict) -> dict:
+    """The texts of a pack's figures (a row of the pack list, a pack's summary) as every
+    view shows them: ``efc``, ``capacity_Ah``, ``capacity_interval95``,
+    ``capacity_fraction``, ``resistance_ohm``, ``eol_efc``, ``eol_efc_interval95``."""
+    out = {}
+    for name in ("efc", "capacity_Ah", "resistance_ohm", "eol_efc"):
+        if name in row:
+            out[name] = quantity(name, row.get(name))
+    if "capacity_fraction" in row:
+        out["capacity_fraction"] = quantity("capacity_fraction", row.get("capacity_fraction"),
+                                            unit=True)
+    if "capacity_interval95" in row:
+        out["capacity_interval95"] = quantity_interval("capacity_Ah",
+                                                       row.get("capacity_interval95"))
+    if "eol_efc_interval95" in row:
+        out["eol_efc_interval95"] = quantity_interval("eol_efc", row.get("eol_efc_interval95"))
+    return out
+
+
+__all__ = ["MISSING", "OPEN", "SEPARATOR", "QUANTITIES", "number", "quantity", "interval",
+           "quantity_interval", "ratio", "percent", "duration", "pack_text"]
