@@ -19,7 +19,8 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   its latest C/5 test, over the charge not put in, at each sample's state of charge
   counted from the charge's end), the tests untouched; its blocks end at the first test
   after a mission that the shift takes below the cutoff (a cell charged to 4.0 V would
-  have stopped there, which a shift cannot show).
+  have stopped there, which a shift cannot show). And with every test cut out, the pack
+  given only its label capacity (3.0 Ah) and chemistry: no full discharge sets the scale.
 
 Prints per condition: blocks, capacity now's error against the next test (median and
 largest), blocks within 2 %, the band's coverage of the next test, its median half
@@ -81,6 +82,10 @@ REAL = {f"{cell} {how}": (cell, period, cv)
         for how, period, cv in (("as logged", None, None), ("resampled 30 s", 30.0, None),
                                 ("resampled 60 s", 60.0, None),
                                 ("charges to 4.0 V", None, 4.0))}
+
+#: Real conditions with every test cut out, the pack given its label capacity and
+#: chemistry only (no full discharge in the logbook).
+LABEL_ONLY = {f"{cell} label only (3.0 Ah, Li-ion)": cell for cell in ("VAH27", "VAH30")}
 
 
 # --------------------------------------------------------------------------- real variants
@@ -175,18 +180,23 @@ def real_log(cell: str, period, cv):
     return frame, truth
 
 
-def logbook_of(frame: pd.DataFrame, label: str, cache: Path) -> Path:
-    """A logbook holding the log with every test but the first cut out (cached)."""
-    db = cache / f"lb_{_key(label, len(frame), float(frame['voltage_V'].sum()))}.sqlite"
+def logbook_of(frame: pd.DataFrame, label: str, cache: Path, first: bool = True) -> Path:
+    """A logbook holding the log with every test but the first cut out (``first`` false:
+    every test, and the pack given its label capacity and chemistry), cached."""
+    db = cache / (f"lb_{_key(label, len(frame), float(frame['voltage_V'].sum()))}"
+                  f"{'' if first else '_label'}.sqlite")
     if db.exists():
         return db
     tests = find_tests(frame)
     csv = cache / f"{db.stem}.csv"
-    cut_copy(frame, tests, True, csv)
+    cut_copy(frame, tests, first, csv)
     part = db.with_suffix(".part")
     part.unlink(missing_ok=True)
     with Logbook(part) as lb:
-        lb.set_pack("cell")
+        if first:
+            lb.set_pack("cell")
+        else:
+            lb.set_pack("cell", label_capacity_Ah=3.0, chemistry="li-ion")
         lb.add(csv, pack="cell", refresh=False)
     part.rename(db)
     csv.unlink()
@@ -289,15 +299,18 @@ def main(argv=None) -> None:
     started = time.perf_counter()
     every = []
     todo = [(n, "synthetic", c) for n, c in SYNTHETIC.items()] + \
-        [(n, "real", c) for n, c in REAL.items()]
+        [(n, "real", c) for n, c in REAL.items()] + \
+        [(n, "label", c) for n, c in LABEL_ONLY.items()]
     for name, kind, conf in todo:
         if args.only and not any(w.lower() in name.lower() for w in args.only):
             continue
         rows = []
         for seed in range(args.seeds if kind == "synthetic" else 1):
-            frame, truth = (synthetic_log(name, conf, seed, args.cache) if kind == "synthetic"
-                            else real_log(*conf))
-            db = logbook_of(frame, f"{name}/{seed}", args.cache)
+            if kind == "synthetic":
+                frame, truth = synthetic_log(name, conf, seed, args.cache)
+            else:
+                frame, truth = real_log(*conf) if kind == "real" else real_log(conf, None, None)
+            db = logbook_of(frame, f"{name}/{seed}", args.cache, first=kind != "label")
             got = blocks(db, truth)
             rows += [dict(r, condition=name, seed=seed) for r in got]
         every += rows
