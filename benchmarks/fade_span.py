@@ -27,10 +27,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _machine import machine_line, table
-from forecast import CELL_C, cycle_of, shared_data
 from dischargelab.logbook import Logbook
 from dischargelab.logbook.forecast import SOON_FACTOR, SPAN_SOON
 from dischargelab.logbook.results import _forecast, _trend, shared_errors
+from forecast import CELL_C, cycle_of, shared_data
 
 CMU = shared_data() / "cmu_evtol"
 SHARES = (0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0)

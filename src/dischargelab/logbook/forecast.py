@@ -752,7 +752,8 @@ def evidence_words(evidence: FadeEvidence, status: str, efc_now: float) -> str:
 
 
 __all__ = ["FadeFit", "EolForecast", "FadeEvidence", "fit_fade", "forecast_eol",
-           "forecast_capacity", "measure_fade", "dating", "evidence_words", "efc_to_measure", "typical_rate", "simulate",
+           "forecast_capacity", "measure_fade", "dating", "evidence_words", "efc_to_measure",
+           "typical_rate", "simulate",
            "PATHS", "Z_MEASURED", "Z_SOON", "SPAN_SOON", "SOON_FACTOR", "TYPICAL_LIFE_EFC",
            "HORIZON_FACTOR", "KNEE_PROBABILITY", "KNEE_ONSET", "KNEE_FACTOR", "SIGMA_RATE",
            "FAMILY_PRIOR"]

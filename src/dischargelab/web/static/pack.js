@@ -69,14 +69,17 @@
     $("m-reference").textContent = DL.num(s.reference_capacity_Ah, 3);
     $("m-efc").textContent = DL.num(s.efc, 1);
     $("m-resistance").textContent = s.resistance_ohm === null || s.resistance_ohm === undefined ? "–" : DL.num(s.resistance_ohm * 1000, 1);
-    $("m-eol").textContent = fc ? DL.num(fc.eol_efc, 0) : "–";
-    $("m-eol-iv").textContent = fc && fc.eol_efc_interval95 ? "EFC (95 %: " + DL.num(fc.eol_efc_interval95[0], 0) + "–" + DL.num(fc.eol_efc_interval95[1], 0) + ")" : "EFC";
+    // no end of life without a measured fade: the forecast says why and when one could show
+    const dated = fc && has(fc.eol_efc);
+    $("m-eol").textContent = dated ? DL.num(fc.eol_efc, 0) : "–";
+    $("m-eol-iv").textContent = dated && fc.eol_efc_interval95 ? "EFC (95 %: " + DL.num(fc.eol_efc_interval95[0], 0) + "–" + DL.num(fc.eol_efc_interval95[1], 0) + ")"
+      : fc && fc.message ? fc.message : fc ? "EFC" : "no fade measured yet (no capacity estimate yet)";
     const civ = h.capacity_now_interval95;
     $("m-capacity-iv").textContent = civ ? "95 %: " + DL.num(civ[0], 3) + "–" + DL.num(civ[1], 3) : "";
     const lines = [];
     if (h.capacity_now_Ah !== null && h.capacity_now_Ah !== undefined) lines.push("Capacity today from " + fromEvents(h.capacity_from) + ".");
     if (h.resistance_now_ohm !== null && h.resistance_now_ohm !== undefined) lines.push("Resistance today (" + h.resistance_basis + ") from " + fromEvents(h.resistance_from) + ".");
-    if (fc) lines.push("Trend: " + (SHAPES[fc.shape] || fc.shape) + " (odds of a bend against a straight line " + Number(fc.bend_odds).toPrecision(3) + "); " +
+    if (dated) lines.push("Trend: " + (SHAPES[fc.shape] || fc.shape) + " (odds of a bend against a straight line " + Number(fc.bend_odds).toPrecision(3) + "); " +
                        (has(fc.knee_efc) ? "knee at " + DL.num(fc.knee_efc, 0) + " EFC." : "no knee in the data yet (the forecast allows one ahead)."));
     $("health-note").textContent = lines.join(" ");
 
