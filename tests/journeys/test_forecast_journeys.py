@@ -66,7 +66,6 @@ def test_a_fresh_tester_file_gets_no_end_of_life_without_a_measured_fade(
     check_no_end_of_life_soon(health, text, row)
 
 
-@pytest.mark.slow
 def test_a_fresh_flight_set_gets_no_end_of_life_without_a_measured_fade(
         capsys, tmp_path, shared_data):
     health, text, row = fresh_pack(capsys, tmp_path, shared_data / "dji_m100_flights")
@@ -74,7 +73,6 @@ def test_a_fresh_flight_set_gets_no_end_of_life_without_a_measured_fade(
     check_no_end_of_life_soon(health, text, row)
 
 
-@pytest.mark.slow
 def test_an_ageing_cell_gets_its_end_of_life_once_the_fade_is_measured(
         capsys, tmp_path, shared_data):
     """Cell C up to cycle 220: the fade is measured well outside the noise, the end of life
@@ -100,3 +98,32 @@ def test_an_ageing_cell_gets_its_end_of_life_once_the_fade_is_measured(
     assert fraction > fc["eol"]
     code, text, _ = run(capsys, "logbook", "health", "C", "--db", db)
     assert f"forecast at {fc['eol_efc']:.0f} EFC" in text
+
+
+@pytest.mark.slow
+def test_the_pack_page_of_a_fresh_tester_file_says_no_fade_next_to_its_health_bar(
+        capsys, tmp_path, shared_data):
+    """TestFile.nda (1.7 EFC) on the pack page: a 100 % health bar and, where the end of life
+    would be, "no fade measured yet" with the EFC a typical fade needs: both from the same
+    stored health."""
+    pytest.importorskip("starlette")
+    from web_helpers import Browser, ServerProcess
+
+    health, _, row = fresh_pack(capsys, tmp_path, shared_data / "cyclers/neware/TestFile.nda")
+    need = health["forecast"]["fade"]["efc_needed"]
+    server = ServerProcess(["serve", "--db", str(tmp_path / "fresh.sqlite"), "--port", "0"],
+                           cwd=tmp_path)
+    browser = Browser()
+    try:
+        browser.get(server.base + "/packs/P")
+        browser.wait_for("window.__pack && window.__pack.loaded", what="the pack page")
+        shown = browser.js("return window.__pack.data.health.forecast;")
+        assert shown["status"] == "no fade" and shown["eol_efc"] is None
+        assert browser.text("m-health") == f"Ah ({round(100 * row['capacity_fraction'])} %)"
+        assert browser.text("m-eol") == "–"
+        assert browser.text("m-eol-iv") == ("no fade measured yet; a typical fade would show "
+                                            f"at about {need:.0f} EFC")
+        assert "End of life: no fade measured yet" in browser.text("health-note")
+    finally:
+        browser.quit()
+        server.stop()
