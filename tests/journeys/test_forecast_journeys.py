@@ -64,6 +64,13 @@ def test_a_fresh_tester_file_gets_no_end_of_life_without_a_measured_fade(
         capsys, tmp_path, shared_data, name):
     health, text, row = fresh_pack(capsys, tmp_path, shared_data / name)
     check_no_end_of_life_soon(health, text, row)
+    # the fleet report reads the same forecast and says why there is no end of life
+    code, out, err = run(capsys, "logbook", "report", "--fleet", "--json", "--db",
+                         tmp_path / "fresh.sqlite", "-o", tmp_path / "fleet.html")
+    assert code == 0, err
+    fleet = json.loads(out)["packs"][0]
+    assert fleet["eol_efc"] is None and fleet["forecast_status"] == "no fade"
+    assert fleet["forecast_note"].startswith("no fade measured yet")
 
 
 def test_a_fresh_flight_set_gets_no_end_of_life_without_a_measured_fade(
