@@ -71,6 +71,10 @@ def test_a_fresh_tester_file_gets_no_end_of_life_without_a_measured_fade(
     fleet = json.loads(out)["packs"][0]
     assert fleet["eol_efc"] is None and fleet["forecast_status"] == "no fade"
     assert fleet["forecast_note"].startswith("no fade measured yet")
+    plot = tmp_path / "health.png"
+    code, out, err = run(capsys, "logbook", "health", "P", "--db", tmp_path / "fresh.sqlite",
+                         "--plot", plot)
+    assert code == 0 and plot.stat().st_size > 10_000, err
 
 
 def test_a_fresh_flight_set_gets_no_end_of_life_without_a_measured_fade(
