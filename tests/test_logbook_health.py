@@ -13,7 +13,16 @@ import pytest
 
 from dischargelab.errors import DataError
 from dischargelab.fleet import InProcessExecutor
-from dischargelab.logbook.forecast import fit_fade, forecast_eol
+from dischargelab.logbook.forecast import (
+    SPAN_SOON,
+    Z_MEASURED,
+    EolForecast,
+    dating,
+    efc_to_measure,
+    fit_fade,
+    forecast_eol,
+    measure_fade,
+)
 from dischargelab.logbook.health import (
     equivalent_full_cycles,
     flag_outliers,
@@ -202,6 +211,54 @@ def test_forecast_from_cycle_220_and_330_covers_the_observed_crossing(shared_dat
         lo, hi = ahead.interval95
         assert lo <= seen[0] <= hi, upto
         assert ahead.eol_efc == pytest.approx(seen[0], rel=0.2), upto
+
+
+def test_a_difference_between_kinds_of_estimate_is_never_fade():
+    """Charges that read 5 % above the full discharges, each kind flat: no fade, though a
+    line through all of them falls at many sigma; the same with a real fade in each kind
+    is measured, and well outside the noise over more than SPAN_SOON EFC."""
+    rng = np.random.default_rng(5)
+    x = np.linspace(0.5, 3.0, 6)
+    kinds = ["charge", "full"] * 3
+    q = np.where(np.array(kinds) == "charge", 6.10, 5.81) + rng.normal(0, 0.003, x.size)
+    tight = dict(low95=q - 0.01, high95=q + 0.01)
+    flat = measure_fade(x, q, kinds=kinds, chemistry="li-ion", **tight)
+    assert not flat.measured and abs(flat.z) < Z_MEASURED
+    assert flat.efc_needed is not None and flat.efc_needed > x[-1]
+    x = np.linspace(0.0, 60.0, 13)
+    kinds = ["charge", "full"] * 6 + ["full"]
+    q = np.where(np.array(kinds) == "charge", 6.10, 5.81) * (1 - 0.001 * x) \
+        + rng.normal(0, 0.005, x.size)
+    fading = measure_fade(x, q, q - 0.02, q + 0.02, kinds, chemistry="li-ion")
+    assert fading.measured and fading.strong and fading.span_efc >= SPAN_SOON
+    assert fading.interval95()[0] < 0.001 < fading.interval95()[1]
+
+
+def test_efc_a_fade_needs_follows_the_slope_variance_of_evenly_spread_estimates():
+    """Without a shared error the span is ``(12 z^2 sigma^2 / (rho r^2))^(1/3)``; a shared
+    error that no span beats leaves it None."""
+    rate, sigma, per_efc = 2.5e-4, 0.01, 2.0
+    closed = (12 * Z_MEASURED ** 2 * sigma ** 2 / (per_efc * rate ** 2)) ** (1 / 3)
+    assert efc_to_measure(rate, sigma, per_efc, 0.0) == pytest.approx(closed, rel=1e-6)
+    assert efc_to_measure(rate, sigma, per_efc, 0.01) > closed
+    assert efc_to_measure(rate, sigma, per_efc, 200.0) is None
+
+
+def test_an_end_of_life_soon_needs_a_strong_fade():
+    """A fade measured at 2.5 sigma gives no end of life whose interval reaches inside 5x
+    today's EFC; one beyond it is given; an unmeasured fade gives none at all."""
+    x = np.linspace(0.0, 10.0, 6)
+    rng = np.random.default_rng(1)
+    q = 3.0 * (1 - 0.002 * x) + rng.normal(0, 0.004, x.size)
+    weak = measure_fade(x, q, q - 0.01, q + 0.01, ["full"] * x.size)
+    weak.z, weak.span_efc = 2.5, 10.0
+    grid = np.array([10.0, 100.0])
+    soon = EolForecast(2.4, 30.0, [20.0, 80.0], grid, grid, grid, grid, 1.0)
+    later = EolForecast(2.4, 300.0, [60.0, None], grid, grid, grid, grid, 1.0)
+    assert dating(weak, soon, 10.0) == "uncertain"
+    assert dating(weak, later, 10.0) == "dated"
+    weak.z = 1.0
+    assert dating(weak, later, 10.0) == "no fade"
 
 
 def test_scaled_parameters_keep_the_curve_shape_in_state_of_charge():

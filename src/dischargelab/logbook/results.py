@@ -67,6 +67,16 @@ class Forecast:
         Capacity estimates used.
     observed : bool
         The logged capacities already fell below the threshold (two in a row).
+    status : str
+        ``"dated"`` (an end of life forecast), ``"observed"``, ``"no fade"`` (the fade
+        is not told apart from zero yet: no end of life) or ``"uncertain"`` (a fade is
+        measured but not well enough for an end of life this soon), see
+        :func:`~dischargelab.logbook.forecast.dating`.
+    fade : dict
+        The fade so far with its 95 % interval, how many sigma, over which span, and the
+        EFC a typical fade needs to show (:class:`~.forecast.FadeEvidence`).
+    message : str
+        Why no end of life is given, in words ("no fade measured yet ...").
     """
 
     eol: float
@@ -81,6 +91,9 @@ class Forecast:
     last_efc: float
     estimates: int
     observed: bool = False
+    status: str = "dated"
+    fade: dict = field(default_factory=dict)
+    message: str = ""
 
     @property
     def reached(self) -> bool:
@@ -105,7 +118,8 @@ class Forecast:
                        "observed": self.observed, "shape": self.shape,
                        "bend_odds": self.bend_odds, "knee_efc": self.knee_efc,
                        "knee_probability": self.knee_probability, "last_efc": self.last_efc,
-                       "estimates": self.estimates, "band": self.band_points()})
+                       "estimates": self.estimates, "band": self.band_points(),
+                       "status": self.status, "fade": self.fade, "message": self.message})
 
     @classmethod
     def from_dict(cls, d: dict) -> Forecast:
@@ -117,7 +131,9 @@ class Forecast:
                    eol_efc_interval95=list(d["eol_efc_interval95"]), shape=d["shape"],
                    bend_odds=d["bend_odds"], knee_efc=d["knee_efc"],
                    knee_probability=d["knee_probability"], band=band,
-                   last_efc=d["last_efc"], estimates=d["estimates"], observed=d["observed"])
+                   last_efc=d["last_efc"], estimates=d["estimates"], observed=d["observed"],
+                   status=d.get("status") or ("observed" if d["observed"] else "dated"),
+                   fade=dict(d.get("fade") or {}), message=d.get("message") or "")
 
 
 def _event_to_dict(e: EventHealth) -> dict:
@@ -502,7 +518,8 @@ def build_health(row: dict, events: list[dict], model: dict | None, eol: float) 
                      resistance_from=_sources(with_r, resistance_trend.influence))
     forecast = None
     if reference and capacity_trend is not None:
-        forecast = _forecast(with_cap, capacity_trend, reference, eol, notes)
+        forecast = _forecast(with_cap, capacity_trend, reference, eol, notes,
+                             chemistry=row["chemistry"], efc_now=today["efc"])
     return Health(pack=row["name"], events=per_event, reference_capacity_Ah=reference,
                   reference=how, forecast=forecast, notes=notes, today=today,
                   capacity_trend=capacity_trend, resistance_trend=resistance_trend)
@@ -711,10 +728,12 @@ def _sources(chosen: list[EventHealth], influence) -> list[dict]:
 
 
 def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eol: float,
-              notes: list[str]) -> Forecast | None:
+              notes: list[str], chemistry: str | None = None,
+              efc_now: float | None = None) -> Forecast | None:
     """End of life from the capacity estimates (:mod:`.forecast`), or where the logged
-    capacities already fell through it."""
-    from .forecast import forecast_capacity
+    capacities already fell through it; none until a fade is measured (:func:`.dating`).
+    The futures start from the capacity trend that gives the health today."""
+    from .forecast import dating, evidence_words, forecast_capacity, measure_fade
     from .health import observed_crossing
 
     efc = np.array([e.efc for e in with_cap])
@@ -724,29 +743,52 @@ def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eo
     hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1]
           for e in with_cap]
     threshold = eol * reference
-    made = forecast_capacity(efc, cap, lo, hi, reference, threshold, weights=trend.weights)
-    if made is None:
-        return None
-    fit, ahead = made
+    evidence = measure_fade(efc, cap, lo, hi, [e.health_kind for e in with_cap],
+                            weights=trend.weights, shared_Ah=trend.systematic,
+                            nugget_Ah=trend.nugget,
+                            chemistry=chemistry)
+    x_now = float(efc.max())
+    today = max(x_now, efc_now or 0.0)
+    made = None
+    if evidence.measured:
+        mean, sd = trend.at(x_now)
+        made = forecast_capacity(efc, cap, lo, hi, reference, threshold,
+                                 weights=trend.weights, start=(float(mean[0]), float(sd[0])))
+    fit, ahead = made if made is not None else (None, None)
+    status = dating(evidence, ahead, today)
+    past = (trend.efc >= efc.min()) & (trend.efc <= x_now)
+    lo_past, hi_past = trend.band()
+    band = {"efc": [*trend.efc[past]], "capacity_Ah": [*trend.level[past]],
+            "lo": [*lo_past[past]], "hi": [*hi_past[past]]}
+    common = dict(eol=eol, threshold_Ah=threshold, band=band, last_efc=x_now,
+                  fade=evidence.to_dict(), estimates=int(efc.size))
+    if status != "dated":
+        shape = {} if fit is None else dict(shape=fit.family, bend_odds=fit.bend_odds,
+                                            knee_efc=fit.knee_efc,
+                                            knee_probability=fit.knee_probability)
+        fc = Forecast(eol_efc=None, eol_efc_interval95=[None, None],
+                      **{"shape": "", "bend_odds": float("nan"), "knee_efc": None,
+                         "knee_probability": float("nan"), **shape},
+                      status=status, message=evidence_words(evidence, status, today),
+                      **common)
+        fc.band = _clean(fc.band)
+        return fc
     central, interval = ahead.eol_efc, list(ahead.interval95)
     seen = observed_crossing(efc, cap, threshold)
     if seen is not None:
         central, interval = seen
         notes.append(f"end of life observed: the capacity fell below {threshold:.3g} Ah "
                      f"between {interval[0]:.0f} and {interval[1]:.0f} EFC")
-    past = (trend.efc >= efc.min()) & (trend.efc <= fit.x_now)
     end = max(v for v in (interval[1], central, fit.x_now) if v is not None)
     future = (ahead.efc > fit.x_now) & (ahead.efc <= max(1.15 * end, 1.5 * fit.x_now))
-    lo_past, hi_past = trend.band()
-    band = {"efc": [*trend.efc[past], *ahead.efc[future]],
-            "capacity_Ah": [*trend.level[past], *ahead.median[future]],
-            "lo": [*lo_past[past], *ahead.low[future]],
-            "hi": [*hi_past[past], *ahead.high[future]]}
-    return Forecast(eol=eol, threshold_Ah=threshold, eol_efc=central,
-                    eol_efc_interval95=interval, shape=fit.family, bend_odds=fit.bend_odds,
-                    knee_efc=fit.knee_efc, knee_probability=fit.knee_probability,
-                    band=_clean(band), last_efc=fit.x_now, estimates=fit.n,
-                    observed=seen is not None)
+    for key, values in (("efc", ahead.efc), ("capacity_Ah", ahead.median),
+                        ("lo", ahead.low), ("hi", ahead.high)):
+        band[key] = [*band[key], *values[future]]
+    common["band"] = _clean(band)
+    return Forecast(eol_efc=central, eol_efc_interval95=interval, shape=fit.family,
+                    bend_odds=fit.bend_odds, knee_efc=fit.knee_efc,
+                    knee_probability=fit.knee_probability, observed=seen is not None,
+                    status="observed" if seen is not None else "dated", **common)
 
 
 __all__ = ["Health", "Forecast", "PackTable", "EventTable", "Pack", "scale_parameters",
