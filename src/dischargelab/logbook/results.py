@@ -743,7 +743,7 @@ def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eo
     hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1]
           for e in with_cap]
     threshold = eol * reference
-    evidence = measure_fade(efc, cap, lo, hi, [e.health_kind for e in with_cap],
+    evidence = measure_fade(efc, cap, lo, hi, [estimate_kind(e) for e in with_cap],
                             weights=trend.weights, shared_Ah=trend.systematic,
                             nugget_Ah=trend.nugget,
                             chemistry=chemistry)
