@@ -67,9 +67,8 @@ def test_charges_reading_high_are_put_on_the_full_discharges_scale():
 
 @pytest.mark.slow
 def test_a_routine_charge_to_4_0_v_is_not_full_and_the_band_holds_the_next_test(tmp_path):
-    from synthetic_life import LifeSpec, synthetic_life
-
     from dischargelab.logbook import Logbook
+    from synthetic_life import LifeSpec, synthetic_life
 
     life = synthetic_life(LifeSpec(cycles=6, test_every=5, cv_V=4.0, fade_per_efc=3e-3,
                                    ocv_wiggle_V=0.008, lli_share=0.3, seed=4))
