@@ -275,7 +275,10 @@ def calibration(rows: pd.DataFrame) -> None:
         else:
             cell = c.split()[0]
             others = [need[o] for o in need if o not in SYNTHETIC and not o.startswith(cell)]
-        chosen = max(others) if others else float("nan")
+        if not others:
+            print(f"| {c} | {n:.2f} | - | - |")
+            continue
+        chosen = max(others)
         got = rows[(rows["condition"] == c)].dropna(subset=["now_Ah"])
         sd = np.hypot(got["trend_sd"], chosen * got["drift_unit"])
         held = ((got["now_Ah"] - got["truth_Ah"]).abs() <= got["quantile"] * sd).mean()
@@ -285,6 +288,8 @@ def calibration(rows: pd.DataFrame) -> None:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=1, help="synthetic lives per condition")
+    parser.add_argument("--cycles", type=int, default=BASE["cycles"],
+                        help="cycles per synthetic life (a test every 5)")
     parser.add_argument("--only", nargs="*", default=None,
                         help="conditions whose name contains one of these words")
     parser.add_argument("--cache", type=Path, default=ROOT / ".cache" / "health_matrix",
@@ -307,7 +312,8 @@ def main(argv=None) -> None:
         rows = []
         for seed in range(args.seeds if kind == "synthetic" else 1):
             if kind == "synthetic":
-                frame, truth = synthetic_log(name, conf, seed, args.cache)
+                frame, truth = synthetic_log(name, dict(conf, cycles=args.cycles), seed,
+                                             args.cache)
             else:
                 frame, truth = real_log(*conf) if kind == "real" else real_log(conf, None, None)
             db = logbook_of(frame, f"{name}/{seed}", args.cache, first=kind != "label")
