@@ -86,3 +86,44 @@ def test_a_routine_charge_to_4_0_v_is_not_full_and_the_band_holds_the_next_test(
     assert len(full) <= 3 and len(charges) - len(full) >= 5
     low, high = health.today["capacity_interval95"]
     assert low <= life.tests[1][2] <= high
+
+
+def _hover_log(path, tail_s: float):
+    """A 3S 12 Ah pack (the engine's ``ecm`` Li-ion cell) rested full, hovered at 27 A to
+    30 % and logged ``tail_s`` after landing, one sample a second."""
+    import pandas as pd
+
+    import synthetic_life as sl
+    from dischargelab.engine import Step
+
+    spec = sl.LifeSpec(capacity_Ah=12.0, ocv_wiggle_V=0.008, seed=3)
+    p = sl.parameters(spec, 0.0)
+    log = sl._Logger(spec)
+    log.rest(120.0, p, 25.0)
+    log.go([Step("current", 27.0, duration_s=0.7 * 12 * 3600 / 27)], p, 25.0)
+    log.go([Step("rest", duration_s=tail_s)], p, 25.0)
+    s = log.series()
+    t = np.arange(0.0, s["time_s"][-1], 1.0)
+    pd.DataFrame({"time_s": t, "voltage_V": 3 * np.interp(t, s["time_s"], s["voltage_V"]),
+                  "current_A": np.interp(t, s["time_s"], s["current_A"]),
+                  "temperature_C": np.interp(t, s["time_s"], s["temperature_C"])}
+                 ).to_csv(path, index=False)
+    return float(p["C_Ah"])
+
+
+@pytest.mark.parametrize("chemistry", [None, "li-ion"])
+def test_a_hover_to_30_percent_of_a_pack_of_unknown_chemistry_gets_an_honest_band(tmp_path,
+                                                                                 chemistry):
+    from dischargelab.logbook import Logbook
+
+    truth = _hover_log(tmp_path / "hover.csv", 60.0)
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.set_pack("quad", cells=3, chemistry=chemistry)
+        lb.add(tmp_path / "hover.csv", pack="quad")
+        flight = next(e for e in lb.health("quad").events if e.capacity_Ah is not None)
+    low, high = flight.capacity_interval95
+    assert low < truth < high
+    if chemistry is None:   # both 4.2 V curves are possible: the interval says so
+        assert "chemistry not known" in " ".join(flight.notes)
+    else:
+        assert flight.capacity_Ah == pytest.approx(truth, rel=0.06)

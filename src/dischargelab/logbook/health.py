@@ -739,7 +739,12 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
     from ..ocv import charge_cell_V
 
     top = highest_rest_cell_V(ordered, cells, chemistry)
-    prior = OcvCurve.prior(chemistry, top)
+    from ..ocv import is_lihv
+
+    # a 4.2 V pack of no known chemistry reads through both generic curves' mean, their
+    # difference carried in the interval (a LiPo curve read on an NMC cell: -27 %)
+    prior = OcvCurve.unknown() if chemistry is None and not is_lihv(None, top) else \
+        OcvCurve.prior(chemistry, top)
     # full is the chemistry's charge voltage: a constant-voltage end lower (a charger set
     # to 4.0 or 4.1 V, a storage charge) leaves the pack part-charged, whatever the pack's
     # first full discharge started from
