@@ -123,7 +123,17 @@ def test_a_hover_to_30_percent_of_a_pack_of_unknown_chemistry_gets_an_honest_ban
         flight = next(e for e in lb.health("quad").events if e.capacity_Ah is not None)
     low, high = flight.capacity_interval95
     assert low < truth < high
-    if chemistry is None:   # both 4.2 V curves are possible: the interval says so
-        assert "chemistry not known" in " ".join(flight.notes)
-    else:
-        assert flight.capacity_Ah == pytest.approx(truth, rel=0.06)
+    assert flight.capacity_Ah == pytest.approx(truth, rel=0.06)
+    if chemistry is None:   # the hover's loaded voltage tells the Li-ion curve from LiPo's
+        assert "chemistry read from 1 load(s): the li-ion curve fits" in " ".join(flight.notes)
+
+
+def test_a_chemistry_not_known_carries_both_curves_in_the_reading():
+    from dischargelab.logbook.estimates import OcvCurve, soc_reading
+
+    unknown, lipo = OcvCurve.unknown(), OcvCurve.prior("lipo")
+    reading = {"relaxed_V": 3 * 3.64, "current_A": 0.0}     # 30 % on the mean curve
+    soc, sd = soc_reading(unknown, reading, 3)
+    assert soc == pytest.approx(0.3, abs=0.05)
+    assert sd > 3 * soc_reading(lipo, reading, 3)[1]
+    assert unknown.sd_at(1.0) < 0.03 and unknown.sd_at(0.3) > 0.1

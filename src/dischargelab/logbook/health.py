@@ -741,10 +741,19 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
     top = highest_rest_cell_V(ordered, cells, chemistry)
     from ..ocv import is_lihv
 
+    read = ""
+    if chemistry is None and not is_lihv(None, top):
+        from .chemistry import chemistry_from_loads
+
+        loads = [(e, pack_cells(e, cells, None)) for e in ordered
+                 if e.get("kind") in ("discharge", "flight")]
+        chemistry, read = chemistry_from_loads(loads)
     # a 4.2 V pack of no known chemistry reads through both generic curves' mean, their
     # difference carried in the interval (a LiPo curve read on an NMC cell: -27 %)
     prior = OcvCurve.unknown() if chemistry is None and not is_lihv(None, top) else \
         OcvCurve.prior(chemistry, top)
+    if read:
+        prior.source = f"{prior.source} (chemistry {read})"
     # full is the chemistry's charge voltage: a constant-voltage end lower (a charger set
     # to 4.0 or 4.1 V, a storage charge) leaves the pack part-charged, whatever the pack's
     # first full discharge started from
