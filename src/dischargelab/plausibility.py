@@ -257,6 +257,34 @@ def check_e0(e0_V: float | None, cells_series: int = 1, chemistry: str | None = 
                     f"{low:g}-{high:g} V of a {what}", fix, {"e0_V": suggestion})]
 
 
+#: Cutoff voltages per cell [V] a chemistry's cells are discharged to: below the low end the
+#: cell is over-discharged, above the high end most of its charge is left unused. From
+#: manufacturers' data sheets: LiPo 3.0-3.3 V (RC packs; 2.75 V the cell's absolute minimum),
+#: Li-ion 2.5-3.0 V (e.g. Samsung INR18650-30Q: 2.5 V), LiFePO4 2.0-2.8 V (e.g. A123
+#: ANR26650: 2.0 V; the paper's packs end at 2.5 V).
+CUTOFF_RANGE_V = {"lipo": (2.75, 3.6), "li-ion": (2.5, 3.4), "lifepo4": (2.0, 3.0)}
+
+
+def check_cutoff(cutoff_cell_V: float | None, chemistry: str | None,
+                 source: str = "") -> list[Finding]:
+    """A cutoff per cell [V] outside its chemistry's usual range (:data:`CUTOFF_RANGE_V`)
+    is a warning (a cutoff of another chemistry, or a pack voltage given per cell)."""
+    if cutoff_cell_V is None or chemistry not in CUTOFF_RANGE_V:
+        return []
+    low, high = CUTOFF_RANGE_V[chemistry]
+    if low - 1e-9 <= cutoff_cell_V <= high + 1e-9:
+        return []
+    from .cell import CUTOFF_CELL_VOLTAGE_V
+
+    usual = CUTOFF_CELL_VOLTAGE_V[chemistry]
+    side = "below" if cutoff_cell_V < low else "above"
+    return [Finding("warning", "cutoff", source,
+                    f"a cutoff of {cutoff_cell_V:g} V per cell is {side} the {low:g}-{high:g} V "
+                    f"a {chemistry} cell is discharged to",
+                    f"check the chemistry, or give a {chemistry} cutoff ({{cutoff_cell_V}})",
+                    {"cutoff_cell_V": usual})]
+
+
 def check_discharge(frame, meta=None, *, cells_series: int = 1, strings_parallel: int = 1,
                     chemistry: str | None = None) -> list[Finding]:
     """Plausibility of one read discharge (see the module notes for the limits).
@@ -312,6 +340,6 @@ def raise_for(findings, strict: bool = False) -> list[Finding]:
     return [f for f in findings if f.level == "warning"]
 
 
-__all__ = ["Finding", "PlausibilityError", "check_discharge", "check_discharges", "check_e0",
-           "infer_cells", "raise_for", "rest_range", "REST_RANGE_V", "FULL_CHARGE_V",
+__all__ = ["Finding", "PlausibilityError", "check_cutoff", "check_discharge", "check_discharges",
+           "check_e0", "infer_cells", "raise_for", "rest_range", "REST_RANGE_V", "FULL_CHARGE_V",
            "MIN_SPAN_FRACTION", "WARN_BAND_V"]

@@ -151,7 +151,8 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
                   draws, seed, plot_path, csv_path, force, as_json):
     """Fly a mission (TOML) on a battery: flight time, max cruise, margin and its interval.
 
-    BATTERY is a battery file from `fit` or a preset name; MISSION a TOML file of
+    BATTERY is a battery file from `fit` or a preset name (leave it out when the
+    mission's [battery] source names one); MISSION a TOML file of
     phases (current, power or flight condition; duration, until cutoff/reserve,
     repeat blocks; one phase may be `stretch = true`). Bundled examples by name:
     paper-table5, fixed-wing-survey, multirotor-hover.
@@ -160,6 +161,7 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
     Examples:
       dischargelab endurance hacker-4100-4s-lifepo4 paper-table5
       dischargelab endurance battery.json mission.toml --reserve 25 --plot flight.png
+      dischargelab endurance quad.toml      # [battery] source = "lco.json" beside it
       dischargelab endurance cell.json mission.toml --cells 4 --parallel 2 --cutoff 3.0
       dischargelab endurance battery.json mission.toml --draws 500 --json
       dischargelab endurance --pack zippy-a paper-table5     # a logbook pack, today
@@ -170,8 +172,11 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
         if mission is not None:
             raise DischargelabError("with --pack NAME give the MISSION alone, not a battery")
         battery, mission = None, battery
-    if battery is None and pack_name is None or mission is None:
-        raise DischargelabError("give BATTERY and MISSION, or --pack NAME and MISSION")
+    elif mission is None and battery is not None:
+        battery, mission = None, battery  # the mission's [battery] source names the battery
+    if mission is None:
+        raise DischargelabError("give MISSION (its [battery] source names the battery), "
+                                "BATTERY and MISSION, or --pack NAME and MISSION")
     guard_outputs([plot_path, csv_path], battery_input(battery or "") + [mission], force,
                   figures=[plot_path])
     if pack_name is not None:
@@ -180,10 +185,10 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
         with Logbook(db, create=False) as lb:
             loaded = lb.pack(pack_name).battery()
     else:
-        loaded = load_battery_arg(battery)
+        loaded = None if battery is None else load_battery_arg(battery)
     plan = load_mission(mission, battery=loaded, cutoff_cell_V=cutoff,
-                        reserve_pct=reserve, ambient_C=ambient)
-    plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
+                        reserve_pct=reserve, ambient_C=ambient, cells_series=cells,
+                        strings_parallel=parallel)
     with err.status("flying the mission", spinner="dots") as status:
         result = run_mission(plan, draws=draws, seed=seed,
                              progress=progress_callback(status, "parameter draws"))
@@ -254,8 +259,8 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
     with err.status("building the report", spinner="dots") as status:
         if mission_path:
             status.update("flying the mission")
-            plan = load_mission(mission_path, battery=bat, cutoff_cell_V=cutoff)
-            plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
+            plan = load_mission(mission_path, battery=bat, cutoff_cell_V=cutoff,
+                                cells_series=cells, strings_parallel=parallel)
             result = run_mission(plan, draws=draws, seed=seed,
                                  progress=progress_callback(status, "parameter draws"))
         if validate_paths:
