@@ -241,16 +241,18 @@ def validate(battery: Battery | str | Path,
     list of dischargelab.validate.ValidationCase
     """
     from .predict import default_cutoff
-    from .validate import compare_discharge
+    from .validate import compare_discharge, input_warnings
 
     bat = load(battery)
     cut = default_cutoff(bat, cutoff)["cutoff_cell_V"]
     items = discharges if isinstance(discharges, (list, tuple)) else [discharges]
-    out = []
+    out, loaded = [], []
     for d in items:
         for dis in _as_discharges(d, "all"):
-            out.append(compare_discharge(bat, dis.to_pandas(), dict(dis.meta), cut,
-                                         low_timer_s=low_timer_s))
+            frame, meta = dis.to_pandas(), dict(dis.meta)
+            loaded.append((frame, meta))
+            out.append(compare_discharge(bat, frame, meta, cut, low_timer_s=low_timer_s))
+    input_warnings(bat, loaded, out, cut)
     return out
 
 

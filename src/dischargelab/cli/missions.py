@@ -300,4 +300,56 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
         print_mission(result)
 
 
-COMMANDS = [demo_cmd, endurance_cmd, report_cmd]
+@click.group("missions")
+def missions_group():
+    """The bundled missions: list them, show one, copy one to a file to edit.
+
+    \b
+    Examples:
+      dischargelab missions list
+      dischargelab missions show paper-table5
+      dischargelab missions copy multirotor-hover quad.toml
+    The keys of a mission file, with units and defaults: docs/mission-format.md.
+    """
+
+
+@missions_group.command("list")
+@json_option
+def missions_list_cmd(as_json):
+    """List the bundled missions (name, title, battery, phases)."""
+    from ..mission import mission_catalogue
+
+    rows = mission_catalogue()
+    if as_json:
+        print_json({"missions": [{k: v for k, v in r.items() if k != "path"} for r in rows]})
+        return
+    out.print(table("Bundled missions", ["name", "title", "battery", "phases"],
+                    [[r["name"], r["title"], r["battery"] or "-", str(r["phases"])]
+                     for r in rows]))
+    out.print("Show one: dischargelab missions show NAME; copy one to edit: "
+              "dischargelab missions copy NAME FILE", markup=False)
+
+
+@missions_group.command("show")
+@click.argument("name")
+def missions_show_cmd(name):
+    """Print a bundled mission's TOML text."""
+    from ..mission import bundled_mission_text
+
+    click.echo(bundled_mission_text(name), nl=False)
+
+
+@missions_group.command("copy")
+@click.argument("name")
+@click.argument("file", type=click.Path(dir_okay=False))
+@force_option
+def missions_copy_cmd(name, file, force):
+    """Copy a bundled mission to FILE to edit (an existing FILE is kept without --force)."""
+    from ..mission import copy_mission
+
+    path = copy_mission(name, file, force=force)
+    out.print(f"copied {name} to {path}; fly it with: dischargelab endurance {path}",
+              markup=False)
+
+
+COMMANDS = [demo_cmd, endurance_cmd, report_cmd, missions_group]

@@ -692,3 +692,35 @@ def load_mission(path, *, battery=None, cutoff_cell_V: float | None = None,
                          cutoff_cell_V=cutoff_cell_V, reserve_pct=reserve_pct,
                          ambient_C=ambient_C, cells_series=cells_series,
                          strings_parallel=strings_parallel)
+
+
+def mission_catalogue() -> list[dict]:
+    """The bundled missions: ``{"name", "title", "battery", "phases", "path"}`` each."""
+    rows = []
+    for key, path in bundled_missions().items():
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        bat = data.get("battery") or {}
+        rows.append({"name": key, "title": str(data.get("name", key)),
+                     "battery": bat.get("source"), "phases": len(data.get("phase") or []),
+                     "path": str(path)})
+    return rows
+
+
+def bundled_mission_text(name: str) -> str:
+    """The TOML text of a bundled mission (a :class:`DataError` naming the bundled ones
+    for another name)."""
+    bundled = bundled_missions()
+    if name not in bundled:
+        raise DataError(f"no bundled mission {name!r}; choose one of {', '.join(bundled)} "
+                        f"(dischargelab missions list)")
+    return bundled[name].read_text(encoding="utf-8")
+
+
+def copy_mission(name: str, destination, *, force: bool = False) -> Path:
+    """Copy a bundled mission to ``destination`` to edit (atomic; an existing file is kept
+    unless ``force``). Returns the path written."""
+    from ..atomic import check_outputs, write_text
+
+    text = bundled_mission_text(name)
+    (path,) = check_outputs([destination], [], force)
+    return write_text(path, text)
