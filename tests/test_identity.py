@@ -10,9 +10,8 @@ import pytest
 
 from dischargelab.errors import DataError, DischargelabError
 from dischargelab.identity import battery_identity, resolve
-from dischargelab.mission import copy_mission, load_mission, mission_catalogue, parse_mission
+from dischargelab.mission import copy_mission, load_mission, mission_catalogue, parse_mission, spec
 from dischargelab.mission import keys as mission_keys
-from dischargelab.mission import spec
 from dischargelab.model import PRESETS
 from dischargelab.plausibility import check_cutoff, check_given_current
 
