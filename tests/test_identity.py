@@ -29,7 +29,7 @@ def test_a_cell_takes_the_missions_pack_and_chemistry_without_a_word():
     out = resolve(cell, series=4, parallel=2, chemistry="lifepo4", cutoff_cell_V=2.6)
     assert (out.battery.cells_series, out.battery.strings_parallel) == (4, 2)
     assert out.battery.chemistry == "lifepo4" and out.cutoff_cell_V == 2.6
-    assert out.warnings == []
+    assert out.warnings == [] and "lifepo4" in out.notes[0]
 
 
 def test_a_pack_keeps_its_layout_chemistry_and_cutoff_and_each_conflict_is_one_line():

@@ -79,11 +79,13 @@ def battery_identity(battery) -> Identity:
 
 @dataclass(frozen=True)
 class Resolved:
-    """The battery as flown, its cutoff per cell [V] and the warnings on the way."""
+    """The battery as flown, its cutoff per cell [V], the warnings on the way (conflicts)
+    and the notes (what was taken from the mission's defaults)."""
 
     battery: object
     cutoff_cell_V: float | None
     warnings: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
 
 
 def _layout(ident, warnings, where, key, own, default, given, option):
@@ -143,14 +145,16 @@ def resolve(battery, *, where: str = "the mission's [battery]", series: int | No
                       parallel_given, "--parallel")
     flown = battery.with_pack(cells, strings)
     chem = ident.chemistry
+    notes: list[str] = []
     if chem is None and chemistry is not None:
         chem = chemistry
         flown = replace(flown, chemistry=chem)
+        notes.append(f"{ident.label} does not say its chemistry: {chem} from {where}")
     elif chemistry is not None and chemistry != chem:
         warnings.append(f"{where} says chemistry = {chemistry}, {ident.label} is {chem}; "
                         f"flying {chem}")
     cutoff = _cutoff(ident, warnings, where, chem, chemistry, cutoff_cell_V, cutoff_given)
-    return Resolved(flown, cutoff, warnings)
+    return Resolved(flown, cutoff, warnings, notes)
 
 
 def _cutoff(ident, warnings, where, chem, mission_chem, default, given):

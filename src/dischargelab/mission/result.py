@@ -348,6 +348,7 @@ def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
         soc_end_pct=soc_end, min_voltage_V=float(np.min(sim.voltage_V)), stretch=stretch,
         warnings=warnings, cannot_deliver=cannot,
     )
+    result.notes.extend(mission.notes)
     extra = mission.battery.extra
     if extra.get("logbook") and extra.get("note"):  # a logbook pack at today's health
         result.notes.append(str(extra["note"]))

@@ -152,6 +152,8 @@ class Mission:
     warnings : tuple of str
         Where the mission's ``[battery]`` table disagreed with the battery flown
         (:func:`dischargelab.identity.resolve`), one line each.
+    notes : tuple of str
+        What was taken from the ``[battery]`` table for a battery that did not say.
     """
 
     items: tuple
@@ -164,6 +166,7 @@ class Mission:
     aircraft: dict | None = field(default=None, compare=False)
     ambient_C: float | None = None
     warnings: tuple = field(default=(), compare=False)
+    notes: tuple = field(default=(), compare=False)
 
     def __post_init__(self):
         if not self.items:
@@ -605,7 +608,7 @@ def parse_mission(data: dict, *, battery=None, base_dir=None, source: str = "",
                        reserve_pct=float(reserve), initial_soc_pct=float(soc0), name=name,
                        source=source, aircraft=aircraft,
                        ambient_C=None if ambient_C is None else float(ambient_C),
-                       warnings=tuple(warnings))
+                       warnings=tuple(warnings), notes=tuple(flown.notes))
     except DataError as exc:
         raise ctx.error("", str(exc)) from None
 
