@@ -6,16 +6,16 @@ and the pack pages all build a mission through :func:`resolve`. A mission's ``[b
 table (``series``, ``parallel``, ``chemistry``, ``cutoff_cell_V``) is a default for a battery
 that has none of these, never an override of a known pack:
 
-* a battery of one cell (``1S1P``, e.g. a cell fitted on the bench) is placed in the
-  mission's pack; a pack (more than one cell, or a logbook pack) keeps its own layout, and a
-  mission that says otherwise gets a one-line warning naming both values;
+* a battery of one cell (``1S1P``, e.g. a cell fitted on the bench or a logbook of one
+  cell) is placed in the mission's pack; a pack (more than one cell) keeps its own layout,
+  and a mission that says otherwise gets a one-line warning naming both values;
 * a battery of unknown chemistry takes the mission's; a known one keeps its own;
 * the cutoff per cell is the battery's own (``cutoff_cell_V`` stored in its file), else the
   mission's when it was written for the same chemistry (or the chemistry is unknown), else
   the usual cutoff of the battery's chemistry (:data:`dischargelab.cell.CUTOFF_CELL_VOLTAGE_V`);
 * values given explicitly by the user (``--cells``, ``--parallel``, ``--cutoff``) win,
-  except that a logbook pack's measured layout cannot be changed: asking for another is an
-  error (:class:`dischargelab.errors.DataError`), one line.
+  except that the measured layout of a logbook pack of several cells cannot be changed:
+  asking for another is an error (:class:`dischargelab.errors.DataError`), one line.
 """
 
 from __future__ import annotations
@@ -42,9 +42,11 @@ class Identity:
     capacity_Ah : float
         Pack model capacity [Ah].
     pack : bool
-        The layout is the battery's own (a logbook pack, or more than one cell).
+        The layout is the battery's own (more than one cell); one cell is placed in the
+        mission's pack.
     measured : bool
-        A logbook pack: its layout is measured and cannot be changed.
+        A logbook pack of more than one cell: its layout is measured and cannot be
+        changed.
     label : str
         How the battery is named in messages.
     """
@@ -68,13 +70,13 @@ def battery_identity(battery) -> Identity:
     else:
         label = repr(battery.name) if battery.name else "the battery"
     own = battery.extra.get("cutoff_cell_V")
+    multi = battery.cells_series > 1 or battery.strings_parallel > 1
     return Identity(
         cells_series=int(battery.cells_series), strings_parallel=int(battery.strings_parallel),
         chemistry=battery.chemistry or None,
         cutoff_cell_V=float(own) if isinstance(own, (int, float)) else None,
         capacity_Ah=float(battery.capacity_Ah),
-        pack=measured or battery.cells_series > 1 or battery.strings_parallel > 1,
-        measured=measured, label=label)
+        pack=multi, measured=measured and multi, label=label)
 
 
 @dataclass(frozen=True)
