@@ -159,3 +159,17 @@ def test_a_current_given_for_the_wrong_file_is_named(capsys, tmp_path, shared_da
     assert code == 0, err
     for row in json.loads(out)["files"]:
         assert not any("not this file's" in w for w in row["warnings"])
+
+
+def test_cells_and_a_cutoff_that_disagree_with_the_voltages_and_the_chemistry_are_named(
+        capsys, shared_data):
+    flight = (shared_data / "dji_m100_flights"
+              / "derived_battery_19-12-17_tablet1_2019_12_17_18_49.csv")
+    code, out, err = run(capsys, "validate", "zippy-1100-2s", flight, "--cutoff", "2.5",
+                         "--json")
+    assert code == 0, err
+    (row,) = json.loads(out)["files"]
+    cells = [w for w in row["warnings"] if "per cell for 2 cells in series" in w]
+    assert len(cells) == 1 and "--cells 6" in cells[0]
+    cutoff = [w for w in row["warnings"] if "a cutoff of 2.5 V per cell" in w]
+    assert len(cutoff) == 1 and "lipo" in cutoff[0] and "--cutoff 3" in cutoff[0]
