@@ -152,7 +152,8 @@ def resolve(battery, *, where: str = "the mission's [battery]", series: int | No
         chem = chemistry
         flown = replace(flown, chemistry=chem)
         notes.append(f"{ident.label} does not say its chemistry: {chem} from {where}")
-    elif chemistry is not None and chemistry != chem:
+    elif chemistry is not None and chemistry != chem and cutoff_given is None:
+        # (with the cutoff given, the mission's chemistry decides nothing)
         warnings.append(f"{where} says chemistry = {chemistry}, {ident.label} is {chem}; "
                         f"flying {chem}")
     cutoff = _cutoff(ident, warnings, where, chem, chemistry, cutoff_cell_V, cutoff_given)
