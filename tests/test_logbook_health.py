@@ -134,6 +134,40 @@ def test_partial_discharges_cut_at_60_percent_within_3_percent(shared_data, tmp_
     assert reference == pytest.approx(health[0].capacity_Ah)
 
 
+@pytest.mark.parametrize("dated", [True, False])
+def test_partials_from_a_storage_charge_or_a_fresh_rest_within_3_percent(shared_data, tmp_path,
+                                                                        dated):
+    """A discharge from a storage charge (a rest near 3.8 V) run to the cutoff, and one
+    from a full charge whose rest still reads 40 mV high, against the full integral."""
+    from lvm_cut import lvm_storage
+
+    events, truth = [], {}
+    for k, c in enumerate((1, 100, 200, 300)):
+        events += stored(summarise_source(shared_data / CELL_C / f"DischargeCycle{c:03d}.txt"), k)
+    for k, c in enumerate((110, 210, 310)):
+        path = shared_data / CELL_C / f"DischargeCycle{c:03d}.txt"
+        store = tmp_path / f"storage_{c}.txt"
+        truth[store.name] = lvm_storage(path, store, 0.45, dated)
+        fresh = tmp_path / f"fresh_{c}.txt"
+        truth[fresh.name] = lvm_cut(path, fresh, 0.6, dated)
+        lines = fresh.read_text().splitlines(keepends=True)
+        first = next(i for i, line in enumerate(lines) if line.startswith("X_Value")) + 1
+        cols = lines[first].split("\t")
+        cols[2] = f"{float(cols[2]) + 0.04:.6f}"
+        lines[first] = "\t".join(cols)
+        fresh.write_text("".join(lines))
+        events += stored(summarise_source(store), 10 + k) + stored(summarise_source(fresh),
+                                                                   20 + k)
+    health, _, _ = pack_health(events)
+    got = {h.source: h for h in health if h.source in truth}
+    assert len(got) == 6
+    for name, h in got.items():
+        assert h.capacity_Ah == pytest.approx(truth[name], rel=0.03), name
+        lo, hi = h.capacity_interval95
+        assert lo < truth[name] < hi
+    assert got["storage_110.txt"].soc_start == pytest.approx(0.55, abs=0.03)
+
+
 # --------------------------------------------------------------------------- forecast
 
 def test_forecast_of_a_straight_fade_centres_on_its_crossing():
