@@ -152,6 +152,13 @@ def test_a_current_given_for_the_wrong_file_is_named(capsys, tmp_path, shared_da
     warned = [line for line in out.splitlines() if "that current is not this file's" in line]
     assert len(warned) == 1, out
     assert warned[0].startswith("warning: 0.1C_discharge_U.txt:") and "4.56 A" in warned[0]
+    # fit checks the files against each other: the slow run cannot have drawn 2.28 A
+    code, _, err = run(capsys, "fit", data / "0.1C_discharge_U.txt", data / "1C_discharge_U.txt",
+                       data / "2C_discharge_U.txt", "--current", "2.28", "--model", "shepherd",
+                       "-o", tmp_path / "three.json")
+    assert code == 0, err
+    warned = [line for line in err.splitlines() if "that current is not this file's" in line]
+    assert len(warned) == 1 and warned[0].startswith("warning: 0.1C_discharge_U.txt:"), err
     # each file with its own current: no such warning
     code, out, err = run(capsys, "validate", tmp_path / "lco.json", data / "2C_discharge_U.txt",
                          data / "0.1C_discharge_U.txt", "--current", "4.56,0.228",
