@@ -639,17 +639,20 @@ def load_mission(path, *, battery=None, cutoff_cell_V: float | None = None,
                  ) -> Mission:
     """Read a mission TOML file.
 
-    Format (all keys with units in their names)::
+    Format (all keys with units in their names; every key with its unit and default:
+    :data:`dischargelab.mission.keys.KEYS`, the page ``docs/mission-format.md``)::
 
         name = "survey"
         ambient_C = 35             # optional: air temperature [degC] for thermal models
                                    # (default: the battery file's, that of its fitted data)
         [battery]                  # all optional
-        source = "battery.json"    # or a preset name; the command-line battery wins
-        series = 4                 # override the battery file's pack configuration
-        parallel = 1
+        source = "battery.json"    # beside this file, or a preset name; the command-line
+                                   # battery wins
+        series = 4                 # defaults for a battery that does not say: a cell is
+        parallel = 1               # placed in this pack, a pack keeps its own (a warning)
+        chemistry = "lipo"         # what the cutoff below was written for
         initial_soc_pct = 100
-        cutoff_cell_V = 3.3        # default by chemistry
+        cutoff_cell_V = 3.3        # default: the battery's own, else its chemistry's
         reserve_pct = 20           # land with 20 % left
 
         [aircraft]                 # only for flight-condition phases
