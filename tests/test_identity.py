@@ -146,3 +146,13 @@ def test_a_given_current_that_the_duration_contradicts_is_named():
     assert [f.source for f in check_given_current(three)] == ["c"]
     measured = [(f, dict(m, current_source="column")) for f, m in loaded]
     assert check_given_current(measured, capacity_Ah=2.28) == []
+
+
+def test_the_python_api_flies_the_missions_own_battery_and_keeps_a_packs():
+    import dischargelab as dl
+
+    own = dl.endurance(None, "paper-table5", draws=0)
+    assert own.mission.battery.name == HACKER.name and own.mission.warnings == ()
+    zippy = dl.endurance("zippy-1100-2s", "paper-table5", draws=0).to_dict()
+    assert zippy["cells_series"] == 2 and zippy["cutoff_cell_V"] == 3.0
+    assert sum("paper-table5 [battery]" in w for w in zippy["warnings"]) == 3

@@ -191,13 +191,16 @@ def predict(battery: Battery | str | Path, *, current: float | None = None,
                            interval=interval)
 
 
-def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int | None = None,
-              seed: int = 0, **options: Any):
+def endurance(battery: Battery | str | Path | None, mission: str | Path, *,
+              draws: int | None = None, seed: int = 0, **options: Any):
     """Fly a mission (TOML file or bundled mission name) and return its result.
 
     Parameters
     ----------
     battery : Battery, preset name, battery-file path or logbook pack (see :func:`load`)
+        None: the battery the mission's ``[battery] source`` names. The battery's cells,
+        chemistry and cutoff are kept; the mission's ``[battery]`` table fills in only
+        what it does not say (:mod:`dischargelab.identity`).
     mission : str or path-like
         Mission file, or a bundled mission's name (``"paper-table5"``, ...).
     draws : int, optional
@@ -213,8 +216,8 @@ def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int 
     """
     from .mission import load_mission, run_mission
 
-    bat = load(battery)
-    mis = load_mission(mission, battery=bat, **options)
+    mis = load_mission(mission, battery=None if battery is None else load(battery), **options)
+    bat = mis.battery
     if draws is None:
         boot = bat.extra.get("bootstrap") or {}
         draws = len(boot.get("samples", [])) or (100 if bat.covariance is not None else 0)
