@@ -320,9 +320,16 @@ def cutoff_options(func):
 
 
 def battery_and_cutoff(battery_arg, cells, parallel, cutoff, cutoff_pack):
+    from ..plausibility import check_cutoff
+
     battery = load_battery_arg(battery_arg).with_pack(cells, parallel)
-    return battery, {"cutoff_cell_V": cell_cutoff(battery, cutoff, cutoff_pack),
-                     "cutoff_pack_V": cutoff_pack}
+    per_cell = cell_cutoff(battery, cutoff, cutoff_pack)
+    if cutoff_pack is not None:
+        per_cell_given = cutoff_pack / battery.cells_series
+    else:
+        per_cell_given = per_cell
+    print_data_warnings(check_cutoff(per_cell_given, battery.chemistry))
+    return battery, {"cutoff_cell_V": per_cell, "cutoff_pack_V": cutoff_pack}
 
 
 def cell_cutoff(battery, cutoff, cutoff_pack=None):
