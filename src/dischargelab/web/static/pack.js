@@ -171,7 +171,9 @@
     const t = $("endurance-result");
     t.replaceChildren();
     const cannot = r.cannot_deliver ? r.cannot_deliver.message : null;
-    const rows = [["Mission", r.mission]];
+    const rows = [["Mission", r.mission],
+                  ["Pack as flown", r.cells_series + "S" + r.strings_parallel + "P" + (r.chemistry ? " " + r.chemistry : "") +
+                   ", cutoff " + DL.num(r.cutoff_cell_V, 2) + " V/cell"]];
     if (cannot) rows.push(["Cannot fly", cannot]);
     const unc = r.uncertainty;
     rows.push(["Model", (r.model_family ? r.model_family + " (" + r.model + ")" : r.model) || DL.MISSING],
