@@ -702,12 +702,24 @@ def _load_event(log: LogArrays, spans: list[Span], k: int, rests: dict, ambient,
         sign = -1.0 if sp.kind == "charge" else 1.0
         q = np.concatenate(([0.0], np.cumsum(0.5 * (i_b[1:] + i_b[:-1])
                                              * np.diff(t[lo:hi])))) / 3600.0
-        if sp.kind == "charge":
-            details["charge"]["charged_Ah"] = max(-float(q[-1]), 0.0)
-        else:
-            event["discharged_Ah"] = max(float(q[-1]), 0.0)
+        if not sp.steps:
+            if sp.kind == "charge":
+                details["charge"]["charged_Ah"] = max(-float(q[-1]), 0.0)
+            else:
+                event["discharged_Ah"] = max(float(q[-1]), 0.0)
         event["curve"] = compact_curve(sign * q, log.voltage_V[lo:hi], sign * i_b,
                                        int(min(CURVE_POINTS, hi - lo)))
+    if sp.steps and sp.rows >= 2:
+        # a tester's step starts right after the record before it and ends at its own last
+        # record: its charge is the current of its first record over that first interval
+        # plus the trapezoid over its records, as the tester's counter adds it
+        i_s, t_s = log.current_A[a:b], t[a:b]
+        moved = float(i_s[0] * (t[a] - t[lo])
+                      + np.sum(0.5 * (i_s[1:] + i_s[:-1]) * np.diff(t_s))) / 3600.0
+        if sp.kind == "charge":
+            details["charge"]["charged_Ah"] = max(-moved, 0.0)
+        else:
+            event["discharged_Ah"] = max(moved, 0.0)
     return event
 
 
