@@ -107,7 +107,7 @@ def richness(samples: int, size_bytes: int) -> tuple[int, int]:
 def reason(kept: str, events: int) -> str:
     """Why a file was skipped as a copy of ``kept``."""
     what = "event" if events == 1 else "events"
-    return f"the same {events} {what} as {kept} (same times, samples and charge); kept {kept}"
+    return f"the same {events} {what} as {kept}, which is kept (same times, samples and charge)"
 
 
 __all__ = ["same_event", "same_content", "content", "richness", "reason", "FIELDS"]
