@@ -89,7 +89,9 @@ def test_the_dji_folder_as_it_is_counts_each_flight_once(capsys, tmp_path, share
     starts = [datetime.fromisoformat(e["start"]) for e in h["events"]]
     assert len(starts) == len(h["events"]) and starts == sorted(starts)
     assert starts[0].date().isoformat() == "2019-11-28"
-    for e in stored_events(capsys, db):
+    listed = stored_events(capsys, db)
+    assert [e["start_time"] for e in listed] == sorted(e["start_time"] for e in listed)
+    for e in listed:
         day = e["source"].split("_")[-5:-2]          # ..._2019_11_28_18_28.txt
         assert e["start_time"].startswith("-".join(day))
 
