@@ -154,7 +154,7 @@ def test_a_tester_file_gets_the_testers_own_steps_as_events(capsys, tmp_path, sh
     check_events_are_the_steps(capsys, db, steps_as_runs(shared_data / name))
 
 
-def arbin_like_cell(path, capacity_Ah=3.179e-3, cycles=4, seed=7):
+def arbin_like_cell(path, capacity_Ah=3.179e-3, cycles=4, seed=7, noise_A=2e-6):
     """An Arbin CSV export of a small full cell at C/10 (0.32 mA): charge CC, CV, rest,
     discharge, rest; logged every second for a minute after each step starts, then every
     10 minutes (as a tester logging by voltage change does on a flat curve)."""
@@ -177,7 +177,7 @@ def arbin_like_cell(path, capacity_Ah=3.179e-3, cycles=4, seed=7):
             state["qd" if current > 0 else "qc"] += abs(current) * dt / 3600
             v = ocv(min(max(state["soc"], 0.0), 1.0)) - 40.0 * current
             rows.append((len(rows) + 1, state["t"], elapsed, number, cycle,
-                         -current + rng.normal(0, 2e-6), v + rng.normal(0, 2e-4),
+                         -current + rng.normal(0, noise_A), v + rng.normal(0, 2e-4),
                          state["qc"], state["qd"]))
             if stop(state["soc"]):
                 break
@@ -209,3 +209,30 @@ def test_a_small_full_cell_in_milliamperes_is_not_split_into_noise(capsys, tmp_p
     assert len(discharges) == 4
     for e in discharges:
         assert e["discharged_Ah"] == pytest.approx(3.179e-3, rel=0.02)
+
+
+@pytest.mark.parametrize("capacity_Ah", [3.179e-3, 3.179e-5])
+def test_a_small_full_cell_without_step_numbers_gives_its_loads_as_events(capsys, tmp_path,
+                                                                          capacity_Ah):
+    """The same small cell's records without the tester's step and cycle numbers (time,
+    voltage and current in mA only, discharge positive), in mA and in uA: the discharges
+    and charges come from the current, at the cell's own scale, and the sparse records of
+    a long step are neither gaps nor noise events."""
+    # the tester's current noise in proportion to its range (2 uA on 0.3 mA)
+    tester = arbin_like_cell(tmp_path / "small_cell_Channel_1.csv", capacity_Ah=capacity_Ah,
+                             noise_A=2e-6 * capacity_Ah / 3.179e-3)
+    table = np.genfromtxt(tester, delimiter=",", names=True)
+    path = tmp_path / "small_cell_records.csv"
+    lines = ["time_s,voltage_V,current_mA"] + [
+        f"{t:.1f},{v:.6f},{-1e3 * i:.9g}"
+        for t, v, i in zip(table["Test_Time"], table["Voltage"], table["Current"])]
+    path.write_text("\n".join(lines) + "\n")
+    db = tmp_path / "records.sqlite"
+    result = add(capsys, db, path)
+    assert len(result["added"]) == 1, result
+    events = stored_events(capsys, db)
+    loads = [e["kind"] for e in events if e["kind"] in ("discharge", "charge")]
+    assert loads == ["charge", "discharge"] * 4
+    assert not [e for e in events if e["kind"] == "gap"]
+    for e in (e for e in events if e["kind"] == "discharge"):
+        assert e["discharged_Ah"] == pytest.approx(capacity_Ah, rel=0.02)

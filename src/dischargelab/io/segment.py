@@ -5,7 +5,9 @@ Works on canonical columns (``time_s``, ``voltage_V``, ``current_A``; optional
 
 * **Load threshold.** A row carries load when its discharge current exceeds
   ``IDLE_FRACTION`` (20 %) of the load level, the 98th percentile of the
-  positive currents (and at least ``MIN_LOAD_A``, 1 mA). Below that in
+  positive currents (and at least ``MIN_LOAD_A``, 1 mA, or for a cell in mA or uA
+  ``SMALL_LOAD_NOISE_FACTOR`` times its current's noise and resolution, see
+  :func:`load_floor`). Below that in
   magnitude a row is *idle* (rest before the load, relaxation after it, or a
   landed aircraft); a current beyond it in the other direction is *charge*.
   Rows whose ``flight_mode`` is ``LANDED`` are idle.
@@ -53,6 +55,9 @@ REST_STEP_FACTOR = 10.0
 #: Currents below 1 mA are idle whatever the load level (logger noise).
 MIN_LOAD_A = 1e-3
 SENTINEL_ABS = 1e30
+#: A small cell's load (below 1 mA) counts when it is this many times the current's
+#: sample noise and its logging resolution.
+SMALL_LOAD_NOISE_FACTOR = 10.0
 
 CUT_REASONS = {1: "state of charge jumps up (pack swap?)", 2: "voltage jumps up (pack swap?)",
                3: "take-off or landing event", 4: "gap in the samples"}
@@ -159,6 +164,23 @@ def detect_sign(time_s, current_A, voltage_V) -> tuple[int, str]:
                   + ("positive" if sign > 0 else "negative"))
 
 
+def load_floor(current_A) -> float:
+    """Smallest load current [A]: :data:`MIN_LOAD_A`, or less for a small cell whose
+    current is resolved (:data:`SMALL_LOAD_NOISE_FACTOR` times the larger of its sample
+    noise, from the median step between consecutive samples, and the logger's resolution,
+    its smallest step)."""
+    i = np.asarray(current_A, dtype=float)
+    i = i[np.isfinite(i)]
+    if i.size < 3:
+        return MIN_LOAD_A
+    steps = np.abs(np.diff(i))
+    nonzero = steps[steps > 0]
+    if nonzero.size == 0:
+        return MIN_LOAD_A
+    noise = max(float(np.median(steps)) / np.sqrt(2.0), float(np.min(nonzero)))
+    return float(min(MIN_LOAD_A, SMALL_LOAD_NOISE_FACTOR * noise))
+
+
 def find_segments(frame: pd.DataFrame, *, breaks_s=(), threshold_A: float | None = None
                   ) -> SegmentSearch:
     """Split a canonical frame (discharge positive, no NaN) into discharge segments.
@@ -190,7 +212,7 @@ def find_segments(frame: pd.DataFrame, *, breaks_s=(), threshold_A: float | None
                         "after the sign convention was applied")
     level = float(np.percentile(positive, LOAD_PERCENTILE))
     if threshold_A is None:
-        threshold = max(IDLE_FRACTION * level, MIN_LOAD_A)
+        threshold = max(IDLE_FRACTION * level, load_floor(i))
     else:
         threshold = float(threshold_A)
     state = np.where(i > threshold, 1, np.where(i < -threshold, -1, 0))

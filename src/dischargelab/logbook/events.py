@@ -9,13 +9,18 @@ whole life of a cell. :func:`split_log` cuts its rows into events:
   constant-voltage charge) form one event.
 * **Otherwise from the current and the time:** a row is idle when the current is
   within the idle threshold of zero (:func:`idle_threshold`: three times the
-  quietest current of the log, at least :data:`MIN_IDLE_A`, at most
+  quietest current of the log, at least :data:`MIN_IDLE_A` or, for a small cell whose
+  current stands above its noise, that share of its load, at most
   :data:`IDLE_MAX_SHARE` of the load level), discharging above it and charging
   below it. An idle stretch shorter than :data:`MIN_REST_S` between two loads of
   one kind belongs to them (a flight's low-throttle moments, a tester's pause of one
   sample), so does a stretch of the other sign shorter than :data:`MIN_BLIP_S`.
 * **Gaps:** where consecutive samples are more than :func:`gap_limit` apart the
-  logger was off; a gap event sits there and no event spans it.
+  logger was off; a gap event sits there and no event spans it. With step numbers only
+  an interval between two steps is a gap (a tester records a long step sparsely and
+  always records a step's start); without them, a long interval inside a steady load
+  (same sign, current within :data:`SPARSE_LOAD_SHARE`) is the load recorded sparsely,
+  and the longest such interval sets the pace below which an idle interval is no gap.
 
 :func:`rest_reading` gives a rest's reading for the events on either side: its
 voltage at the end, how far it has relaxed and what it relaxes to
@@ -67,6 +72,13 @@ GAP_FACTOR = 10.0
 
 #: ... and than this [s].
 MIN_GAP_S = 60.0
+
+#: Without step numbers, a long interval between two samples of one load whose currents
+#: differ by at most this share is the load recorded sparsely, not a gap.
+SPARSE_LOAD_SHARE = 0.25
+#: ... and a log recorded that sparsely inside its loads has a gap only where its samples
+#: are more than this many times its longest interval inside a load apart.
+SPARSE_GAP_FACTOR = 2.0
 
 #: Idle stretches shorter than this [s] between two loads of one kind belong to them.
 MIN_REST_S = 60.0
@@ -120,7 +132,9 @@ def idle_threshold(current_A) -> float:
     """Current below which a row is idle [A] (see the module docstring): the larger of
     :data:`IDLE_QUIET_FACTOR` times the quietest current (the lowest rolling median of
     ``|i|``) and :data:`IDLE_NOISE_FACTOR` times the current's sample noise, at least
-    :data:`MIN_IDLE_A`, at most :data:`IDLE_MAX_SHARE` of the load level."""
+    :data:`MIN_IDLE_A` (or, for a cell in mA or uA whose current stands above that noise,
+    :data:`IDLE_MAX_SHARE` of its load level), at most :data:`IDLE_MAX_SHARE` of the load
+    level."""
     from .estimates import sample_noise
 
     i = np.asarray(current_A, dtype=float)
@@ -130,8 +144,13 @@ def idle_threshold(current_A) -> float:
     level = float(np.percentile(a, 98))
     w = min(QUIET_WINDOW, a.size)
     quiet = float(np.min(np.median(np.lib.stride_tricks.sliding_window_view(a, w), axis=1)))
-    top = max(MIN_IDLE_A, IDLE_MAX_SHARE * level)
-    floor = max(IDLE_QUIET_FACTOR * quiet, IDLE_NOISE_FACTOR * sample_noise(i), MIN_IDLE_A)
+    # a small cell (mA or uA) has its idle threshold in proportion to its load, as long as
+    # its current stands above its own noise; else (a logger's noise, no load) MIN_IDLE_A
+    least = min(MIN_IDLE_A, IDLE_MAX_SHARE * level)
+    top = max(least, IDLE_MAX_SHARE * level)
+    floor = max(IDLE_QUIET_FACTOR * quiet, IDLE_NOISE_FACTOR * sample_noise(i), least)
+    if floor > top and level < MIN_IDLE_A / IDLE_MAX_SHARE:
+        return MIN_IDLE_A
     return float(min(floor, top))
 
 
@@ -182,7 +201,28 @@ def split_log(time_s, current_A, *, step_index=None, cycle_index=None,
         return [Span(kind, s, e, st) for kind, s, e, st in
                 _by_tester(i, step_index, cycle_index, step_kinds, idle)]
     gap = gap_limit(t) if gap_s is None else float(gap_s)
-    bounds = [0, *(np.flatnonzero(np.diff(t) > gap) + 1).tolist(), n]
+    long_intervals = np.diff(t) > gap
+    if step_index is not None:
+        # a step is recorded sparsely but always at its start: gaps only between steps
+        key = np.asarray(step_index).astype(np.int64)
+        change = np.diff(key) != 0
+        if cycle_index is not None:
+            change |= np.diff(np.asarray(cycle_index).astype(np.int64)) != 0
+        long_intervals &= change
+    elif n > 1:
+        # without steps, a steady load recorded sparsely (a tester's export without its
+        # step numbers) goes on across a long interval: same sign, a current within
+        # SPARSE_LOAD_SHARE of the one before
+        state = np.where(i > idle, 1, np.where(i < -idle, -1, 0))
+        steady = (state[1:] == state[:-1]) & (state[1:] != 0) & (
+            np.abs(np.diff(i)) <= SPARSE_LOAD_SHARE * np.maximum(np.abs(i[1:]), np.abs(i[:-1])))
+        long_intervals &= ~steady
+        if np.any(long_intervals) and np.any(steady & (np.diff(t) > gap)):
+            # the logger records this sparsely inside a load: an idle stretch recorded at
+            # the same pace is a rest, not the logger off
+            pace = float(np.max(np.diff(t)[steady]))
+            long_intervals &= np.diff(t) > SPARSE_GAP_FACTOR * pace
+    bounds = [0, *(np.flatnonzero(long_intervals) + 1).tolist(), n]
     out: list[Span] = []
     for a, b in zip(bounds[:-1], bounds[1:]):
         if a > 0:
