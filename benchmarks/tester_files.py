@@ -27,6 +27,15 @@ Table 4, the DJI M100 flights (``../shared/data/dji_m100_flights``): events and 
 of its raw logs alone against the whole folder (raw logs plus their CSV exports), and
 the files skipped as copies. The acceptance: the same within 5 %.
 
+Table 5, small full cells of known truth (built here, seeded): a cell of 3.179 Ah,
+mAh and uAh, cycled at C/5 (rest, discharge, rest, CC charge, CV charge whose current
+decays, rest; three cycles), written as a tester's CSV export with its step and cycle
+numbers or as bare records (time, voltage, current in mA), each recorded every 30 s or
+sparsely (every second for 30 s after a step starts, then every 300 s, as a tester
+logging a flat curve by voltage change). The logbook's discharges, charges and gaps
+against the truth, and the largest error of a discharge's charge. The acceptance: three
+discharges and three charges, no gap, each discharge within 1 %, at every scale.
+
 Usage: python benchmarks/tester_files.py [--data ../shared/data]
 """
 
@@ -155,6 +164,78 @@ def dji_table(folder: Path, scratch: Path) -> tuple[list[str], bool]:
     return rows, ok
 
 
+def small_cell(path: Path, capacity_Ah: float, steps: bool, sparse: bool,
+               seed: int = 0) -> list[float]:
+    """Write a small cell's test (Table 5); returns each discharge's charge [Ah]."""
+    rng = np.random.default_rng(seed)
+    rate = capacity_Ah / 5
+    rows, moved, state = [], [], {"clock": 0.0, "charge": capacity_Ah}
+
+    def step(duration, amps, number, cycle, cv=False):
+        times = [*np.arange(0.0, min(30.0, duration)),
+                 *np.arange(30.0, duration, 300.0 if sparse else 30.0), duration]
+        last, before = 0.0, state["charge"]
+        for s in times:
+            now = -rate / 2 * np.exp(-s / 1200.0) if cv else amps
+            state["charge"] -= now * (s - last) / 3600
+            last = s
+            soc = min(max(state["charge"] / capacity_Ah, 0.0), 1.0)
+            volts = 3.0 + 1.2 * soc - 0.15 * np.exp(-25 * soc) - now * 0.16 / capacity_Ah
+            current = now + rng.normal(0.0, abs(now) * 1e-3 + capacity_Ah * 1e-5)
+            rows.append((state["clock"] + s, volts + rng.normal(0, 2e-4), 1e3 * current,
+                         cycle, number))
+        state["clock"] += duration + 1.0
+        return before - state["charge"]
+
+    step(3600, 0.0, 1, 1)
+    for cycle in (1, 2, 3):
+        moved.append(step(0.97 * 5 * 3600, rate, 2, cycle))
+        step(1800, 0.0, 3, cycle)
+        step(0.9 * 5 * 3600, -rate, 4, cycle)
+        step(3600, 0.0, 5, cycle, cv=True)
+        step(1800, 0.0, 6, cycle)
+    head = "Test_Time(s),Voltage(V),Current(mA),Cycle_Index,Step_Index" if steps \
+        else "time_s,voltage_V,current_mA"
+    body = [f"{t:.1f},{v:.5f},{i:.7g}" + (f",{c},{n}" if steps else "")
+            for t, v, i, c, n in rows]
+    path.write_text("\n".join([head, *body]) + "\n")
+    return moved
+
+
+def small_cells_table(scratch: Path) -> tuple[list[str], bool]:
+    from dischargelab.logbook.summarise import summarise_source
+
+    rows = ["| cell | step numbers | records | discharges | charges | gaps | largest "
+            "discharge error |", "|---|---|---|---|---|---|---|"]
+    ok = True
+    for capacity, label in ((3.179, "3.179 Ah"), (3.179e-3, "3.179 mAh"),
+                            (3.179e-6, "3.179 uAh")):
+        for steps in (True, False):
+            for sparse in (False, True):
+                path = scratch / f"small_{int(steps)}{int(sparse)}.csv"
+                truth = small_cell(path, capacity, steps, sparse)
+                try:
+                    events = summarise_source(path, keep_raw=False).events
+                except DischargelabError as exc:
+                    rows.append(f"| {label} | {'yes' if steps else 'no'} | "
+                                f"{'sparse' if sparse else 'every 30 s'} | {exc} | | | |")
+                    ok = False
+                    continue
+                found = {k: [e for e in events if e["kind"] == k]
+                         for k in ("discharge", "charge", "gap")}
+                worst = max((abs(e["discharged_Ah"] / t - 1.0) for e, t in
+                             zip(found["discharge"], truth)), default=float("nan"))
+                good = (len(found["discharge"]) == len(truth) == len(found["charge"])
+                        and not found["gap"] and worst <= 0.01)
+                ok = ok and good
+                rows.append(f"| {label} | {'yes' if steps else 'no'} | "
+                            f"{'sparse' if sparse else 'every 30 s'} | "
+                            f"{len(found['discharge'])} of {len(truth)} | "
+                            f"{len(found['charge'])} of {len(truth)} | {len(found['gap'])} | "
+                            f"{100 * worst:.2f} % |")
+    return rows, ok
+
+
 def _tlog_row(label: str, path: Path) -> str:
     start = time.perf_counter()
     try:
@@ -218,6 +299,11 @@ def main(argv=None) -> int:
         rows, ok = dji_table(args.data / "dji_m100_flights", Path(scratch))
         print("\n".join(rows))
         print(f"\nsame events, flights and EFC within 5 %: {'met' if ok else 'NOT met'}")
+        print("\nSmall full cells of known truth: the logbook's events at every scale\n")
+        rows, ok = small_cells_table(Path(scratch))
+        print("\n".join(rows))
+        print(f"\nevery cell's discharges and charges, no gap, within 1 %: "
+              f"{'met' if ok else 'NOT met'}")
     print(f"\n{machine_line()}; load average {os.getloadavg()[0]:.2f}")
     return 0
 
