@@ -52,9 +52,13 @@ MAX_ENGINE_STEPS = 200_000
 #: Bisection iterations that locate a stop inside a time step (2^-34 of the step).
 BISECTION_ITERATIONS = 34
 
-#: Bits of the bisection's grid tried at once (one batched advance of 2**bits - 1
-#: points per draw).
+#: Bits of the bisection's grid tried at once at most (one batched advance of
+#: 2**bits - 1 points per draw) ...
 BISECTION_GRID_BITS = 7
+
+#: ... and points of one batched advance at most: many draws stopping in one step are
+#: halved together, one point each (a batch costs its size once it is large).
+BISECTION_BATCH_POINTS = 128
 
 #: Default ambient temperature [degC] when neither the battery nor the call gives one.
 DEFAULT_AMBIENT_C = 25.0
@@ -575,9 +579,10 @@ def _bisect(pack, st, state, i0, h, crossed, cutoff, reserve):
 
     The same answer as :data:`BISECTION_ITERATIONS` halvings of the step (the first
     stopped point of the grid of ``2**-BISECTION_ITERATIONS`` steps), found in a few
-    rounds that each try :data:`BISECTION_GRID_BITS` bits of that grid at once: every
-    round advances each draw to all the grid's points as one batch of draws, so the
-    cost is a few batched advances instead of one per halving.
+    rounds that each try up to :data:`BISECTION_GRID_BITS` bits of that grid at once:
+    every round advances each draw to all the grid's points as one batch of draws, so a
+    few draws cost a few batched advances instead of one per halving (many draws, whose
+    batch would be large, are halved one point each as before).
     """
     out = np.ones(h.size)
     sel = np.flatnonzero(crossed)
@@ -585,9 +590,11 @@ def _bisect(pack, st, state, i0, h, crossed, cutoff, reserve):
     if m == 0:
         return out
     lo_s, hi_s = np.zeros(m), np.ones(m)
+    per_round = int(np.clip(np.floor(np.log2(BISECTION_BATCH_POINTS / m)), 1,
+                            BISECTION_GRID_BITS))
     bits_left = BISECTION_ITERATIONS
     while bits_left > 0:  # bounded: bits_left falls by at least one per round
-        bits = min(BISECTION_GRID_BITS, bits_left)
+        bits = min(per_round, bits_left)
         bits_left -= bits
         n = 2 ** bits
         frac = np.arange(1, n) / n  # the grid's inner points; the last is hi, stopped
