@@ -177,6 +177,10 @@ class EngineResult:
     final_state: dict = field(default_factory=dict)
 
 
+#: The two currents at which :meth:`_Pack.affine` evaluates the cell voltage [A].
+_AFFINE_CURRENTS = np.array([[0.0], [1.0]])
+
+
 class _Pack:
     """Cell family + parameters (arrays over draws) + pack configuration."""
 
@@ -193,8 +197,8 @@ class _Pack:
 
     def affine(self, state):
         """(a, b): pack voltage = a - b I for the pack current I at this state."""
-        v0 = self.family.voltage(self.p, state, 0.0)
-        v1 = self.family.voltage(self.p, state, 1.0)
+        # one evaluation at 0 A and 1 A together (the families broadcast over currents)
+        v0, v1 = self.family.voltage(self.p, state, _AFFINE_CURRENTS)
         with np.errstate(invalid="ignore"):  # -inf - -inf beyond the capacity: NaN (no power)
             return self.s * v0, self.s * (v0 - v1) / self.par
 
