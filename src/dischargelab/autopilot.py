@@ -39,6 +39,13 @@ FIRMWARES = ("ardupilot", "px4")
 DEFAULT_RESERVE_S = 120.0
 
 
+def wrap_comment(text: str, width: int = 96) -> list[str]:
+    """``text`` cut at spaces into lines of at most ``width`` characters (comment lines)."""
+    import textwrap
+
+    return textwrap.wrap(text, width, break_long_words=False, break_on_hyphens=False) or [""]
+
+
 @dataclass(frozen=True)
 class Setting:
     """One parameter: name, value, unit, firmware type and how it was derived."""

@@ -1,0 +1,184 @@
+@HEADER@
+--
+-- Reads battery:voltage, current_amps, consumed_mah (instance BATT_INSTANCE below), sends
+-- named floats DL_TREM [s] and DL_SOC [%] once a second and warns once at each reserve.
+-- Tables: charge taken out Q [Ah]; pack currents I [A]; OCV [V] the model's rest voltage
+-- at Q; REM[k][j] charge left to the cutoff [Ah] from Q[k] at I[j]; VL[k][j] the loaded
+-- pack voltage [V] at Q[k] and I[j]. Lua 5.3.
+
+local BATT_INSTANCE = @INSTANCE@
+local RESERVE_S = @RESERVE_S@
+local INTERVAL_MS = @INTERVAL_MS@
+local SEND_MS = @SEND_MS@
+local WINDOW_S = @WINDOW_S@
+local CAPACITY_AH = @CAPACITY_AH@
+local REF_A = @REF_A@
+local REST_A = @REST_A@
+local FILTER_S = @FILTER_S@
+
+local Q = @Q@
+local I = @I@
+local OCV = @OCV@
+local REM = @REM@
+local VL = @VL@
+
+local NQ = #Q
+local NI = #I
+
+-- segment of a sorted grid holding x (clamped) and the fraction along it
+local function seg(x, grid, n)
+  if x <= grid[1] then return 1, 0 end
+  if x >= grid[n] then return n - 1, 1 end
+  local k = 1
+  while grid[k + 1] < x do k = k + 1 end
+  return k, (x - grid[k]) / (grid[k + 1] - grid[k])
+end
+
+-- value of a Q x I table at charge q [Ah] and current a [A]
+local function at(tab, q, a)
+  local k, f = seg(q, Q, NQ)
+  local j, g = seg(a, I, NI)
+  local r0, r1 = tab[k], tab[k + 1]
+  local lo = r0[j] + g * (r0[j + 1] - r0[j])
+  local hi = r1[j] + g * (r1[j + 1] - r1[j])
+  return lo + f * (hi - lo)
+end
+
+-- charge taken out [Ah] at which the voltage falls to v: the rest voltage (a == nil)
+-- or the loaded voltage at current a [A]; both fall with the charge
+local function charge_at(v, a)
+  local j, g = 1, 0
+  if a then j, g = seg(a, I, NI) end
+  local prev
+  for k = 1, NQ do
+    local row = a and VL[k] or nil
+    local vk = a and (row[j] + g * (row[j + 1] - row[j])) or OCV[k]
+    if vk <= v then
+      if k == 1 or prev == vk then return Q[k] end
+      return Q[k - 1] + (prev - v) / (prev - vk) * (Q[k] - Q[k - 1])
+    end
+    prev = vk
+  end
+  return Q[NQ]
+end
+
+-- seconds to the cutoff from charge q [Ah] at current a [A]
+local function time_left(q, a)
+  if a < I[1] * 0.01 then a = I[1] * 0.01 end
+  return at(REM, q, a) * 3600 / a
+end
+
+local q_rest = nil      -- charge taken out at rest before take-off [Ah]
+local q = 0             -- charge taken out now [Ah]
+local was_armed = false
+local base_mah = nil    -- consumed_mah at arming
+local counted = 0       -- charge integrated from current_amps since arming [Ah]
+local last_ms = nil
+local next_send = 0
+local v_filt = nil
+local warned_reserve, warned_last, said_no_current = false, false, false
+-- ring of (time [s], charge [Ah]) once a second over the last WINDOW_S
+local ring_t, ring_q, ring_n, ring_head, next_ring = {}, {}, 0, 0, 0
+
+local function ring_push(t, charge)
+  ring_head = ring_head % (WINDOW_S + 1) + 1
+  ring_t[ring_head], ring_q[ring_head] = t, charge
+  if ring_n < WINDOW_S + 1 then ring_n = ring_n + 1 end
+end
+
+-- mean current [A] over the ring (nil before two entries)
+local function recent_current(t, charge)
+  if ring_n < 2 then return nil end
+  local oldest = (ring_head - ring_n) % (WINDOW_S + 1) + 1
+  local dt = t - ring_t[oldest]
+  if dt <= 0 then return nil end
+  return (charge - ring_q[oldest]) * 3600 / dt
+end
+
+local function send(trem, soc)
+  gcs:send_named_float("DL_TREM", trem)
+  gcs:send_named_float("DL_SOC", soc)
+end
+
+local function warn(trem)
+  if not warned_reserve and trem <= RESERVE_S then
+    warned_reserve = true
+    gcs:send_text(4, string.format("DL: %.0f s of flight left to the cutoff", trem))
+  end
+  if not warned_last and trem <= RESERVE_S / 3 then
+    warned_last = true
+    gcs:send_text(2, string.format("DL: %.0f s left, land now", trem))
+  end
+end
+
+local function update()
+  if battery:num_instances() <= BATT_INSTANCE then
+    return update, 1000
+  end
+  local now = millis():tofloat()
+  local t = now * 0.001
+  local v = battery:voltage(BATT_INSTANCE)
+  local amps = battery:current_amps(BATT_INSTANCE)
+  local mah = battery:consumed_mah(BATT_INSTANCE)
+  local dt = last_ms and (now - last_ms) * 0.001 or 0
+  last_ms = now
+  if not v or v <= 0 then return update, INTERVAL_MS end
+  local alpha = dt / (FILTER_S + dt)
+  v_filt = v_filt and (v_filt + alpha * (v - v_filt)) or v
+  local armed = arming:is_armed()
+  if not armed then
+    was_armed = false
+    if amps == nil or amps < REST_A then
+      q_rest = charge_at(v_filt, nil)
+      q = q_rest
+    end
+    if now >= next_send then
+      next_send = now + SEND_MS
+      gcs:send_named_float("DL_SOC", 100 * (1 - q / CAPACITY_AH))
+    end
+    return update, INTERVAL_MS
+  end
+  if not was_armed then   -- take-off: count from the rest reading
+    was_armed = true
+    if q_rest == nil then q_rest = charge_at(v, amps or REF_A) end
+    base_mah, counted, ring_n, next_ring = mah, 0, 0, 0
+    warned_reserve, warned_last = false, false
+  end
+  local load
+  if amps == nil then       -- no current sensor: the filtered voltage alone
+    if not said_no_current then
+      said_no_current = true
+      gcs:send_text(4, string.format("DL: no current sensor, time left from voltage at %.1f A",
+                                     REF_A))
+    end
+    local qv = charge_at(v_filt, REF_A)
+    if qv > q then q = qv end
+    load = REF_A
+  else
+    if mah ~= nil and base_mah ~= nil then
+      q = q_rest + (mah - base_mah) * 0.001
+    else
+      counted = counted + amps * dt / 3600
+      q = q_rest + counted
+    end
+    if t >= next_ring then
+      next_ring = t + 1
+      ring_push(t, q)
+    end
+    load = recent_current(t, q) or amps
+  end
+  if now >= next_send then
+    next_send = now + SEND_MS
+    local soc = 100 * (1 - q / CAPACITY_AH)
+    if load > REST_A then
+      local trem = time_left(q, load)
+      send(trem, soc)
+      warn(trem)
+    else
+      gcs:send_named_float("DL_SOC", soc)
+    end
+  end
+  return update, INTERVAL_MS
+end
+
+return update, INTERVAL_MS
