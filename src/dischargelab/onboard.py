@@ -94,8 +94,15 @@ class AutopilotScript:
         return write_text(path, self.text)
 
 
-def _lua_list(values, digits: int) -> str:
-    return "{" + ", ".join(_num(v, digits) for v in values) + "}"
+def _lua_list(values, digits: int, indent: str = "") -> str:
+    """A Lua table constructor of numbers, cut into lines of at most 100 characters."""
+    text = "{" + ", ".join(_num(v, digits) for v in values) + "}"
+    if len(text) + len(indent) + 12 <= 100:
+        return text
+    import textwrap
+
+    lines = textwrap.wrap(", ".join(_num(v, digits) for v in values), 96 - len(indent))
+    return "{\n" + "\n".join(indent + "  " + line for line in lines) + "\n" + indent + "}"
 
 
 def _num(value: float, digits: int) -> str:
@@ -194,7 +201,7 @@ def autopilot_script(battery, *, firmware: str = "ardupilot", cells: int | None 
         raise SimulationError(f"at {ref:.3g} A the pack reaches {cut:g} V/cell after "
                               f"{t_ref:.0f} s, less than the {reserve_s:g} s reserve; lower "
                               "the load or reserve")
-    stamp = generated or _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    stamp = generated or _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     header = _header(bat, cells, cut, ref, t_ref, reserve_s, stamp, ambient)
     text = _render(tables, header, reserve_s, int(instance), bat)
     notes = [f"{bat.model} model, {cells}S{bat.strings_parallel}P, cutoff {cut:g} V/cell: "
@@ -223,8 +230,8 @@ def _header(bat: Battery, cells: int, cut: float, ref: float, t_ref: float, rese
              f"generated {stamp} from the {bat.model} model{amb}",
              health,
              f"at {ref:.3g} A the model reaches the cutoff after {t_ref / 60:.1f} min",
-             f"sends DL_TREM (s to cutoff at the last 30 s mean current) and DL_SOC (%), "
-             f"warns at {reserve_s:g} s and {reserve_s / 3:g} s left",
+             "sends DL_TREM (s to cutoff at the last 30 s mean current) and DL_SOC (%)",
+             f"warns at {reserve_s:g} s and at {reserve_s / 3:.0f} s left",
              "install: copy to APM/scripts/ on the SD card, set SCR_ENABLE = 1 and reboot;",
              "  it needs about 25 KB of scripting heap (SCR_HEAP_SIZE; 43 KB on F4 boards)"]
     out = []
