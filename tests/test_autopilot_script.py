@@ -1,0 +1,194 @@
+"""The on-board script: generated from the model, run in a real Lua 5.3 on simulated flights
+through a stand-in of ArduPilot's bindings (tests/ardupilot_standin.lua)."""
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli_run import run
+from dischargelab import autopilot_script
+from dischargelab.engine import Step
+from dischargelab.errors import DischargelabError
+from dischargelab.model import load_battery
+from dischargelab.onboard import flight_samples
+from dischargelab.simulate import simulate, simulate_current
+
+sys.path.insert(0, str(Path(__file__).parent))
+from ardupilot_replay import replay  # noqa: E402
+
+CUT = 3.3
+REST_S = 5.0
+FRACTIONS = (0.25, 0.5, 0.75, 0.9)
+LUA_GLOBALS = ["battery", "gcs", "millis", "arming", "param", "Parameter"]
+
+
+def need(tool: str) -> str:
+    """The tool's path; a missing tool fails in CI (CI=1) and skips elsewhere."""
+    path = shutil.which(tool)
+    if path is None:
+        message = f"{tool} not found (make lua installs it)"
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    return path
+
+
+@pytest.fixture(scope="module")
+def pack():
+    return load_battery("zippy-1100-2s").with_pack(3)
+
+
+@pytest.fixture(scope="module")
+def script(pack):
+    return autopilot_script(pack, cells=3, cutoff=CUT, reserve_s=120)
+
+
+def trem_at(rep, flight_s):
+    """DL_TREM sent nearest each flight time [s]."""
+    ts, values = rep.series("DL_TREM")
+    assert ts.size, "no DL_TREM sent"
+    flight = ts - REST_S
+    return [float(values[np.argmin(np.abs(flight - x))]) for x in flight_s], flight, values
+
+
+def test_constant_current_time_left_instructions_and_heap(pack, script):
+    need("lua5.3")
+    sim = simulate_current(pack, 3.3, cutoff_cell_V=CUT)          # 3C to the cutoff
+    total = sim.time_to_cutoff_s
+    rep = replay(script.text, flight_samples(sim, rest_s=REST_S))
+    moments = [f * total for f in FRACTIONS]
+    sent, _, _ = trem_at(rep, moments)
+    for x, value in zip(moments, sent):
+        assert abs(value - (total - x)) / total < 0.02, (x, value, total - x)
+    assert rep.max_instructions <= 10_000
+    assert rep.heap_kb <= 40.0
+    texts = [t for t in rep.texts if t[2].startswith("DL:")]
+    assert len(texts) == 2                                       # reserve and a third of it
+    assert texts[0][0] - REST_S == pytest.approx(total - 120, abs=3)
+    assert texts[1][0] - REST_S == pytest.approx(total - 40, abs=3)
+
+
+def test_stepped_flight_matches_the_python_model_at_the_recent_load(pack, script):
+    need("lua5.3")
+    steps = [Step("current", 1.2, 60.0, "hover"), Step("current", 4.5, 45.0, "climb")] * 3 \
+        + [Step("current", 2.2, None, "cruise")]
+    sim = simulate(pack, steps, cutoff_cell_V=CUT)
+    total = sim.time_to_cutoff_s
+    rep = replay(script.text, flight_samples(sim, rest_s=REST_S))
+    t, i, q = sim.time_s, sim.current_A, sim.charge_Ah
+    grid = np.arange(0.0, total, 0.2)
+    amps = np.interp(grid, t, i)
+    checked = 0
+    for x in np.linspace(0.1 * total, 0.9 * total, 9):
+        window = (grid > x - 30.0) & (grid <= x)
+        load = float(np.mean(amps[window]))
+        q_now = float(np.interp(x, t, q))
+        python = simulate_current(pack, load, cutoff_cell_V=CUT,
+                                  initial_charge_Ah=q_now).time_to_cutoff_s
+        sent, _, _ = trem_at(rep, [x])
+        assert abs(sent[0] - python) / total < 0.03, (x, sent[0], python)
+        checked += 1
+    assert checked == 9
+    assert rep.max_instructions <= 10_000 and rep.heap_kb <= 40.0
+
+
+def test_preflight_soc_from_the_rest_voltage(pack, script):
+    need("lua5.3")
+    q0 = 0.4 * pack.capacity_Ah
+    sim = simulate_current(pack, 2.2, cutoff_cell_V=CUT, initial_charge_Ah=q0)
+    rep = replay(script.text, flight_samples(sim, rest_s=REST_S))
+    ts, soc = rep.series("DL_SOC")
+    before = soc[ts < REST_S]
+    assert before.size >= 3
+    assert before[-1] == pytest.approx(60.0, abs=1.0)
+    total = sim.time_to_cutoff_s
+    sent, _, _ = trem_at(rep, [0.5 * total])
+    assert abs(sent[0] - 0.5 * total) / total < 0.02
+
+
+def test_without_a_current_sensor_the_voltage_alone(pack, script):
+    need("lua5.3")
+    sim = simulate_current(pack, 1.1, cutoff_cell_V=CUT)      # the 1C reference current
+    total = sim.time_to_cutoff_s
+    rep = replay(script.text, flight_samples(sim, rest_s=REST_S, current_sensor=False))
+    said = [t for t in rep.texts if "no current sensor" in t[2]]
+    assert len(said) == 1
+    sent, _, _ = trem_at(rep, [f * total for f in FRACTIONS])
+    for f, value in zip(FRACTIONS, sent):
+        assert abs(value - (1 - f) * total) / total < 0.05, (f, value)
+    assert rep.max_instructions <= 10_000
+
+
+def test_integrates_current_without_a_charge_counter(pack, script):
+    need("lua5.3")
+    sim = simulate_current(pack, 3.3, cutoff_cell_V=CUT)
+    rows = [(t, a, v, c, None) for t, a, v, c, _ in flight_samples(sim, rest_s=REST_S)]
+    rep = replay(script.text, rows)
+    total = sim.time_to_cutoff_s
+    sent, _, _ = trem_at(rep, [0.5 * total, 0.9 * total])
+    assert abs(sent[0] - 0.5 * total) / total < 0.02
+    assert abs(sent[1] - 0.1 * total) / total < 0.02
+
+
+def test_luacheck_clean_with_ardupilot_globals(script, tmp_path):
+    luacheck = need("luacheck")
+    path = tmp_path / "battery.lua"
+    path.write_text(script.text)
+    proc = subprocess.run([luacheck, "--std", "lua53", "--no-color", "--read-globals",
+                           *LUA_GLOBALS, "--", str(path)], capture_output=True, text=True,
+                          timeout=60, check=False)
+    assert proc.returncode == 0, proc.stdout
+
+
+def test_only_the_listed_bindings(script):
+    import re
+
+    used = set(re.findall(r"\b(battery|gcs|arming|param):(\w+)", script.text))
+    allowed = {("battery", "voltage"), ("battery", "current_amps"),
+               ("battery", "consumed_mah"), ("battery", "num_instances"),
+               ("gcs", "send_text"), ("gcs", "send_named_float"), ("arming", "is_armed"),
+               ("param", "get"), ("param", "add_table"), ("param", "add_param")}
+    assert used <= allowed and ("battery", "voltage") in used
+    assert "voltage_resting_estimate" not in script.text
+    assert script.text.rstrip().endswith("return update, INTERVAL_MS")
+    header = script.text.split("\nlocal ", 1)[0]
+    for word in ("3S1P", "cutoff 3.3 V/cell", "shepherd", "SCR_ENABLE = 1", "heap"):
+        assert word in header
+    assert max(len(line) for line in script.text.splitlines()) <= 100
+
+
+def test_tables_and_dict(script):
+    doc = script.to_dict()
+    rem = np.asarray(doc["tables"]["remaining_Ah"])
+    assert rem.shape == (len(doc["tables"]["charge_Ah"]), len(doc["tables"]["current_A"]))
+    assert np.all(np.diff(rem, axis=0) <= 1e-12) and np.all(np.diff(rem, axis=1) <= 1e-12)
+    assert np.all(np.diff(doc["tables"]["ocv_V"]) < 0)
+
+
+def test_cli_writes_the_script_and_refuses_to_replace_it(capsys, tmp_path):
+    target = tmp_path / "battery.lua"
+    code, out, _ = run(capsys, "autopilot-script", "hacker-4100-4s-lifepo4", "--cells", "4",
+                       "-o", target)
+    assert code == 0 and "SCR_ENABLE = 1" in out
+    first = target.read_text()
+    assert "4S1P" in first and "lifepo4" in first.lower() or "LiFePO4" in first
+    code, _, err = run(capsys, "autopilot-script", "hacker-4100-4s-lifepo4", "--cells", "4",
+                       "-o", target)
+    assert code != 0 and "exists" in err and target.read_text() == first
+    code, _, err = run(capsys, "autopilot-script", "hacker-4100-4s-lifepo4")
+    assert code != 0 and "--cells" in err
+    code, _, err = run(capsys, "autopilot-script", "zippy-1100-2s", "--cells", "3",
+                       "--reserve-s", "7200")
+    assert code != 0 and "reserve" in err and "Traceback" not in err
+
+
+def test_library_errors():
+    with pytest.raises(DischargelabError, match="ardupilot"):
+        autopilot_script("zippy-1100-2s", firmware="px4")
+    with pytest.raises(DischargelabError, match="reserve"):
+        autopilot_script("zippy-1100-2s", reserve_s=0)
