@@ -4,12 +4,11 @@ through a stand-in of ArduPilot's bindings (tests/ardupilot_standin.lua)."""
 import os
 import shutil
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from ardupilot_replay import replay
 from cli_run import run
 from dischargelab import autopilot_script
 from dischargelab.engine import Step
@@ -17,9 +16,6 @@ from dischargelab.errors import DischargelabError
 from dischargelab.model import load_battery
 from dischargelab.onboard import flight_samples
 from dischargelab.simulate import simulate, simulate_current
-
-sys.path.insert(0, str(Path(__file__).parent))
-from ardupilot_replay import replay  # noqa: E402
 
 CUT = 3.3
 REST_S = 5.0

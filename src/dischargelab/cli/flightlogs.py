@@ -67,9 +67,11 @@ def fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, p
 
 
 
-def _battery_or_pack(battery, pack_name, db, cells, output, force):
+def _battery_or_pack(battery, pack_name, db, cells, output, force, load_current=None):
     """The model of BATTERY (a battery file or preset) or of the logbook pack --pack NAME at
-    today's capacity and resistance, after the checks both autopilot commands share."""
+    today's capacity and resistance (read without writing to the logbook), after the checks
+    both autopilot commands share; with the load current [A] and what it is: the one given,
+    else with --pack the typical current of the pack's logged flights, else None (1C)."""
     if battery is not None and pack_name is not None:
         raise DischargelabError("give a BATTERY or --pack NAME, not both")
     if battery is None and pack_name is None:
@@ -81,8 +83,14 @@ def _battery_or_pack(battery, pack_name, db, cells, output, force):
         from ..logbook import Logbook
 
         with Logbook(db, create=False) as lb:
-            battery = lb.pack(pack_name).battery()
-    return load_battery_arg(battery)
+            battery = lb.pack(pack_name, store=False).battery()
+            typical = lb.flight_current(pack_name) if load_current is None else None
+        if typical is not None:
+            amps, flights = typical
+            return battery, amps, (f"the median mean current of the pack's {flights} logged "
+                                   f"flight{'s' if flights != 1 else ''}")
+    source = None if load_current is None else "given with --load"
+    return load_battery_arg(battery), load_current, source
 
 
 @click.command("autopilot-params")
@@ -102,7 +110,8 @@ def _battery_or_pack(battery, pack_name, db, cells, output, force):
               help="Strings in parallel (default: as in the battery file).")
 @click.option("--load", "load_current", type=float, metavar="A", default=None,
               help="Pack current of normal flight (hover/cruise) at which the reserve is "
-                   "computed [A]; default 1C of the pack.")
+                   "computed [A]; default with --pack the median mean current of its logged "
+                   "flights, else 1C of the pack.")
 @click.option("--reserve-s", default=120.0, show_default=True, type=float, metavar="S",
               help="Flight time left at that load when the low-voltage warning fires [s].")
 @click.option("--critical-reserve-s", type=float, metavar="S", default=None,
@@ -136,9 +145,11 @@ def autopilot_params_cmd(battery, pack_name, db, firmware, cells, parallel, load
     """
     from ..autopilot import autopilot_params
 
-    battery = _battery_or_pack(battery, pack_name, db, cells, output, force)
+    battery, load_current, load_source = _battery_or_pack(battery, pack_name, db, cells,
+                                                          output, force, load_current)
     result = autopilot_params(battery, firmware=firmware, cells=cells,
                               parallel=parallel, load_current_A=load_current,
+                              load_source=load_source,
                               reserve_s=reserve_s, critical_reserve_s=critical_reserve_s,
                               cutoff=cutoff, ambient=ambient)
     if output:
@@ -176,7 +187,8 @@ def autopilot_params_cmd(battery, pack_name, db, firmware, cells, parallel, load
 @click.option("--parallel", type=click.IntRange(1), default=None,
               help="Strings in parallel (default: as in the battery file).")
 @click.option("--load", "load_current", type=float, metavar="A", default=None,
-              help="Pack current the script assumes without a current sensor [A]; default 1C.")
+              help="Pack current the script assumes without a current sensor [A]; default "
+                   "with --pack the typical current of its logged flights, else 1C.")
 @click.option("--reserve-s", default=120.0, show_default=True, type=float, metavar="S",
               help="Time left at which the script warns (and again at a third of it) [s].")
 @cutoff_option("at which the loaded pack is empty")
@@ -206,7 +218,8 @@ def autopilot_script_cmd(battery, pack_name, db, firmware, cells, parallel, load
     """
     from ..onboard import autopilot_script
 
-    battery = _battery_or_pack(battery, pack_name, db, cells, output, force)
+    battery, load_current, _ = _battery_or_pack(battery, pack_name, db, cells, output, force,
+                                                load_current)
     result = autopilot_script(battery, firmware=firmware, cells=cells, parallel=parallel,
                               cutoff=cutoff, reserve_s=reserve_s, load_current_A=load_current,
                               ambient=ambient, instance=instance)
