@@ -1,0 +1,120 @@
+"""The on-board script against the time actually left, beside what a pilot has today.
+
+For each case a pack model (a preset) is flown through the one engine
+(:mod:`dischargelab.simulate`) to its cutoff: a constant current (2C), a stepped flight
+(10 s at 1.5C and 5 s at 3C in turn, to the cutoff: the 30 s mean is 2C), and a hover to empty at constant power (1C, 3C
+and 5C of the rated capacity at the start). The readings ArduPilot's battery monitor
+would give (voltage, current, consumed mAh every 200 ms, 5 s at rest first) are replayed
+through the generated script in a real ``lua5.3`` with the stand-in of the bindings
+(``tests/ardupilot_standin.lua``). At 25, 50, 75 and 90 % of the time to cutoff it prints
+``DL_TREM`` minus the time actually left, in % of the flight's time to cutoff, beside:
+
+* label: the label-capacity coulomb count (rated capacity minus the consumed charge, over
+  the same 30 s mean current), what ``BATT_CAPACITY`` and the counted mAh give;
+* px4: PX4's voltage-based estimate with its defaults (``BAT1_V_EMPTY`` 3.6 V,
+  ``BAT1_V_CHARGED`` 4.05 V, 5 mOhm per cell load compensation; see
+  ``dischargelab.flight.replay``) times the label capacity over the same current.
+
+and the largest instruction count of one call and the heap after a full collection.
+
+Usage: python benchmarks/onboard.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "tests"))
+
+from ardupilot_replay import lua, replay  # noqa: E402
+
+from dischargelab import autopilot_script  # noqa: E402
+from dischargelab.engine import Step  # noqa: E402
+from dischargelab.flight.replay import (  # noqa: E402
+    PX4_R_INTERNAL_OHM,
+    PX4_V_CHARGED,
+    PX4_V_EMPTY,
+)
+from dischargelab.model import load_battery  # noqa: E402
+from dischargelab.onboard import RECENT_LOAD_S, flight_samples  # noqa: E402
+from dischargelab.predict import default_cutoff  # noqa: E402
+from dischargelab.simulate import simulate  # noqa: E402
+
+FRACTIONS = (0.25, 0.5, 0.75, 0.9)
+REST_S = 5.0
+
+#: (preset, cells in series of the flight pack)
+PACKS = (("zippy-1100-2s", 3), ("nanotech-1700-2s", 4), ("hacker-4100-4s-lifepo4", 4))
+
+
+def cases(bat, quick: bool):
+    rated = bat.rated_capacity_Ah
+    nominal_V = float(bat.voltage(0.0, 0.5 * bat.capacity_Ah))
+    out = [("constant 2C", [Step("current", 2.0 * rated)]),
+           ("stepped", [Step("current", 1.5 * rated, 10.0), Step("current", 3.0 * rated, 5.0)]
+            * 400)]
+    for c in ((3.0,) if quick else (1.0, 3.0, 5.0)):
+        out.append((f"hover {c:g}C", [Step("power", c * rated * nominal_V)]))
+    return out
+
+
+def errors_at(sim, rep, label_Ah, cells):
+    """Per fraction: (DL_TREM, label count, PX4) minus the time left, % of the flight."""
+    total = sim.time_to_cutoff_s
+    t, i, v, q = sim.time_s, sim.current_A, sim.voltage_V, sim.charge_Ah
+    grid = np.arange(0.0, total, 0.2)
+    amps = np.interp(grid, t, i)
+    ts, trem = rep.series("DL_TREM")
+    rows = []
+    for f in FRACTIONS:
+        now = f * total
+        left = total - now
+        k = int(np.argmin(np.abs(ts - REST_S - now)))
+        window = (grid > now - RECENT_LOAD_S) & (grid <= now)
+        load = float(np.mean(amps[window]))
+        used = float(np.interp(now, t, q))
+        label = max(label_Ah - used, 0.0) * 3600.0 / load
+        recent = (grid > now - 1.0) & (grid <= now)
+        cell = float(np.mean(np.interp(grid[recent], t, v))) / cells \
+            + PX4_R_INTERNAL_OHM * float(np.mean(amps[recent]))
+        px4 = float(np.clip((cell - PX4_V_EMPTY) / (PX4_V_CHARGED - PX4_V_EMPTY), 0, 1)) \
+            * label_Ah * 3600.0 / load
+        rows.append(tuple(100.0 * (x - left) / total for x in (float(trem[k]), label, px4)))
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="one hover rate only")
+    args = parser.parse_args(argv)
+    if lua() is None:
+        print("lua5.3 not found (make lua)")
+        return 1
+    head = (f"{'pack':<24} {'case':<12} {'min':>6} "
+            + " ".join(f"{int(100 * f):>3}%: dl/label/px4" for f in FRACTIONS)
+            + f" {'instr':>6} {'heap KB':>7}")
+    print(head)
+    worst = 0.0
+    for preset, cells in PACKS:
+        bat = load_battery(preset).with_pack(cells)
+        cut = default_cutoff(bat)["cutoff_cell_V"]
+        script = autopilot_script(bat, cells=cells, cutoff=cut)
+        for name, steps in cases(bat, args.quick):
+            sim = simulate(bat, steps, cutoff_cell_V=cut)
+            rep = replay(script.text, flight_samples(sim, rest_s=REST_S))
+            errs = errors_at(sim, rep, bat.rated_capacity_Ah, cells)
+            worst = max(worst, max(abs(e[0]) for e in errs))
+            cols = " ".join(f"{e[0]:+6.1f}/{e[1]:+5.1f}/{e[2]:+6.1f}" for e in errs)
+            print(f"{bat.name[:24]:<24} {name:<12} {sim.time_to_cutoff_s / 60:6.1f} {cols} "
+                  f"{rep.max_instructions:6d} {rep.heap_kb:7.1f}")
+    print(f"largest |DL_TREM - time left|: {worst:.1f} % of the flight (goal 3 %)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
