@@ -1,13 +1,14 @@
 """The on-board script against the time actually left, beside what a pilot has today.
 
 For each case a pack model (a preset) is flown through the one engine
-(:mod:`dischargelab.simulate`) to its cutoff: a constant current (2C), a stepped flight
-(10 s at 1.5C and 5 s at 3C in turn, to the cutoff: the 30 s mean is 2C), and a hover to empty at constant power (1C, 3C
-and 5C of the rated capacity at the start). The readings ArduPilot's battery monitor
-would give (voltage, current, consumed mAh every 200 ms, 5 s at rest first) are replayed
-through the generated script in a real ``lua5.3`` with the stand-in of the bindings
-(``tests/ardupilot_standin.lua``). At 25, 50, 75 and 90 % of the time to cutoff it prints
-``DL_TREM`` minus the time actually left, in % of the flight's time to cutoff, beside:
+(:mod:`dischargelab.simulate`) to its cutoff: a constant current (2C), a stepped flight (10
+s at 1.5C and 5 s at 3C in turn, to the cutoff: the 30 s mean is 2C), and a hover to empty
+at constant power (1C, 3C and 5C of the rated capacity at the start). The readings
+ArduPilot's battery monitor would give (voltage, current, consumed mAh every 200 ms, 5 s at
+rest first) are replayed through the generated script in a real ``lua5.3`` with the stand-in
+of the bindings (``tests/ardupilot_standin.lua``). At 25, 50, 75 and 90 % of the time to
+cutoff it prints ``DL_TREM`` minus the time actually left, in % of the flight's time to
+cutoff, beside:
 
 * label: the label-capacity coulomb count (rated capacity minus the consumed charge, over
   the same 30 s mean current), what ``BATT_CAPACITY`` and the counted mAh give;
@@ -32,7 +33,6 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 
 from ardupilot_replay import lua, replay  # noqa: E402
-
 from dischargelab import autopilot_script  # noqa: E402
 from dischargelab.engine import Step  # noqa: E402
 from dischargelab.flight.replay import (  # noqa: E402

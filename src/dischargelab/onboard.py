@@ -11,8 +11,14 @@ curve. The script (package data ``data/onboard.lua``) only interpolates them:
   model's open-circuit curve;
 * armed, the charge counted from ``battery:consumed_mah`` (or the integrated
   ``battery:current_amps``), and the time left until the loaded voltage reaches
-  the cutoff at the mean current of the last 30 s (``DL_TREM`` [s]) with the
-  state of charge (``DL_SOC`` [%]), sent with ``gcs:send_named_float`` every second;
+  the cutoff at the recent load (``DL_TREM`` [s]) with the state of charge
+  (``DL_SOC`` [%]), sent with ``gcs:send_named_float`` every second. The recent
+  load is the mean current of the last 30 s; the pack is empty when its voltage
+  at the window's highest 1 s current reaches the cutoff (steps of a stepped
+  flight), and the mean current is let grow as the voltage falls, ``I ~ V^-g``,
+  with ``g`` measured in flight from the mean current and voltage against those
+  of the first full window (0 for a constant current, 1 for a constant-power
+  hover; filtered, within [0, 1.2]);
 * one ``gcs:send_text`` warning at the reserve and one at a third of it;
 * without a current sensor, the charge from the filtered loaded voltage at the
   reference current, said once.
@@ -130,7 +136,8 @@ def _tables(bat: Battery, cut: float, ambient: float | None) -> dict:
                               f"{currents[0]:.3g} A; check the cutoff")
     q_cut = np.minimum.accumulate(q_cut)   # more current never gives more charge
     charge = np.linspace(0.0, float(q_cut[0]), CHARGE_POINTS)
-    remaining = np.maximum(q_cut[None, :] - charge[:, None], 0.0)
+    # charge left to the cutoff, negative past it (linear in the charge: exact between rows)
+    remaining = q_cut[None, :] - charge[:, None]
     with np.errstate(invalid="ignore", over="ignore"):
         ocv = np.asarray(bat.voltage(np.zeros_like(charge), charge, temperature_C=ambient))
         loaded = np.array([[float(bat.voltage(i, q, temperature_C=ambient)) for i in currents]
@@ -233,7 +240,7 @@ def _header(bat: Battery, cells: int, cut: float, ref: float, t_ref: float, rese
              "sends DL_TREM (s to cutoff at the last 30 s mean current) and DL_SOC (%)",
              f"warns at {reserve_s:g} s and at {reserve_s / 3:.0f} s left",
              "install: copy to APM/scripts/ on the SD card, set SCR_ENABLE = 1 and reboot;",
-             "  it needs about 25 KB of scripting heap (SCR_HEAP_SIZE; 43 KB on F4 boards)"]
+             "  it needs about 30 KB of scripting heap (SCR_HEAP_SIZE; 43 KB on F4 boards)"]
     out = []
     for line in lines:
         out += wrap_comment(line, 96)
