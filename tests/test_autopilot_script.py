@@ -199,3 +199,25 @@ def test_library_errors():
         autopilot_script("zippy-1100-2s", firmware="px4")
     with pytest.raises(DischargelabError, match="reserve"):
         autopilot_script("zippy-1100-2s", reserve_s=0)
+
+
+def test_battestimate_coefficients_follow_the_model_curve():
+    from dischargelab.autopilot import SOC_BOUNDS, autopilot_params
+
+    pack = load_battery("zippy-1100-2s").with_pack(3)
+    params = autopilot_params(pack, firmware="ardupilot", cells=3)
+    values = params.to_dict()["parameters"]
+    coefficients = [values[f"BATT_SOC1_C{k}"] for k in range(1, 5)]
+    for c, (lo, hi) in zip(coefficients, SOC_BOUNDS):
+        assert lo <= c <= hi
+    assert values["BATT_SOC1_NCELL"] == 3 and values["BATT_SOC_COUNT"] == 1
+    # the applet's formula on the model's own rest curve: the stated worst difference
+    q = np.linspace(0.0, 0.98 * pack.capacity_Ah, 200)
+    cell = pack.voltage(np.zeros_like(q), q) / 3
+    c1, c2, c3, c4 = coefficients
+    soc = c1 * (1 - 1 / (1 + (cell / c2) ** c4) ** c3)
+    worst = float(np.max(np.abs(soc - 100 * (1 - q / pack.capacity_Ah))))
+    stated = float(params.to_dict()["derivation"]["BATT_SOC1_C1"].split("worst difference ")[1]
+                   .split(" %")[0])
+    assert worst == pytest.approx(stated, abs=0.3)
+    assert all(len(line) <= 100 for line in params.text().splitlines())
