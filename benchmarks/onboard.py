@@ -88,6 +88,63 @@ def errors_at(sim, rep, label_Ah, cells):
     return rows
 
 
+#: Held-out real drains: the Samsung 30Q cell of ``samsung30q_S001`` fitted as a user
+#: would (``dl.fit``, automatic family) on its C/10 drain, the script replayed on its 1C,
+#: 2C and 4C drains (3, 6, 12 A), cutoff 3.0 V, label capacity 3.0 Ah.
+SAMSUNG = "samsung30q_S001"
+SAMSUNG_COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
+REAL_CUTOFF_V = 3.0
+
+
+def shared_data() -> Path:
+    for parent in [HERE, *HERE.parents]:
+        if (parent / "shared" / "data" / SAMSUNG).is_dir():
+            return parent / "shared" / "data"
+    raise SystemExit("../shared/data not found")
+
+
+def real_rows(d, rest_s: float = REST_S):
+    """Battery-monitor readings of a measured drain: rest first, then every sample."""
+    import dischargelab.discharge as discharge
+
+    t, v, i = d.time_s - d.time_s[0], d.voltage_V, d.current_A
+    used = np.concatenate([[0.0], np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))]) / 3.6
+    rest_v = d.rest_voltage_V if d.rest_voltage_V else float(v[0])
+    rows = [(int(k * 200), False, rest_v, 0.0, 0.0) for k in range(int(rest_s / 0.2))]
+    rows += [(int(round((rest_s + tk) * 1000)), True, float(vk), float(ik), float(qk))
+             for tk, vk, ik, qk in zip(t, v, i, used)]
+    total = discharge.measured_time_to_cutoff(t, v, REAL_CUTOFF_V)
+    return rows, total, t, v, i, used / 1000.0
+
+
+def real_drains(label_Ah: float = 3.0):
+    import dischargelab as dl
+
+    data = shared_data() / SAMSUNG
+    slow = dl.read(data / "Q30_S001_C10.csv", columns=SAMSUNG_COLUMNS)
+    model = dl.fit(slow, bootstrap=0, cells=1).battery
+    script = autopilot_script(model, cells=1, cutoff=REAL_CUTOFF_V)
+    for rate in ("1C", "2C", "4C"):
+        d = dl.read(data / f"Q30_S001_{rate}.csv", columns=SAMSUNG_COLUMNS)
+        rows, total, t, v, i, used = real_rows(d)
+        rep = replay(script.text, rows)
+        ts, trem = rep.series("DL_TREM")
+        errs = []
+        for f in FRACTIONS:
+            now = f * total
+            left = total - now
+            k = int(np.argmin(np.abs(ts - REST_S - now)))
+            window = (t > now - RECENT_LOAD_S) & (t <= now)
+            load = float(np.mean(i[window]))
+            label = max(label_Ah - float(np.interp(now, t, used)), 0.0) * 3600.0 / load
+            recent = (t > now - 1.0) & (t <= now)
+            cell = float(np.mean(v[recent])) + PX4_R_INTERNAL_OHM * float(np.mean(i[recent]))
+            px4 = float(np.clip((cell - PX4_V_EMPTY) / (PX4_V_CHARGED - PX4_V_EMPTY), 0, 1)) \
+                * label_Ah * 3600.0 / load
+            errs.append(tuple(100.0 * (x - left) / total for x in (float(trem[k]), label, px4)))
+        yield "Samsung 30Q, C/10 model", f"real {rate}", total, errs, rep
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one hover rate only")
@@ -113,6 +170,14 @@ def main(argv=None) -> int:
             print(f"{bat.name[:24]:<24} {name:<12} {sim.time_to_cutoff_s / 60:6.1f} {cols} "
                   f"{rep.max_instructions:6d} {rep.heap_kb:7.1f}")
     print(f"largest |DL_TREM - time left|: {worst:.1f} % of the flight (goal 3 %)")
+    real_worst = 0.0
+    for pack, name, total, errs, rep in real_drains():
+        real_worst = max(real_worst, max(abs(e[0]) for e in errs))
+        cols = " ".join(f"{e[0]:+6.1f}/{e[1]:+5.1f}/{e[2]:+6.1f}" for e in errs)
+        print(f"{pack[:24]:<24} {name:<12} {total / 60:6.1f} {cols} "
+              f"{rep.max_instructions:6d} {rep.heap_kb:7.1f}")
+    print(f"held-out real drains, largest |DL_TREM - time left|: {real_worst:.1f} % of the "
+          "flight (goal 3 %)")
     return 0
 
 
