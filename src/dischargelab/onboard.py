@@ -240,7 +240,7 @@ def _header(bat: Battery, cells: int, cut: float, ref: float, t_ref: float, rese
              "sends DL_TREM (s to cutoff at the last 30 s mean current) and DL_SOC (%)",
              f"warns at {reserve_s:g} s and at {reserve_s / 3:.0f} s left",
              "install: copy to APM/scripts/ on the SD card, set SCR_ENABLE = 1 and reboot;",
-             "  it needs about 30 KB of scripting heap (SCR_HEAP_SIZE; 43 KB on F4 boards)"]
+             "  it needs about 32 KB of scripting heap (SCR_HEAP_SIZE; 43 KB on F4 boards)"]
     out = []
     for line in lines:
         out += wrap_comment(line, 96)
