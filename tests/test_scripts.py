@@ -40,6 +40,8 @@ BENCHMARKS = {
     "logbook_pages.py": (["--sizes", "2,3", "--requests", "3", "--workers", "1"], "goals at 3"),
     "health_from_use.py": (["--skip", "cmu", "synthetic", "cellc"], "full-enough flights"),
     "cmu_rewindow.py": ([], "re-windowed"),
+    # needs Debian's lua5.3 (make lua), as the on-board script tests do
+    "onboard.py": (["--quick", "--skip-real"], "largest |DL_TREM - time left|"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }
