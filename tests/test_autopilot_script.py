@@ -221,3 +221,18 @@ def test_battestimate_coefficients_follow_the_model_curve():
                    .split(" %")[0])
     assert worst == pytest.approx(stated, abs=0.3)
     assert all(len(line) <= 100 for line in params.text().splitlines())
+
+
+def test_armed_from_the_first_call_reads_the_loaded_voltage(pack, script):
+    """No rest before arming (the script started in the air): the charge from the loaded
+    voltage at the present current, then counted."""
+    need("lua5.3")
+    q0 = 0.3 * pack.capacity_Ah
+    sim = simulate_current(pack, 2.2, cutoff_cell_V=CUT, initial_charge_Ah=q0)
+    rows = [r for r in flight_samples(sim, rest_s=REST_S) if r[1]]
+    rep = replay(script.text, rows)
+    total = sim.time_to_cutoff_s
+    ts, soc = rep.series("DL_SOC")
+    assert soc[0] == pytest.approx(70.0, abs=3.0)
+    sent, _, _ = trem_at(rep, [0.5 * total])
+    assert abs(sent[0] - 0.5 * total) / total < 0.05

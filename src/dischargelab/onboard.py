@@ -229,7 +229,7 @@ def _header(bat: Battery, cells: int, cut: float, ref: float, t_ref: float, rese
                   f"series resistance {1000 * lb['resistance_shift_cell_ohm']:+.1f} mOhm/cell")
     elif lb:
         health = "health today: the chemistry's prior at the logbook's figures"
-    amb = f", tables at {bat.ambient_C if ambient is None else ambient:g} degC" \
+    amb = f", tables at {bat.ambient_C if ambient is None else ambient:.0f} degC" \
         if bat.family.thermal else ""
     lines = [f"dischargelab on-board flight time for {bat.name or 'a battery model'}",
              f"pack: {cells}S{bat.strings_parallel}P, {bat.rated_capacity_Ah:.3g} Ah rated, "
@@ -237,7 +237,7 @@ def _header(bat: Battery, cells: int, cut: float, ref: float, t_ref: float, rese
              f"generated {stamp} from the {bat.model} model{amb}",
              health,
              f"at {ref:.3g} A the model reaches the cutoff after {t_ref / 60:.1f} min",
-             "sends DL_TREM (s to cutoff at the last 30 s mean current) and DL_SOC (%)",
+             "sends DL_TREM (s to the cutoff at the last 30 s load) and DL_SOC (%)",
              f"warns at {reserve_s:g} s and at {reserve_s / 3:.0f} s left",
              "install: copy to APM/scripts/ on the SD card, set SCR_ENABLE = 1 and reboot;",
              "  it needs about 32 KB of scripting heap (SCR_HEAP_SIZE; 43 KB on F4 boards)"]
