@@ -41,8 +41,10 @@ def _field(x) -> str:
     return repr(float(x))
 
 
-def replay(script_text: str, rows, timeout_s: float = 600.0) -> Replay:
-    """Run ``script_text`` on ``rows`` ``(time_ms, armed, voltage, current, consumed_mAh)``."""
+def replay(script_text: str, rows, timeout_s: float = 600.0, params: dict | None = None
+           ) -> Replay:
+    """Run ``script_text`` on ``rows`` ``(time_ms, armed, voltage, current, consumed_mAh)``,
+    with parameter values ``params`` (``{"DL_RESERVE": 60}``)."""
     exe = lua()
     if exe is None:
         raise RuntimeError("lua5.3 is not installed (make lua)")
@@ -53,8 +55,10 @@ def replay(script_text: str, rows, timeout_s: float = 600.0) -> Replay:
         with open(samples, "w") as fh:
             for t, armed, v, c, q in rows:
                 fh.write(f"{int(t)} {_field(bool(armed))} {_field(v)} {_field(c)} {_field(q)}\n")
+        env = dict(os.environ, STANDIN_PARAMS=",".join(f"{k}={v}" for k, v in
+                                                        (params or {}).items()))
         proc = subprocess.run([exe, str(STANDIN), script, samples], capture_output=True,
-                              text=True, timeout=timeout_s, check=False)
+                              text=True, timeout=timeout_s, check=False, env=env)
     if proc.returncode != 0:
         raise RuntimeError(f"lua5.3 failed: {proc.stderr.strip()}")
     out = Replay()

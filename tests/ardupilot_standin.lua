@@ -2,6 +2,7 @@
 -- replaying recorded or simulated battery readings through it in a plain Lua 5.3.
 --
 -- usage: lua5.3 ardupilot_standin.lua SCRIPT.lua SAMPLES.txt
+-- STANDIN_PARAMS="DL_RESERVE=60,..." in the environment sets parameter values.
 -- SAMPLES: one call per line, "time_ms armed(0/1) voltage_V current_A consumed_mAh",
 -- "nil" for a reading the battery monitor does not have. Prints what the script sends
 -- ("F time_ms NAME value", "T time_ms severity text") and, at the end, the largest
@@ -17,6 +18,12 @@ local now_ms, armed, volts, amps, mah = 0, false, 0, nil, nil
 local function reading(text)
   if text == "nil" then return nil end
   return tonumber(text)
+end
+
+-- parameter tables the script adds, and parameter values (from STANDIN_PARAMS)
+local tables, values = {}, {}
+for name, value in (os.getenv("STANDIN_PARAMS") or ""):gmatch("([%w_]+)=([%d%.%-]+)") do
+  values[name] = tonumber(value)
 end
 
 local millis_meta = {__index = {tofloat = function(self) return self.ms end}}
@@ -37,7 +44,19 @@ local standin = {
       io.write(string.format("T %d %d %s\n", now_ms, severity, text))
     end,
   },
-  param = {get = function(_, _) return nil end},
+  param = {
+    add_table = function(_, key, prefix, count)
+      tables[key] = {prefix = prefix, count = count}
+      return true
+    end,
+    add_param = function(_, key, index, name, default)
+      local t = tables[key]
+      if not t or index < 1 or index > t.count then return false end
+      values[t.prefix .. name] = values[t.prefix .. name] or default
+      return true
+    end,
+    get = function(_, name) return values[name] end,
+  },
   millis = function() return setmetatable({ms = now_ms}, millis_meta) end,
 }
 for name, value in pairs(standin) do _G[name] = value end

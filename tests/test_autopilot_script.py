@@ -236,3 +236,13 @@ def test_armed_from_the_first_call_reads_the_loaded_voltage(pack, script):
     assert soc[0] == pytest.approx(70.0, abs=3.0)
     sent, _, _ = trem_at(rep, [0.5 * total])
     assert abs(sent[0] - 0.5 * total) / total < 0.05
+
+
+def test_reserve_setting_moves_the_warning(pack, script):
+    need("lua5.3")
+    sim = simulate_current(pack, 3.3, cutoff_cell_V=CUT)
+    total = sim.time_to_cutoff_s
+    rep = replay(script.text, flight_samples(sim, rest_s=REST_S), params={"DL_RESERVE": 300})
+    texts = [t for t in rep.texts if t[2].startswith("DL:")]
+    assert texts[0][0] - REST_S == pytest.approx(total - 300, abs=3)
+    assert texts[1][0] - REST_S == pytest.approx(total - 100, abs=3)

@@ -73,6 +73,10 @@ REST_C_RATE = 0.05
 #: Time constant of the voltage filter of the no-current fallback [s].
 VOLTAGE_FILTER_S = 5.0
 
+#: Key of the script's parameter table (DL_BATT_IDX, DL_RESERVE); unique among the
+#: scripts on one autopilot.
+PARAM_KEY = 73
+
 TEMPLATE = "onboard.lua"
 
 
@@ -239,6 +243,7 @@ def _header(bat: Battery, cells: int, cut: float, ref: float, t_ref: float, rese
              f"at {ref:.3g} A the model reaches the cutoff after {t_ref / 60:.1f} min",
              "sends DL_TREM (s to the cutoff at the last 30 s load) and DL_SOC (%)",
              f"warns at {reserve_s:g} s and at {reserve_s / 3:.0f} s left",
+             "settings: DL_BATT_IDX (battery instance) and DL_RESERVE (s), after a reboot",
              "install: copy to APM/scripts/ on the SD card, set SCR_ENABLE = 1 and reboot;",
              "  it needs about 32 KB of scripting heap (SCR_HEAP_SIZE; 43 KB on F4 boards)"]
     out = []
@@ -255,6 +260,7 @@ def _render(tables: dict, header: list[str], reserve_s: float, instance: int,
     values = {
         "HEADER": "\n".join(f"-- {line}".rstrip() for line in header),
         "INSTANCE": str(instance),
+        "PARAM_KEY": str(PARAM_KEY),
         "RESERVE_S": _num(reserve_s, 1),
         "INTERVAL_MS": str(INTERVAL_MS),
         "SEND_MS": str(SEND_MS),

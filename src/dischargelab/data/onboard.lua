@@ -8,6 +8,16 @@
 
 local BATT_INSTANCE = @INSTANCE@
 local RESERVE_S = @RESERVE_S@
+
+-- settings DL_BATT_IDX and DL_RESERVE (parameter table key PARAM_KEY; the values above are
+-- their defaults and stay in use when the table cannot be added)
+local PARAM_KEY = @PARAM_KEY@
+if param:add_table(PARAM_KEY, "DL_", 2) then
+  param:add_param(PARAM_KEY, 1, "BATT_IDX", BATT_INSTANCE)
+  param:add_param(PARAM_KEY, 2, "RESERVE", RESERVE_S)
+  BATT_INSTANCE = math.floor(param:get("DL_BATT_IDX") or BATT_INSTANCE)
+  RESERVE_S = param:get("DL_RESERVE") or RESERVE_S
+end
 local INTERVAL_MS = @INTERVAL_MS@
 local SEND_MS = @SEND_MS@
 local WINDOW_S = @WINDOW_S@
