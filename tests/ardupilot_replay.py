@@ -79,3 +79,35 @@ def replay(script_text: str, rows, timeout_s: float = 600.0, params: dict | None
         elif kind == "N":
             out.calls = int(rest)
     return out
+
+
+def flight_rows(samples) -> list[tuple]:
+    """Battery-monitor readings of a logged flight (a ``FlightAnalysis.samples`` frame):
+    armed while in flight, consumed charge integrated from the current."""
+    t = samples["time_s"].to_numpy(dtype=float)
+    v = samples["voltage_V"].to_numpy(dtype=float)
+    i = samples["current_A"].to_numpy(dtype=float)
+    armed = samples["in_flight"].to_numpy(dtype=bool)
+    used = np.concatenate([[0.0], np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))]) / 3.6
+    return [(int(round(tk * 1000)), bool(a), float(vk), float(ik), float(qk))
+            for tk, a, vk, ik, qk in zip(t - t[0], armed, v, i, used)]
+
+
+def against_python_replay(script_text: str, analysis) -> tuple[float, Replay]:
+    """Largest |DL_TREM - the Python replay's time left at the recent load| over a logged
+    flight's replay moments, in % of the flight's time to cutoff as the Python replay sees
+    it at its first moment."""
+    samples = analysis.samples
+    t0 = float(samples["time_s"].iloc[0])
+    rep = replay(script_text, flight_rows(samples))
+    ts, trem = rep.series("DL_TREM")
+    rows = analysis.replay.dropna(subset=["model_s"])
+    if rows.empty or ts.size == 0:
+        raise RuntimeError("nothing to compare: no replay moment or no DL_TREM sent")
+    start = float(samples["time_s"][samples["in_flight"]].iloc[0])
+    total = float(rows["time_s"].iloc[0]) - start + float(rows["model_s"].iloc[0])
+    worst = 0.0
+    for time_s, model_s in zip(rows["time_s"], rows["model_s"]):
+        k = int(np.argmin(np.abs(ts + t0 - time_s)))
+        worst = max(worst, abs(float(trem[k]) - float(model_s)) / total * 100.0)
+    return worst, rep

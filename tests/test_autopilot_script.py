@@ -246,3 +246,30 @@ def test_reserve_setting_moves_the_warning(pack, script):
     texts = [t for t in rep.texts if t[2].startswith("DL:")]
     assert texts[0][0] - REST_S == pytest.approx(total - 300, abs=3)
     assert texts[1][0] - REST_S == pytest.approx(total - 100, abs=3)
+
+
+@pytest.mark.slow
+def test_a_logged_flight_matches_the_python_replay(capsys, tmp_path, shared_data):
+    """A model fitted on one logged FPV flight (INA3221 logger, 4S), the next flight replayed
+    through the script and through the Python replay of the same model (flight/replay.py):
+    the time left at the recent load agrees within 2 % of the flight at every replay
+    moment."""
+    need("lua5.3")
+    from ardupilot_replay import against_python_replay
+    from dischargelab.flight import analyse_flight
+
+    logs = shared_data / "flight_logs" / "ina3221_fpv_4s"
+    model = tmp_path / "fpv.json"
+    code, _, err = run(capsys, "fit", logs / "28.csv", "--capacity", "1.5", "--bootstrap", "0",
+                       "-o", model)
+    assert code == 0, err
+    bat = load_battery(model)
+    report = analyse_flight(logs / "29.csv", bat, cutoff=3.3)
+    script = autopilot_script(bat, cutoff=3.3)
+    checked = 0
+    for flight in report.flights:
+        worst, rep = against_python_replay(script.text, flight)
+        assert worst < 2.0, (flight.number, worst)
+        assert rep.max_instructions <= 10_000 and rep.heap_kb <= 40.0
+        checked += 1
+    assert checked >= 1
