@@ -26,7 +26,9 @@ Every figure goes through the logbook as a user meets it (``Logbook.add`` of the
    full-enough flight, one that moves the smart battery's state of charge by at least
    :data:`FULL_ENOUGH`).
 4. **Cell C partial discharges** cut at 60 % of their charge, with or without a clock
-   time, added before or after the full cycles (goal: within 3 %).
+   time, added before or after the full cycles; run to the cutoff from a storage charge
+   (``tests/lvm_cut.lvm_storage``); from a full charge whose rest reads 40 mV high
+   (goal: within 3 %).
 5. **Flight logs** (``../shared/data/flight_logs``): a resistance for every log, a
    capacity with its interval or the one-line reason why not.
 
@@ -70,22 +72,16 @@ CMU_LABEL_AH = 3.0
 
 def capacity_now(events) -> tuple[float | None, float | None]:
     """Capacity today [Ah] and its standard deviation as the logbook would have said it
-    when ``events`` were all it held: the life trend (:func:`dischargelab.logbook.trend.
-    smooth`, as ``Logbook.health`` makes it) over their non-outlier estimates, read at
-    the last one's EFC (no later event informs it)."""
-    from dischargelab.logbook.results import shared_errors
-    from dischargelab.logbook.trend import smooth
+    when ``events`` were all it held (:func:`dischargelab.logbook.results.capacity_now`,
+    as ``Logbook.health`` makes it), read at the last one's EFC."""
+    from dischargelab.logbook.results import capacity_now as now_of
 
-    est = [e for e in events if e.capacity_Ah is not None and not e.outlier
-           and e.efc is not None]
-    if not est:
+    now = now_of([e for e in events if e.capacity_Ah is not None and not e.outlier
+                  and e.efc is not None])
+    if now is None:
         return None, None
-    lo = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[0] for e in est]
-    hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1] for e in est]
-    trend = smooth([e.efc for e in est], [e.capacity_Ah for e in est], lo, hi,
-                   systematic=shared_errors(est))
-    value, interval = trend.interval95(max(e.efc for e in est))
-    return float(value), float((interval[1] - interval[0]) / 3.92)
+    low, high = now.interval95()
+    return now.value_Ah, (high - low) / (2 * now.quantile)
 
 
 def block_mean(capacity, low, high) -> tuple[float, float]:
@@ -448,6 +444,52 @@ def cell_c_section(folder: Path) -> None:
                 print(f"| {'yes' if dated else 'no'} | {'yes' if named else 'no'} | {added} | "
                       f"{max(map(abs, errs)):.2f} % | {sum(cover)}/{len(cover)} |")
     print(f"\nworst {worst:.2f} % (goal 3 %)")
+    print("\n### Cell C: partials from a storage charge (run to the cutoff from 45 % and 50 % "
+          "of the charge down) and from a full charge whose rest reads 40 mV high (cut at "
+          "60 %)\n")
+    print("| clock time | start | partials | max error | intervals covering |")
+    print("|---|---|---|---|---|")
+    from lvm_cut import lvm_storage
+
+    fulls = [CELL_C / f"DischargeCycle{c:03d}.txt" for c in FULL_CYCLES]
+    for dated in (True, False):
+        for start in ("storage charge", "fresh rest"):
+            sub = folder / f"c_{dated}_{start.replace(' ', '_')}"
+            sub.mkdir()
+            truth, paths = {}, []
+            for c in CUT_CYCLES:
+                src = CELL_C / f"DischargeCycle{c:03d}.txt"
+                for share in ((0.45, 0.5) if start == "storage charge" else (0.6,)):
+                    out = sub / f"{start[0]}{c:03d}_{int(100 * share)}.txt"
+                    if start == "storage charge":
+                        truth[out.name] = lvm_storage(src, out, share, dated)
+                    else:
+                        truth[out.name] = lvm_cut(src, out, share, dated)
+                        _raise_rest(out, 0.04)
+                    paths.append(out)
+            with Logbook(sub / "lb.sqlite") as lb:
+                for path in fulls + paths:
+                    lb.add(path, pack="C")
+                health = lb.health("C")
+            errs, cover = [], []
+            for h in health.events:
+                if h.source in truth and h.capacity_Ah is not None:
+                    errs.append(100 * (h.capacity_Ah / truth[h.source] - 1))
+                    lo, hi = h.capacity_interval95
+                    cover.append(lo <= truth[h.source] <= hi)
+            print(f"| {'yes' if dated else 'no'} | {start} | {len(errs)}/{len(truth)} | "
+                  f"{max(map(abs, errs)):.2f} % | {sum(cover)}/{len(cover)} |")
+
+
+def _raise_rest(path: Path, volts: float) -> None:
+    """Raise the first sample's voltage of a LabVIEW cycle file (a rest read sooner after
+    its charge)."""
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    first = next(k for k, line in enumerate(lines) if line.startswith("X_Value")) + 1
+    cols = lines[first].split("\t")
+    cols[2] = f"{float(cols[2]) + volts:.6f}"
+    lines[first] = "\t".join(cols)
+    path.write_text("".join(lines), encoding="utf-8")
 
 
 # --------------------------------------------------------------------------- 5. flights

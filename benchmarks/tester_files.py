@@ -15,6 +15,18 @@ joined (the clock going back), and bytes flipped at random (seeded). The
 acceptance: within 1 % of the counter, or one counter step (1 mAh) for a log
 whose whole flight is 30 mAh.
 
+Table 3, the logbook's events of each tester file against the tester's own steps:
+the tester's discharge and charge steps, its runs of them (a CC then a CV charge is one
+charge), the logbook's discharge and charge events, whether the sequence of kinds is
+the tester's, and the largest difference between an event's discharged charge and the
+tester's for the same steps, by its counter and by its records (the current over the
+step's time, as the tester counts it). The acceptance: events equal to the tester's runs
+of steps on every file, capacities within 1 % of the records' count.
+
+Table 4, the DJI M100 flights (``../shared/data/dji_m100_flights``): events and EFC
+of its raw logs alone against the whole folder (raw logs plus their CSV exports), and
+the files skipped as copies. The acceptance: the same within 5 %.
+
 Usage: python benchmarks/tester_files.py [--data ../shared/data]
 """
 
@@ -65,6 +77,82 @@ def tester_table(folder: Path) -> list[str]:
             f"{1e3 * first['charge_Ah']:.5g} | {1e3 * first['tester_Ah']:.5g} | "
             f"{diff:+.4f} % | {elapsed:.2f} |")
     return rows
+
+
+def tester_runs(steps: list[dict]) -> list[dict]:
+    """The tester's steps as events: consecutive steps of one kind are one run."""
+    runs: list[dict] = []
+    for step in steps:
+        moved = step["tester_Ah"] if step.get("tester_Ah") is not None else step["charge_Ah"]
+        if runs and runs[-1]["kind"] == step["kind"]:
+            runs[-1]["Ah"] += moved
+            runs[-1]["counted_Ah"] += step["charge_Ah"]
+            runs[-1]["steps"] += 1
+        else:
+            runs.append({"kind": step["kind"], "Ah": moved, "counted_Ah": step["charge_Ah"],
+                         "steps": 1})
+    return runs
+
+
+def events_table(folder: Path) -> tuple[list[str], bool]:
+    from dischargelab.logbook.summarise import summarise_source
+
+    rows = ["| file | tester's discharge / charge steps | tester's runs (discharge / charge "
+            "/ rest) | logbook events (discharge / charge / rest) | same kinds in order | "
+            "first discharge: tester [mAh] | logbook [mAh] | largest difference from the "
+            "tester's counter | largest difference from the tester's records |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    ok = True
+    for path in sorted(p for p in folder.glob("*/*") if p.parent.name != "LICENSES"):
+        try:
+            tester = read_tester(path)
+            summary = summarise_source(path, keep_raw=False)
+        except DischargelabError as exc:
+            rows.append(f"| {path.name} | {exc} | | | | | | |")
+            ok = False
+            continue
+        steps = tester.steps
+        runs = tester_runs(steps)
+        events = [e for e in summary.events if e["kind"] != "gap"]
+        count = lambda items, kind: sum(1 for x in items if x["kind"] == kind)  # noqa: E731
+        same = [r["kind"] for r in runs] == [e["kind"] for e in events]
+        pairs = [(r["Ah"], e.get("discharged_Ah") or 0.0, r["counted_Ah"])
+                 for r, e in zip(runs, events)
+                 if same and r["kind"] == "discharge" and r["Ah"] > 0 and r["counted_Ah"] > 0]
+        worst = max((abs(b / a - 1.0) for a, b, _ in pairs), default=float("nan"))
+        # the records' own count: a file whose clock is rounded to 0.1 s cannot give a 2 s
+        # step's charge to better than a few per cent, however it is counted
+        worst_records = max((abs(b / c - 1.0) for _, b, c in pairs), default=float("nan"))
+        ok = ok and same and (not pairs or worst_records <= 0.01)
+        first = pairs[0] if pairs else (float("nan"), float("nan"), float("nan"))
+        rows.append(
+            f"| {path.name} | {count(steps, 'discharge')} / {count(steps, 'charge')} | "
+            f"{count(runs, 'discharge')} / {count(runs, 'charge')} / {count(runs, 'rest')} | "
+            f"{count(events, 'discharge')} / {count(events, 'charge')} / "
+            f"{count(events, 'rest')} | {'yes' if same else 'NO'} | {1e3 * first[0]:.5g} | "
+            f"{1e3 * first[1]:.5g} | {100 * worst:.2f} % | {100 * worst_records:.2f} % |")
+    return rows, ok
+
+
+def dji_table(folder: Path, scratch: Path) -> tuple[list[str], bool]:
+    from dischargelab.logbook import Logbook
+
+    rows = ["| files added | files | events | flights | EFC | skipped as copies |",
+            "|---|---|---|---|---|---|"]
+    found = {}
+    for label, paths in (("raw logs alone", sorted(folder.glob("raw_*"))),
+                         ("whole folder", [folder])):
+        with Logbook(scratch / f"{label.replace(' ', '_')}.sqlite") as book:
+            result = book.add(paths, pack="M100")
+            health = book.health("M100").to_dict()
+        flights = sum(1 for e in health["events"] if e["kind"] == "flight")
+        found[label] = (result.events, flights, health["efc_now"] or 0.0)
+        copies = "; ".join(name for name, _ in result.copies) or "-"
+        rows.append(f"| {label} | {len(result.added)} | {result.events} | {flights} | "
+                    f"{health['efc_now']:.2f} | {copies} |")
+    (e1, f1, c1), (e2, f2, c2) = found.values()
+    ok = e1 == e2 and f1 == f2 and abs(c2 / c1 - 1.0) <= 0.05
+    return rows, ok
 
 
 def _tlog_row(label: str, path: Path) -> str:
@@ -120,6 +208,16 @@ def main(argv=None) -> int:
     print("\nTelemetry logs (.tlog): charge by the current vs the log's current_consumed\n")
     with tempfile.TemporaryDirectory(prefix="dischargelab-bench-") as scratch:
         print("\n".join(tlog_table(args.data / "flight_logs" / "mavlink_tlog", Path(scratch))))
+        print("\nLogbook events of each tester file vs the tester's own steps\n")
+        rows, ok = events_table(args.data / "cyclers")
+        print("\n".join(rows))
+        print(f"\nevents equal to the tester's steps, capacity within 1 %: "
+              f"{'met' if ok else 'NOT met'}")
+        print("\nDJI M100 flights: raw logs alone vs the whole folder (raw logs and their "
+              "CSV exports)\n")
+        rows, ok = dji_table(args.data / "dji_m100_flights", Path(scratch))
+        print("\n".join(rows))
+        print(f"\nsame events, flights and EFC within 5 %: {'met' if ok else 'NOT met'}")
     print(f"\n{machine_line()}; load average {os.getloadavg()[0]:.2f}")
     return 0
 

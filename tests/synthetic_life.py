@@ -13,6 +13,12 @@ thermal state with Arrhenius resistances). Its life, cycle by cycle:
 * every ``test_every`` cycles a capacity test: the charge, a rest, C/5 to the cutoff, a
   rest (its delivered charge is the test's capacity, as the CMU tests measure it).
 
+The cell's own open-circuit curve is the generic one off by ``ocv_wiggle_V`` (a
+smooth wave, zero at both ends), and ageing moves it: the state of charge on the
+fresh curve is ``s - 4 lli_share fade s (1 - s)`` (the ends fixed by the charge and
+cutoff voltages, the middle moved as a loss of lithium inventory shifts the electrodes'
+windows against each other: Dubarry et al. 2012, Birkl et al. 2017).
+
 Ageing by a known law: capacity ``C(efc) = C0 (1 - a efc - b max(0, efc - knee)^2)``
 (a slow linear fade and a knee, Attia et al. 2022), resistances growing linearly with
 the equivalent full cycles; the ambient temperature follows a slow season. The log is
@@ -20,7 +26,8 @@ sampled at ``sample_hz`` (1-10 Hz) with voltage and current noise. The truth (ca
 per cycle, the tests) comes with it.
 
 References: A. Bills et al., Sci. Data 10, 344 (2023); P. M. Attia et al., J.
-Electrochem. Soc. 169, 060517 (2022).
+Electrochem. Soc. 169, 060517 (2022); M. Dubarry, C. Truchot, B. Y. Liaw, J. Power
+Sources 219 (2012) 204-216; C. R. Birkl et al., J. Power Sources 341 (2017) 373-386.
 """
 
 from __future__ import annotations
@@ -41,6 +48,9 @@ FAMILY = get_family("ecm")
 #: reads 4.14 V full) raised near full by this times SOC^3 [V], so that a 4.2 V
 #: constant-voltage charge ends at C/30 as a real cell's does (its OCV at full ~4.2 V).
 TOP_RAISE_V = 0.07
+
+#: Version of the generator: lives cached by a benchmark are made again when it changes.
+GENERATOR_VERSION = 3
 
 #: Bound on the steps of one constant-voltage phase.
 MAX_CV_STEPS = 2000
@@ -65,7 +75,9 @@ class LifeSpec:
     season_C: float = 6.0
     rest_s: float = 900.0
     charge_C: float = 1.0
-    cv_V: float = 4.2
+    cv_V: float = 4.2               # the routine charge's stop voltage per cell
+    cv: bool = True                 # the routine charge holds it (False: constant current only)
+    test_cv_V: float = 4.2          # the capacity tests' charge (constant current, then voltage)
     cutoff_V: float = 2.5
     test_C: float = 0.2
     noise_V: float = 0.001
@@ -73,6 +85,8 @@ class LifeSpec:
     mission_scale: float = 1.0
     mission_dt_s: float = 2.0
     cv_step_s: float = 10.0
+    ocv_wiggle_V: float = 0.0       # the cell's own curve off the generic one [V]
+    lli_share: float = 0.0          # how far ageing moves the curve (module docstring)
     seed: int = 0
 
 
@@ -91,11 +105,23 @@ def capacity_at(spec: LifeSpec, efc: float) -> float:
     return spec.capacity_Ah * (1.0 - spec.fade_per_efc * efc - spec.knee_per_efc2 * knee ** 2)
 
 
+def cell_ocv(spec: LifeSpec, soc, efc: float) -> np.ndarray:
+    """The cell's open-circuit voltage [V] at ``soc`` after ``efc`` cycles: the generic
+    Li-ion curve raised near full, off it by the cell's own wiggle, and moved by ageing
+    (module docstring)."""
+    soc = np.asarray(soc, dtype=float)
+    fade = 1.0 - capacity_at(spec, efc) / spec.capacity_Ah
+    moved = np.clip(soc - 4.0 * spec.lli_share * fade * soc * (1.0 - soc), 0.0, 1.0)
+    phase = 2 * np.pi * np.random.default_rng(spec.seed + 1000).random()
+    wiggle = spec.ocv_wiggle_V * np.sin(6 * np.pi * soc + phase) * 4 * soc * (1 - soc)
+    return ocv_from_soc(moved, "li-ion") + TOP_RAISE_V * soc ** 3 + wiggle
+
+
 def parameters(spec: LifeSpec, efc: float) -> dict:
     """ECM parameters of the cell at ``efc`` [per cell]."""
     p = FAMILY.defaults()
     soc = 1.0 - OCV_NODES
-    ocv = ocv_from_soc(soc, "li-ion") + TOP_RAISE_V * soc ** 3
+    ocv = cell_ocv(spec, soc, efc)
     p["U_full_V"] = float(ocv[0])
     for name, d in zip(OCV_DROP_NAMES, -np.diff(ocv)):
         p[name] = float(max(d, 0.0))
@@ -135,8 +161,11 @@ class _Logger:
         left = duration - sum(pieces)
         self.go([Step("rest", duration_s=d) for d in (*pieces, left) if d > 0], p, ambient)
 
-    def charge(self, p, ambient):
+    def charge(self, p, ambient, test: bool = False):
+        """A charge to the routine's stop voltage (or the tests' full charge)."""
         spec = self.spec
+        cv_V = spec.test_cv_V if test else spec.cv_V
+        hold = test or spec.cv
         cap = p["C_Ah"]
         i_cc = spec.charge_C * spec.capacity_Ah
         q = self.charge_removed()
@@ -150,7 +179,7 @@ class _Logger:
         calm.update({st.name: np.full(grid_q.size, -i_cc) for st in FAMILY.states
                      if st.kind == "lowpass"}, charge_Ah=grid_q)
         v = FAMILY.voltage(p, calm, -i_cc)
-        over = np.flatnonzero(v >= spec.cv_V)
+        over = np.flatnonzero(v >= cv_V)
         q_cv = float(grid_q[over[0]]) if over.size else 0.0
         t_cc = (q - q_cv) * 3600.0 / i_cc
         if t_cc > 1.0:
@@ -159,10 +188,10 @@ class _Logger:
         # constant voltage: each 10 s the current that holds the charge voltage (the
         # terminal voltage is affine in the current at a given state), until C/30
         i_end = cap / 30.0
-        for _ in range(MAX_CV_STEPS):
+        for _ in range(MAX_CV_STEPS if hold else 0):
             a = float(FAMILY.voltage(p, self.state, 0.0)[0])
             b = a - float(FAMILY.voltage(p, self.state, 1.0)[0])
-            i = max(min((a - spec.cv_V) / b, 0.0), -i_cc)
+            i = max(min((a - cv_V) / b, 0.0), -i_cc)
             if -i < i_end:
                 break
             self.go([Step("profile", profile_time_s=(spec.cv_step_s,),
@@ -187,9 +216,12 @@ def synthetic_life(spec: LifeSpec | None = None) -> Life:
             log.go([Step("current", 0.5 * spec.capacity_Ah, duration_s=1800.0)], p, ambient,
                    max_dt_s=20.0)
             log.rest(spec.rest_s, p, ambient)
-            log.charge(p, ambient)
+            log.charge(p, ambient, test=True)
             log.rest(spec.rest_s, p, ambient)
         if cycle % spec.test_every == 0:
+            if cycle > 0 and (spec.cv_V != spec.test_cv_V or not spec.cv):
+                log.charge(p, ambient, test=True)   # the test starts from a full charge
+                log.rest(spec.rest_s, p, ambient)
             start = log.t0
             q0 = log.charge_removed()
             log.go([Step("current", spec.test_C * spec.capacity_Ah)], p, ambient, max_dt_s=20.0)
@@ -197,7 +229,7 @@ def synthetic_life(spec: LifeSpec | None = None) -> Life:
             tests.append((start, log.t0, delivered, efc))
             efc += delivered / spec.capacity_Ah
             log.rest(spec.rest_s, p, ambient)
-            log.charge(p, ambient)
+            log.charge(p, ambient, test=True)
             log.rest(spec.rest_s, p, ambient)
         q0 = log.charge_removed()
         log.go([Step("power", w * spec.mission_scale, duration_s=d, name=n)
@@ -220,4 +252,5 @@ def synthetic_life(spec: LifeSpec | None = None) -> Life:
     return Life(frame=frame, cycles=pd.DataFrame(rows), tests=tests)
 
 
-__all__ = ["LifeSpec", "Life", "synthetic_life", "capacity_at", "parameters", "MISSION"]
+__all__ = ["GENERATOR_VERSION", "cell_ocv", "LifeSpec", "Life", "synthetic_life", "capacity_at",
+           "parameters", "MISSION"]

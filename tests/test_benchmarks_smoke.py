@@ -95,3 +95,21 @@ def test_one_rate_cache_reuses_a_fit_of_the_same_code(tmp_path):
         bench.CACHE[:] = []
     assert again.to_dict()["parameters"] == first.to_dict()["parameters"]
     assert len(list(tmp_path.rglob("*.json"))) == 1
+
+
+def test_health_matrix_resamples_and_chooses_the_drift_share():
+    import pandas as pd
+
+    matrix = _load("health_matrix")
+    frame = pd.DataFrame({"time_s": [0.0, 166.5, 333.0], "voltage_V": [4.0, 3.9, 3.8],
+                          "current_A": [1.0, 1.0, 0.0], "temperature_C": [25.0] * 3})
+    fine = matrix.resample(frame, 30.0)
+    assert np.allclose(np.diff(fine["time_s"]), 30.0)
+    assert np.interp(83.25, fine["time_s"], fine["voltage_V"]) == np.float64(3.95)
+    rows = pd.DataFrame({"now_Ah": [3.0, 3.0, 3.0], "truth_Ah": [2.9, 3.0, 3.01],
+                         "trend_sd": [0.01] * 3, "drift_unit": [0.3] * 3,
+                         "quantile": [1.96] * 3})
+    # 0.1 Ah off with 0.01 Ah of its own: the drift must give 0.05 Ah, a share of 0.167,
+    # 0.2 on the grid
+    assert matrix.needed_share(rows) == 0.2
+    assert matrix.needed_share(rows.assign(drift_unit=0.0)) == float("inf")

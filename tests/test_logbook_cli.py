@@ -95,7 +95,9 @@ def test_a_pack_that_only_flies_gets_endurance_and_autopilot_settings(capsys, tm
     the events those come from."""
     db = tmp_path / "lb.sqlite"
     flights = sorted((shared_data / FLIGHTS).glob("*.csv"))
-    code, _, err = run(capsys, "logbook", "add", *flights, "--pack", "fpv", "--db", db)
+    # a LiPo pack, said so: its rests read through the LiPo curve
+    code, _, err = run(capsys, "logbook", "add", *flights, "--pack", "fpv", "--chemistry",
+                       "lipo", "--db", db)
     assert code == 0, err
     with dl.Logbook(db) as lb:
         today = lb.pack("fpv").capacity_Ah

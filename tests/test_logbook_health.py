@@ -13,7 +13,16 @@ import pytest
 
 from dischargelab.errors import DataError
 from dischargelab.fleet import InProcessExecutor
-from dischargelab.logbook.forecast import fit_fade, forecast_eol
+from dischargelab.logbook.forecast import (
+    SPAN_SOON,
+    Z_MEASURED,
+    EolForecast,
+    dating,
+    efc_to_measure,
+    fit_fade,
+    forecast_eol,
+    measure_fade,
+)
 from dischargelab.logbook.health import (
     equivalent_full_cycles,
     flag_outliers,
@@ -125,6 +134,40 @@ def test_partial_discharges_cut_at_60_percent_within_3_percent(shared_data, tmp_
     assert reference == pytest.approx(health[0].capacity_Ah)
 
 
+@pytest.mark.parametrize("dated", [True, False])
+def test_partials_from_a_storage_charge_or_a_fresh_rest_within_3_percent(shared_data, tmp_path,
+                                                                        dated):
+    """A discharge from a storage charge (a rest near 3.8 V) run to the cutoff, and one
+    from a full charge whose rest still reads 40 mV high, against the full integral."""
+    from lvm_cut import lvm_storage
+
+    events, truth = [], {}
+    for k, c in enumerate((1, 100, 200, 300)):
+        events += stored(summarise_source(shared_data / CELL_C / f"DischargeCycle{c:03d}.txt"), k)
+    for k, c in enumerate((110, 210, 310)):
+        path = shared_data / CELL_C / f"DischargeCycle{c:03d}.txt"
+        store = tmp_path / f"storage_{c}.txt"
+        truth[store.name] = lvm_storage(path, store, 0.45, dated)
+        fresh = tmp_path / f"fresh_{c}.txt"
+        truth[fresh.name] = lvm_cut(path, fresh, 0.6, dated)
+        lines = fresh.read_text().splitlines(keepends=True)
+        first = next(i for i, line in enumerate(lines) if line.startswith("X_Value")) + 1
+        cols = lines[first].split("\t")
+        cols[2] = f"{float(cols[2]) + 0.04:.6f}"
+        lines[first] = "\t".join(cols)
+        fresh.write_text("".join(lines))
+        events += stored(summarise_source(store), 10 + k) + stored(summarise_source(fresh),
+                                                                   20 + k)
+    health, _, _ = pack_health(events)
+    got = {h.source: h for h in health if h.source in truth}
+    assert len(got) == 6
+    for name, h in got.items():
+        assert h.capacity_Ah == pytest.approx(truth[name], rel=0.03), name
+        lo, hi = h.capacity_interval95
+        assert lo < truth[name] < hi
+    assert got["storage_110.txt"].soc_start == pytest.approx(0.55, abs=0.03)
+
+
 # --------------------------------------------------------------------------- forecast
 
 def test_forecast_of_a_straight_fade_centres_on_its_crossing():
@@ -168,6 +211,54 @@ def test_forecast_from_cycle_220_and_330_covers_the_observed_crossing(shared_dat
         lo, hi = ahead.interval95
         assert lo <= seen[0] <= hi, upto
         assert ahead.eol_efc == pytest.approx(seen[0], rel=0.2), upto
+
+
+def test_a_difference_between_kinds_of_estimate_is_never_fade():
+    """Charges that read 5 % above the full discharges, each kind flat: no fade, though a
+    line through all of them falls at many sigma; the same with a real fade in each kind
+    is measured, and well outside the noise over more than SPAN_SOON EFC."""
+    rng = np.random.default_rng(5)
+    x = np.linspace(0.5, 3.0, 6)
+    kinds = ["charge", "full"] * 3
+    q = np.where(np.array(kinds) == "charge", 6.10, 5.81) + rng.normal(0, 0.003, x.size)
+    tight = dict(low95=q - 0.01, high95=q + 0.01)
+    flat = measure_fade(x, q, kinds=kinds, chemistry="li-ion", **tight)
+    assert not flat.measured and abs(flat.z) < Z_MEASURED
+    assert flat.efc_needed is not None and flat.efc_needed > x[-1]
+    x = np.linspace(0.0, 60.0, 13)
+    kinds = ["charge", "full"] * 6 + ["full"]
+    q = np.where(np.array(kinds) == "charge", 6.10, 5.81) * (1 - 0.001 * x) \
+        + rng.normal(0, 0.005, x.size)
+    fading = measure_fade(x, q, q - 0.02, q + 0.02, kinds, chemistry="li-ion")
+    assert fading.measured and fading.strong and fading.span_efc >= SPAN_SOON
+    assert fading.interval95()[0] < 0.001 < fading.interval95()[1]
+
+
+def test_efc_a_fade_needs_follows_the_slope_variance_of_evenly_spread_estimates():
+    """Without a shared error the span is ``(12 z^2 sigma^2 / (rho r^2))^(1/3)``; a shared
+    error that no span beats leaves it None."""
+    rate, sigma, per_efc = 2.5e-4, 0.01, 2.0
+    closed = (12 * Z_MEASURED ** 2 * sigma ** 2 / (per_efc * rate ** 2)) ** (1 / 3)
+    assert efc_to_measure(rate, sigma, per_efc, 0.0) == pytest.approx(closed, rel=1e-6)
+    assert efc_to_measure(rate, sigma, per_efc, 0.01) > closed
+    assert efc_to_measure(rate, sigma, per_efc, 200.0) is None
+
+
+def test_an_end_of_life_soon_needs_a_strong_fade():
+    """A fade measured at 2.5 sigma gives no end of life whose interval reaches inside 5x
+    today's EFC; one beyond it is given; an unmeasured fade gives none at all."""
+    x = np.linspace(0.0, 10.0, 6)
+    rng = np.random.default_rng(1)
+    q = 3.0 * (1 - 0.002 * x) + rng.normal(0, 0.004, x.size)
+    weak = measure_fade(x, q, q - 0.01, q + 0.01, ["full"] * x.size)
+    weak.z, weak.span_efc = 2.5, 10.0
+    grid = np.array([10.0, 100.0])
+    soon = EolForecast(2.4, 30.0, [20.0, 80.0], grid, grid, grid, grid, 1.0)
+    later = EolForecast(2.4, 300.0, [60.0, None], grid, grid, grid, grid, 1.0)
+    assert dating(weak, soon, 10.0) == "uncertain"
+    assert dating(weak, later, 10.0) == "dated"
+    weak.z = 1.0
+    assert dating(weak, later, 10.0) == "no fade"
 
 
 def test_scaled_parameters_keep_the_curve_shape_in_state_of_charge():

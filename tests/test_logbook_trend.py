@@ -233,3 +233,38 @@ def test_resistance_at_reference_conditions_and_cells_are_used_when_events_give_
     assert len(axes) == 3 and axes[2].get_ylabel() == "cell spread [mV]"
     assert "reference conditions" in axes[1].get_ylabel()
     assert save(axes[0], tmp_path / "h.png").stat().st_size > 10_000
+
+
+def test_an_offset_between_kinds_of_estimate_is_learned_not_read_as_fade():
+    # a pack with full discharges early in its life and charges all along that read 5 %
+    # high (their constant-voltage overshoot): the charges carry the trend after the last
+    # full discharge, on the full discharges' scale
+    rng = np.random.default_rng(3)
+    x_full = np.array([0.0, 5.0, 10.0, 15.0])
+    x_charge = np.linspace(0.0, 100.0, 60)
+    truth = lambda x: 3.0 - 0.002 * x  # noqa: E731
+    y_full = truth(x_full) + rng.normal(0, 0.003, x_full.size)
+    y_charge = 1.05 * truth(x_charge) + rng.normal(0, 0.01, x_charge.size)
+    x = np.r_[x_full, x_charge]
+    y = np.r_[y_full, y_charge]
+    half = np.r_[np.full(x_full.size, 0.005), np.full(x_charge.size, 0.03)]
+    kinds = ["full"] * x_full.size + ["charge"] * x_charge.size
+    s = smooth(x, y, y - half, y + half, kinds=kinds, offset_sd={"charge": 0.06})
+    value, (lo, hi) = s.interval95(100.0)
+    assert lo < truth(100.0) < hi
+    assert abs(value - truth(100.0)) < 0.03          # without the offset: +0.14 Ah
+    assert s.offsets["charge"] == pytest.approx(0.05 * 2.9, abs=0.04)
+    # one kind alone: its offset unknown, the band carries its prior
+    only = smooth(x_charge, y_charge, y_charge - 0.03, y_charge + 0.03,
+                  kinds=["charge"] * x_charge.size, offset_sd={"charge": 0.06})
+    plain = smooth(x_charge, y_charge, y_charge - 0.03, y_charge + 0.03)
+    assert only.at(100.0)[1][0] > 2 * plain.at(100.0)[1][0]
+    assert only.at(100.0)[1][0] == pytest.approx(0.06, rel=0.3)
+
+
+def test_estimates_sharing_one_efc_are_each_counted():
+    x = np.array([0.0, 0.0, 1.0, 1.0, 2.0, 2.0, 3.0, 3.0])
+    y = np.array([3.0, 3.02, 2.99, 3.01, 2.98, 3.0, 2.97, 2.99])
+    s = smooth(x, y, y - 0.01, y + 0.01)
+    assert np.isfinite(s.influence).all() and s.influence.sum() == pytest.approx(1.0)
+    assert s.interval95(3.0)[0] == pytest.approx(2.98, abs=0.01)

@@ -40,6 +40,9 @@ BENCHMARKS = {
     "logbook_pages.py": (["--sizes", "2,3", "--requests", "3", "--workers", "1"], "goals at 3"),
     "health_from_use.py": (["--skip", "cmu", "synthetic", "cellc"], "full-enough flights"),
     "cmu_rewindow.py": ([], "re-windowed"),
+    "health_matrix.py": (["--only", "generic curve", "--cycles", "11", "--cache", "{tmp}"],
+                         "band holds"),
+    "fade_span.py": (["--skip-cmu"], "EFC"),
     # needs Debian's lua5.3 (make lua), as the on-board script tests do
     "onboard.py": (["--quick", "--skip-real"], "largest |DL_TREM - time left|"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
@@ -68,8 +71,8 @@ def test_every_benchmark_is_listed():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(BENCHMARKS))
-def test_benchmark_runs(name, shared_data):
+def test_benchmark_runs(name, shared_data, tmp_path):
     args, expected = BENCHMARKS[name]
-    done = run([REPO / "benchmarks" / name, *args])
+    done = run([REPO / "benchmarks" / name, *(a.replace("{tmp}", str(tmp_path)) for a in args)])
     assert done.returncode == 0, done.stderr[-2000:]
     assert expected in done.stdout

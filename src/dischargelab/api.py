@@ -193,13 +193,16 @@ def predict(battery: Battery | str | Path, *, current: float | None = None,
                            interval=interval)
 
 
-def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int | None = None,
-              seed: int = 0, **options: Any):
+def endurance(battery: Battery | str | Path | None, mission: str | Path, *,
+              draws: int | None = None, seed: int = 0, **options: Any):
     """Fly a mission (TOML file or bundled mission name) and return its result.
 
     Parameters
     ----------
     battery : Battery, preset name, battery-file path or logbook pack (see :func:`load`)
+        None: the battery the mission's ``[battery] source`` names. The battery's cells,
+        chemistry and cutoff are kept; the mission's ``[battery]`` table fills in only
+        what it does not say (:mod:`dischargelab.identity`).
     mission : str or path-like
         Mission file, or a bundled mission's name (``"paper-table5"``, ...).
     draws : int, optional
@@ -215,8 +218,8 @@ def endurance(battery: Battery | str | Path, mission: str | Path, *, draws: int 
     """
     from .mission import load_mission, run_mission
 
-    bat = load(battery)
-    mis = load_mission(mission, battery=bat, **options)
+    mis = load_mission(mission, battery=None if battery is None else load(battery), **options)
+    bat = mis.battery
     if draws is None:
         boot = bat.extra.get("bootstrap") or {}
         draws = len(boot.get("samples", [])) or (100 if bat.covariance is not None else 0)
@@ -243,16 +246,18 @@ def validate(battery: Battery | str | Path,
     list of dischargelab.validate.ValidationCase
     """
     from .predict import default_cutoff
-    from .validate import compare_discharge
+    from .validate import compare_discharge, input_warnings
 
     bat = load(battery)
     cut = default_cutoff(bat, cutoff)["cutoff_cell_V"]
     items = discharges if isinstance(discharges, (list, tuple)) else [discharges]
-    out = []
+    out, loaded = [], []
     for d in items:
         for dis in _as_discharges(d, "all"):
-            out.append(compare_discharge(bat, dis.to_pandas(), dict(dis.meta), cut,
-                                         low_timer_s=low_timer_s))
+            frame, meta = dis.to_pandas(), dict(dis.meta)
+            loaded.append((frame, meta))
+            out.append(compare_discharge(bat, frame, meta, cut, low_timer_s=low_timer_s))
+    input_warnings(bat, loaded, out, cut)
     return out
 
 

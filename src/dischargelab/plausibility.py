@@ -257,6 +257,107 @@ def check_e0(e0_V: float | None, cells_series: int = 1, chemistry: str | None = 
                     f"{low:g}-{high:g} V of a {what}", fix, {"e0_V": suggestion})]
 
 
+#: Cutoff voltages per cell [V] a chemistry's cells are discharged to: below the low end the
+#: cell is over-discharged, above the high end most of its charge is left unused. From
+#: manufacturers' data sheets: LiPo 3.0-3.3 V (RC packs; 2.75 V the cell's absolute minimum),
+#: Li-ion 2.5-3.0 V (e.g. Samsung INR18650-30Q: 2.5 V), LiFePO4 2.0-2.8 V (e.g. A123
+#: ANR26650: 2.0 V; the paper's packs end at 2.5 V).
+CUTOFF_RANGE_V = {"lipo": (2.75, 3.6), "li-ion": (2.5, 3.4), "lifepo4": (2.0, 3.0)}
+
+
+def check_cutoff(cutoff_cell_V: float | None, chemistry: str | None,
+                 source: str = "") -> list[Finding]:
+    """A cutoff per cell [V] outside its chemistry's usual range (:data:`CUTOFF_RANGE_V`)
+    is a warning (a cutoff of another chemistry, or a pack voltage given per cell)."""
+    if cutoff_cell_V is None or chemistry not in CUTOFF_RANGE_V:
+        return []
+    low, high = CUTOFF_RANGE_V[chemistry]
+    if low - 1e-9 <= cutoff_cell_V <= high + 1e-9:
+        return []
+    from .cell import CUTOFF_CELL_VOLTAGE_V
+
+    usual = CUTOFF_CELL_VOLTAGE_V[chemistry]
+    side = "below" if cutoff_cell_V < low else "above"
+    return [Finding("warning", "cutoff", source,
+                    f"a cutoff of {cutoff_cell_V:g} V per cell is {side} the {low:g}-{high:g} V "
+                    f"a {chemistry} cell is discharged to",
+                    f"check the chemistry, or give a {chemistry} cutoff ({{cutoff_cell_V}})",
+                    {"cutoff_cell_V": usual})]
+
+
+#: How far the charge a given current implies (current x the file's duration) may lie from
+#: the cell's capacity. A lithium cell's capacity changes by well under this between C/10
+#: and 4C (the Samsung 30Q set: 2.97 Ah at C/10, 2.90 Ah at 4C; the rate-capacity effect,
+#: paper section 2), so a larger factor means the current is not this file's.
+CHARGE_FACTOR_LIMIT = 1.5
+
+
+def _given_charge(frame, meta):
+    """(source name, current [A], duration [s], charge [Ah]) of a file read with a given
+    current, None for a measured current."""
+    if (meta or {}).get("current_source") != "given" or "current_A" not in frame:
+        return None
+    t = frame["time_s"].to_numpy(dtype=float)
+    amps = float(np.nanmedian(frame["current_A"].to_numpy(dtype=float)))
+    if t.size < 2 or not amps > 0:
+        return None
+    duration = float(t[-1] - t[0])
+    name = Path(str(meta["source"])).name if meta.get("source") else ""
+    return name, amps, duration, amps * duration / 3600.0
+
+
+def _hours(seconds: float) -> str:
+    return f"{seconds / 3600:.3g} h" if seconds >= 5400 else f"{seconds / 60:.3g} min"
+
+
+def check_given_current(loaded, *, capacity_Ah: float | None = None,
+                        cutoff_pack_V: float | None = None) -> list[Finding]:
+    """A current given for files without one (``--current``) against each file's duration.
+
+    The charge it implies (current x the file's duration) is compared with the battery's
+    capacity, else (three files or more) with the median of the files' charges. A file
+    whose charge is more than :data:`CHARGE_FACTOR_LIMIT` times that (or, for a run that
+    ends at the cutoff, less than its inverse) gets a warning naming the file and the
+    current: the current was not this file's.
+
+    Parameters
+    ----------
+    loaded : list of (frame, meta)
+        As read (``meta["current_source"] == "given"`` marks a given current).
+    capacity_Ah : float, optional
+        The pack's capacity [Ah] (``Battery.capacity_Ah``).
+    cutoff_pack_V : float, optional
+        Pack cutoff [V]: a run whose last voltage is within 3 % of it is a full discharge.
+    """
+    rows = [(_given_charge(frame, meta), frame) for frame, meta in loaded]
+    rows = [(g, frame) for g, frame in rows if g is not None]
+    if not rows:
+        return []
+    reference, what = capacity_Ah, "the battery's capacity"
+    if reference is None:
+        if len(rows) < 3:
+            return []
+        reference = float(np.median([g[3] for g, _ in rows]))
+        what = "the other files' median"
+    found = []
+    for (name, amps, duration, charge), frame in rows:
+        ratio = charge / reference
+        ends = True
+        if cutoff_pack_V is not None:
+            ends = float(frame["voltage_V"].to_numpy(dtype=float)[-1]) <= 1.03 * cutoff_pack_V
+        if ratio > CHARGE_FACTOR_LIMIT or (ends and ratio < 1.0 / CHARGE_FACTOR_LIMIT
+                                           and capacity_Ah is not None):
+            right = reference * 3600.0 / duration
+            found.append(Finding(
+                "warning", "given_current", name,
+                f"{amps:.4g} A for its {_hours(duration)} would take {charge:.3g} Ah, "
+                f"x{ratio:.2g} {what} ({reference:.3g} Ah): that current is not this file's "
+                f"(its duration suggests about {right:.3g} A)",
+                "give each file its own current ({current})",
+                {"current": "A1,A2,..."}))
+    return found
+
+
 def check_discharge(frame, meta=None, *, cells_series: int = 1, strings_parallel: int = 1,
                     chemistry: str | None = None) -> list[Finding]:
     """Plausibility of one read discharge (see the module notes for the limits).
@@ -312,6 +413,7 @@ def raise_for(findings, strict: bool = False) -> list[Finding]:
     return [f for f in findings if f.level == "warning"]
 
 
-__all__ = ["Finding", "PlausibilityError", "check_discharge", "check_discharges", "check_e0",
+__all__ = ["Finding", "PlausibilityError", "check_cutoff", "check_discharge", "check_discharges",
+           "check_e0", "check_given_current", "CHARGE_FACTOR_LIMIT", "CUTOFF_RANGE_V",
            "infer_cells", "raise_for", "rest_range", "REST_RANGE_V", "FULL_CHARGE_V",
            "MIN_SPAN_FRACTION", "WARN_BAND_V"]

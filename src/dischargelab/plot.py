@@ -629,6 +629,11 @@ def _health_title(health) -> str:
     fc = health.forecast
     if fc is None:
         return f"{health.pack}: capacity and resistance against equivalent full cycles"
+    if getattr(fc, "status", "dated") == "no fade":
+        return f"{health.pack}: no fade measured yet ({fc.estimates} estimates)"
+    if not fc.shape or fc.bend_odds is None or not np.isfinite(fc.bend_odds):
+        return (f"{health.pack}: a fade measured, not yet enough for an end of life "
+                f"({fc.estimates} estimates)")
     shape = {"line": "no bend", "early": "a fast early fade, then a line",
              "knee": "a knee", "early+knee": "a fast early fade and a knee"}.get(fc.shape,
                                                                                 fc.shape)
@@ -653,7 +658,7 @@ def _plot_forecast(ax, fc, reference):
                     label="capacity trend, 95 % band")
     ax.plot(efc[past], mid[past], color="C0", lw=1.2)
     ahead = efc >= fc.last_efc
-    if ahead.any():
+    if (efc > fc.last_efc).any():  # futures only once an end of life is forecast
         ax.fill_between(efc[ahead], lo[ahead], hi[ahead], color="C1", alpha=0.13, lw=0,
                         label="forecast: median, 95 % of futures")
         ax.plot(efc[ahead], mid[ahead], color="C1", lw=1.2, ls="--")
@@ -664,6 +669,10 @@ def _plot_forecast(ax, fc, reference):
                    label=f"knee at {fc.knee_efc:.0f} EFC (probability "
                          f"{fc.knee_probability:.2f})")
     a, b = fc.eol_efc_interval95
+    if getattr(fc, "status", "dated") in ("no fade", "uncertain"):
+        words = ("no end of life: no fade measured yet" if fc.status == "no fade"
+                 else "no end of life yet: the fade is not measured well enough")
+        ax.plot([], [], " ", label=words)
     if fc.reached:
         ax.axvline(fc.last_efc, color="C3", lw=1.2,
                    label=f"end of life reached: the trend is below it at {fc.last_efc:.0f} EFC")

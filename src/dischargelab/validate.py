@@ -437,6 +437,40 @@ def compare_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
                           voltage_predicted_V=v_pred, prediction=prediction, current_A=i)
 
 
+def input_warnings(battery: Battery, loaded, cases, cutoff_cell_V: float, *,
+                   options: dict | None = None) -> list:
+    """Check the inputs against each other and add each finding to its case's warnings:
+    a given current against the file's duration and the battery's capacity
+    (:func:`dischargelab.plausibility.check_given_current`), the battery's cells and
+    chemistry against each file's voltages, and the cutoff against the chemistry.
+
+    ``loaded`` are the ``(frame, meta)`` pairs the ``cases`` were made from, in order;
+    ``options`` names arguments as command-line options in the fixes (see
+    :meth:`dischargelab.plausibility.Finding.text`).
+    Returns the findings."""
+    from dataclasses import replace
+
+    from .plausibility import check_cutoff, check_discharge, check_given_current
+
+    found = check_given_current(loaded, capacity_Ah=battery.capacity_Ah,
+                                cutoff_pack_V=cutoff_cell_V * battery.cells_series)
+    for frame, meta in loaded:
+        found += [f for f in check_discharge(frame, meta, cells_series=battery.cells_series,
+                                             strings_parallel=battery.strings_parallel,
+                                             chemistry=battery.chemistry)
+                  if f.check in ("cell_count", "cell_voltage")]
+    for finding in found:
+        text = replace(finding, source="").text(options)
+        for case in cases:
+            if Path(str(case.summary.get("file", ""))).name == finding.source:
+                case.summary["warnings"].append(text)
+    cut = check_cutoff(cutoff_cell_V, battery.chemistry)
+    for finding in cut:
+        for case in cases:
+            case.summary["warnings"].append(finding.text(options))
+    return found + cut
+
+
 def validate_discharge(battery, data, meta: dict | None, cutoff_cell_V: float, *,
                        draws: int = DEFAULT_DRAWS, seed: int = 0) -> dict:
     """Endurance and voltage errors of the model on one measured discharge.
@@ -489,13 +523,15 @@ def compare_files(battery, paths, *, cutoff_cell_V: float, columns=None, current
     paths = list(paths)
     if not paths:
         raise DataError("no measured files to validate against")
-    cases = []
+    cases, loaded = [], []
     for k, path in enumerate(paths):
         data, meta = read_discharge(path, columns=columns, current_A=current_A, **read_options)
+        loaded.append((data, meta))
         cases.append(compare_discharge(battery, data, meta, cutoff_cell_V, draws=draws,
                                        seed=seed))
         if progress is not None:
             progress(k + 1, len(paths))
+    input_warnings(battery, loaded, cases, cutoff_cell_V)
     return cases
 
 

@@ -263,9 +263,10 @@ def check_plausible(loaded, pack: dict, strict: bool = False) -> list:
     Errors (and warnings when ``strict``) raise; the warnings are returned for
     :func:`print_data_warnings`.
     """
-    from ..plausibility import check_discharges, raise_for
+    from ..plausibility import check_discharges, check_given_current, raise_for
 
-    return raise_for(check_discharges(loaded, **pack), strict=strict)
+    return raise_for(check_discharges(loaded, **pack) + check_given_current(loaded),
+                     strict=strict)
 
 
 def print_data_warnings(warnings) -> None:
@@ -319,9 +320,16 @@ def cutoff_options(func):
 
 
 def battery_and_cutoff(battery_arg, cells, parallel, cutoff, cutoff_pack):
+    from ..plausibility import check_cutoff
+
     battery = load_battery_arg(battery_arg).with_pack(cells, parallel)
-    return battery, {"cutoff_cell_V": cell_cutoff(battery, cutoff, cutoff_pack),
-                     "cutoff_pack_V": cutoff_pack}
+    per_cell = cell_cutoff(battery, cutoff, cutoff_pack)
+    if cutoff_pack is not None:
+        per_cell_given = cutoff_pack / battery.cells_series
+    else:
+        per_cell_given = per_cell
+    print_data_warnings(check_cutoff(per_cell_given, battery.chemistry))
+    return battery, {"cutoff_cell_V": per_cell, "cutoff_pack_V": cutoff_pack}
 
 
 def cell_cutoff(battery, cutoff, cutoff_pack=None):
@@ -351,7 +359,8 @@ BUG_LINE = "this is a bug in dischargelab; please report it with the command you
 
 #: Library argument names and the options that set them, for error messages.
 OPTION_OF_ARGUMENT = {"force": "--force", "cells_series": "--cells", "e0_V": "--e0",
-                      "units": "--units", "columns": "--columns", "chemistry": "--chemistry"}
+                      "units": "--units", "columns": "--columns", "chemistry": "--chemistry",
+                      "current": "--current", "cutoff_cell_V": "--cutoff"}
 
 
 def cli_message(exc: DischargelabError) -> str:
@@ -394,13 +403,15 @@ def progress_callback(status, what: str):
 
 def validation_cases(battery, paths, cutoff, columns, current, sign, segment, units,
                       status=None, flight_options=None, low_timer_s=None, steps=None):
-    from ..validate import compare_discharge
+    from ..validate import compare_discharge, input_warnings
 
-    return [compare_discharge(battery, data, meta, cutoff, low_timer_s=low_timer_s)
-            for data, meta in read_data_files(paths, columns, current, sign, segment, units,
-                                              status=status, verb="validating",
-                                              flight_options=flight_options, steps=steps,
-                                              choose="all")]
+    loaded = read_data_files(paths, columns, current, sign, segment, units, status=status,
+                             verb="validating", flight_options=flight_options, steps=steps,
+                             choose="all")
+    cases = [compare_discharge(battery, data, meta, cutoff, low_timer_s=low_timer_s)
+             for data, meta in loaded]
+    input_warnings(battery, loaded, cases, cutoff, options=OPTION_OF_ARGUMENT)
+    return cases
 
 
 def executor_options(func):

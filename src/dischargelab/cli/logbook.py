@@ -209,8 +209,10 @@ def health_cmd(name, eol, plot_path, force, db, as_json):
     into the capacity today with its 95 % interval, and the events it comes from.
     Ahead: a trend that may bend (fast early fade, a knee) chosen by evidence
     against a straight line, and the EFC of end of life with a 95 % interval from
-    simulated futures (knees that have not shown yet included). No forecast until
-    three capacities exist.
+    simulated futures (knees that have not shown yet included). No end of life until
+    the fade is told apart from zero ("no fade measured yet", with the EFC a typical
+    fade needs to show), and none inside 5x today's EFC without a fade of 3 sigma
+    over 20 EFC.
 
     \b
     Examples:
@@ -294,17 +296,20 @@ def health_lines(health, name: str) -> list[str]:
                      f"{_num(t['resistance_interval95'][1], 1, 1000)})"
                      f"{_from(t.get('resistance_from'))}")
     if fc is None:
-        lines.append("end of life: no forecast yet (needs three capacities and a reference "
-                     "capacity)")
+        lines.append("end of life: no fade measured yet (no capacity estimate with a "
+                     "reference capacity)")
         return lines + [f"note: {n}" for n in health.notes[1:]]
     shape = {"line": "a straight line", "early": "a fast early fade, then a straight line",
-             "knee": "a knee", "early+knee": "a fast early fade and a knee"}[fc.shape]
+             "knee": "a knee", "early+knee": "a fast early fade and a knee"}.get(fc.shape)
     knee = (f"knee at {fc.knee_efc:.0f} EFC" if fc.knee_efc is not None
             else "no knee in the data yet (the forecast allows one ahead)")
-    lines.append(f"trend: {shape} (odds of a bend against a straight line {fc.bend_odds:.3g}); "
-                 f"{knee}")
+    if shape is not None and fc.status in ("dated", "observed"):
+        lines.append(f"trend: {shape} (odds of a bend against a straight line "
+                     f"{fc.bend_odds:.3g}); {knee}")
     head = f"end of life ({100 * fc.eol:.0f} % = {fc.threshold_Ah:.3f} Ah): "
-    if fc.reached:
+    if fc.status in ("no fade", "uncertain"):
+        lines.append(head + fc.message)
+    elif fc.reached:
         lines.append(head + f"reached: the capacity trend is below it today (EFC "
                             f"{_num(fc.last_efc, 0)})")
     else:

@@ -151,7 +151,8 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
                   draws, seed, plot_path, csv_path, force, as_json):
     """Fly a mission (TOML) on a battery: flight time, max cruise, margin and its interval.
 
-    BATTERY is a battery file from `fit` or a preset name; MISSION a TOML file of
+    BATTERY is a battery file from `fit` or a preset name (leave it out when the
+    mission's [battery] source names one); MISSION a TOML file of
     phases (current, power or flight condition; duration, until cutoff/reserve,
     repeat blocks; one phase may be `stretch = true`). Bundled examples by name:
     paper-table5, fixed-wing-survey, multirotor-hover.
@@ -160,6 +161,7 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
     Examples:
       dischargelab endurance hacker-4100-4s-lifepo4 paper-table5
       dischargelab endurance battery.json mission.toml --reserve 25 --plot flight.png
+      dischargelab endurance quad.toml      # [battery] source = "lco.json" beside it
       dischargelab endurance cell.json mission.toml --cells 4 --parallel 2 --cutoff 3.0
       dischargelab endurance battery.json mission.toml --draws 500 --json
       dischargelab endurance --pack zippy-a paper-table5     # a logbook pack, today
@@ -170,8 +172,11 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
         if mission is not None:
             raise DischargelabError("with --pack NAME give the MISSION alone, not a battery")
         battery, mission = None, battery
-    if battery is None and pack_name is None or mission is None:
-        raise DischargelabError("give BATTERY and MISSION, or --pack NAME and MISSION")
+    elif mission is None and battery is not None:
+        battery, mission = None, battery  # the mission's [battery] source names the battery
+    if mission is None:
+        raise DischargelabError("give MISSION (its [battery] source names the battery), "
+                                "BATTERY and MISSION, or --pack NAME and MISSION")
     guard_outputs([plot_path, csv_path], battery_input(battery or "") + [mission], force,
                   figures=[plot_path])
     if pack_name is not None:
@@ -180,10 +185,10 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
         with Logbook(db, create=False) as lb:
             loaded = lb.pack(pack_name).battery()
     else:
-        loaded = load_battery_arg(battery)
+        loaded = None if battery is None else load_battery_arg(battery)
     plan = load_mission(mission, battery=loaded, cutoff_cell_V=cutoff,
-                        reserve_pct=reserve, ambient_C=ambient)
-    plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
+                        reserve_pct=reserve, ambient_C=ambient, cells_series=cells,
+                        strings_parallel=parallel)
     with err.status("flying the mission", spinner="dots") as status:
         result = run_mission(plan, draws=draws, seed=seed,
                              progress=progress_callback(status, "parameter draws"))
@@ -254,8 +259,8 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
     with err.status("building the report", spinner="dots") as status:
         if mission_path:
             status.update("flying the mission")
-            plan = load_mission(mission_path, battery=bat, cutoff_cell_V=cutoff)
-            plan = plan.with_battery(plan.battery.with_pack(cells, parallel))
+            plan = load_mission(mission_path, battery=bat, cutoff_cell_V=cutoff,
+                                cells_series=cells, strings_parallel=parallel)
             result = run_mission(plan, draws=draws, seed=seed,
                                  progress=progress_callback(status, "parameter draws"))
         if validate_paths:
@@ -295,4 +300,56 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
         print_mission(result)
 
 
-COMMANDS = [demo_cmd, endurance_cmd, report_cmd]
+@click.group("missions")
+def missions_group():
+    """The bundled missions: list them, show one, copy one to a file to edit.
+
+    \b
+    Examples:
+      dischargelab missions list
+      dischargelab missions show paper-table5
+      dischargelab missions copy multirotor-hover quad.toml
+    The keys of a mission file, with units and defaults: docs/mission-format.md.
+    """
+
+
+@missions_group.command("list")
+@json_option
+def missions_list_cmd(as_json):
+    """List the bundled missions (name, title, battery, phases)."""
+    from ..mission import mission_catalogue
+
+    rows = mission_catalogue()
+    if as_json:
+        print_json({"missions": [{k: v for k, v in r.items() if k != "path"} for r in rows]})
+        return
+    out.print(table("Bundled missions", ["name", "title", "battery", "phases"],
+                    [[r["name"], r["title"], r["battery"] or "-", str(r["phases"])]
+                     for r in rows]))
+    out.print("Show one: dischargelab missions show NAME; copy one to edit: "
+              "dischargelab missions copy NAME FILE", markup=False)
+
+
+@missions_group.command("show")
+@click.argument("name")
+def missions_show_cmd(name):
+    """Print a bundled mission's TOML text."""
+    from ..mission import bundled_mission_text
+
+    click.echo(bundled_mission_text(name), nl=False)
+
+
+@missions_group.command("copy")
+@click.argument("name")
+@click.argument("file", type=click.Path(dir_okay=False))
+@force_option
+def missions_copy_cmd(name, file, force):
+    """Copy a bundled mission to FILE to edit (an existing FILE is kept without --force)."""
+    from ..mission import copy_mission
+
+    path = copy_mission(name, file, force=force)
+    out.print(f"copied {name} to {path}; fly it with: dischargelab endurance {path}",
+              markup=False)
+
+
+COMMANDS = [demo_cmd, endurance_cmd, report_cmd, missions_group]

@@ -260,6 +260,9 @@ class OcvCurve:
     capacity_Ah : float or None
         Capacity its state of charge is scaled to [Ah] (the slow discharge's), None for a
         generic curve.
+    spread_V : numpy.ndarray or None
+        A further standard deviation at each ``soc`` [V per cell] (a chemistry not known:
+        half the spread between the curves it may be), in quadrature with ``sd_V``.
     """
 
     soc: np.ndarray
@@ -268,6 +271,29 @@ class OcvCurve:
     source: str
     temperature_C: float | None = None
     capacity_Ah: float | None = None
+    spread_V: np.ndarray | None = None
+
+    def sd_at(self, soc: float) -> float:
+        """Standard deviation of the curve per cell at ``soc`` [V]."""
+        if self.spread_V is None:
+            return float(self.sd_V)
+        return float(np.hypot(self.sd_V, np.interp(soc, self.soc, self.spread_V)))
+
+    @classmethod
+    def unknown(cls) -> OcvCurve:
+        """A 4.2 V pack whose chemistry is not known (neither given nor read from a full
+        discharge): the mean of the generic LiPo and Li-ion curves, half their difference
+        carried as the curve's error at each state of charge (0.22 V apart at 30 %: a
+        LiPo pouch's flat low end against an NMC cylinder's slope)."""
+        from ..ocv import OCV_SOC, generic_ocv
+
+        lipo, _ = generic_ocv("lipo")
+        li_ion, _ = generic_ocv("li-ion")
+        mean = np.maximum.accumulate((0.5 * (lipo + li_ion))[::-1])
+        return cls(soc=OCV_SOC[::-1].astype(float), cell_V=mean,
+                   sd_V=PRIOR_CURVE_SD_CELL_V, spread_V=(0.5 * np.abs(lipo - li_ion))[::-1],
+                   source="the mean of the generic LiPo and Li-ion curves (chemistry not "
+                          "known: give it to narrow the interval)", temperature_C=25.0)
 
     @classmethod
     def prior(cls, chemistry: str | None, rest_cell_V: float | None = None) -> OcvCurve:
@@ -356,7 +382,8 @@ def soc_reading(curve: OcvCurve, reading: dict, cells: int, *,
     r = float(resistance_ohm or 0.0)
     idle = float(reading.get("current_A") or 0.0)
     cell_v = (float(reading["relaxed_V"]) + r * idle) / cells
-    var = (curve.sd_V ** 2 + READING_SD_CELL_V ** 2
+    soc0 = curve.soc_at(cell_v)
+    var = (curve.sd_at(soc0) ** 2 + READING_SD_CELL_V ** 2
            + (float(reading.get("half95_V") or 0.0) / Z95 / cells) ** 2
            + (0.5 * r * abs(idle) / cells) ** 2)
     temp = reading.get("temperature_C")
@@ -591,7 +618,7 @@ def systematic_share(curve: OcvCurve, soc_read: list[float], swing: float,
     fade : float or None
         Capacity lost since the curve was learned, as a share of its capacity [-].
     """
-    var = sum((curve.sd_V / max(curve.slope(s), 1e-6)) ** 2 for s in soc_read)
+    var = sum((curve.sd_at(s) / max(curve.slope(s), 1e-6)) ** 2 for s in soc_read)
     rel = np.sqrt(var) / max(abs(swing), 1e-9)
     return float(np.hypot(rel, OCV_AGEING_SD * max(0.0, fade or 0.0)))
 

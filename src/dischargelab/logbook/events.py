@@ -144,8 +144,16 @@ def gap_limit(time_s) -> float:
 
 
 def split_log(time_s, current_A, *, step_index=None, cycle_index=None,
-              idle_A: float | None = None, gap_s: float | None = None) -> list[Span]:
+              idle_A: float | None = None, gap_s: float | None = None,
+              step_kinds: dict | None = None) -> list[Span]:
     """Events of a log, in order (discharge current positive).
+
+    A tester's file decides its own events: with ``step_kinds`` (the kind of each of the
+    tester's ``(cycle, step)``, from its step table) every step is what the tester says
+    it is, consecutive steps of one kind (a CC then a CV charge) are one event, and the
+    log is not cut at long sample intervals (a tester logging by voltage change writes
+    sparsely while it runs). The current's scale never enters, so a cell in mA or uA
+    splits as one in A does.
 
     Parameters
     ----------
@@ -157,6 +165,8 @@ def split_log(time_s, current_A, *, step_index=None, cycle_index=None,
         Idle threshold [A] (default :func:`idle_threshold`).
     gap_s : float, optional
         Longest sample interval that is not a gap [s] (default :func:`gap_limit`).
+    step_kinds : dict, optional
+        ``{(cycle, step): kind}`` from the tester's step table (with ``step_index``).
 
     Returns
     -------
@@ -168,6 +178,9 @@ def split_log(time_s, current_A, *, step_index=None, cycle_index=None,
     if n == 0:
         return []
     idle = idle_threshold(i) if idle_A is None else float(idle_A)
+    if step_kinds is not None and step_index is not None:
+        return [Span(kind, s, e, st) for kind, s, e, st in
+                _by_tester(i, step_index, cycle_index, step_kinds, idle)]
     gap = gap_limit(t) if gap_s is None else float(gap_s)
     bounds = [0, *(np.flatnonzero(np.diff(t) > gap) + 1).tolist(), n]
     out: list[Span] = []
@@ -212,6 +225,27 @@ def _by_steps(i, steps, cycles, idle) -> list[tuple]:
         else:
             pieces.append([code, a, b, [step]])
     return [(_CODES[c], a, b, tuple(st)) for c, a, b, st in pieces]
+
+
+def _by_tester(i, steps, cycles, kinds: dict, idle) -> list[tuple]:
+    """Runs of the tester's own steps, each of the kind its step table gives."""
+    key = np.asarray(steps).astype(np.int64)
+    cyc = np.zeros_like(key) if cycles is None else np.asarray(cycles).astype(np.int64)
+    change = (np.diff(key) != 0) | (np.diff(cyc) != 0)
+    bounds = [0, *(np.flatnonzero(change) + 1).tolist(), key.size]
+    pieces: list[list] = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        kind = kinds.get((int(cyc[a]), int(key[a])))
+        if kind is None:        # a step the table does not know: by its mean current
+            m = float(np.mean(i[a:b]))
+            kind = "discharge" if m > idle else "charge" if m < -idle else "rest"
+        step = int(key[a])
+        if pieces and pieces[-1][0] == kind:
+            pieces[-1][2] = b
+            pieces[-1][3].append(step)
+        else:
+            pieces.append([kind, a, b, [step]])
+    return [(kind, a, b, tuple(st)) for kind, a, b, st in pieces]
 
 
 def _span_s(t, a: int, b: int) -> float:
@@ -668,12 +702,24 @@ def _load_event(log: LogArrays, spans: list[Span], k: int, rests: dict, ambient,
         sign = -1.0 if sp.kind == "charge" else 1.0
         q = np.concatenate(([0.0], np.cumsum(0.5 * (i_b[1:] + i_b[:-1])
                                              * np.diff(t[lo:hi])))) / 3600.0
-        if sp.kind == "charge":
-            details["charge"]["charged_Ah"] = max(-float(q[-1]), 0.0)
-        else:
-            event["discharged_Ah"] = max(float(q[-1]), 0.0)
+        if not sp.steps:
+            if sp.kind == "charge":
+                details["charge"]["charged_Ah"] = max(-float(q[-1]), 0.0)
+            else:
+                event["discharged_Ah"] = max(float(q[-1]), 0.0)
         event["curve"] = compact_curve(sign * q, log.voltage_V[lo:hi], sign * i_b,
                                        int(min(CURVE_POINTS, hi - lo)))
+    if sp.steps and sp.rows >= 2:
+        # a tester's step starts right after the record before it and ends at its own last
+        # record: its charge is the current of its first record over that first interval
+        # plus the trapezoid over its records, as the tester's counter adds it
+        i_s, t_s = log.current_A[a:b], t[a:b]
+        moved = float(i_s[0] * (t[a] - t[lo])
+                      + np.sum(0.5 * (i_s[1:] + i_s[:-1]) * np.diff(t_s))) / 3600.0
+        if sp.kind == "charge":
+            details["charge"]["charged_Ah"] = max(-moved, 0.0)
+        else:
+            event["discharged_Ah"] = max(moved, 0.0)
     return event
 
 

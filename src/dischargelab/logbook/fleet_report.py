@@ -33,7 +33,8 @@ def pack_summary(job: tuple) -> dict:
         ``capacity_fraction``, ``resistance_ohm`` (today) and ``resistance_basis``,
         ``eol_efc``, ``eol_efc_interval95``, ``efc_left`` (EFC from today to the
         forecast end of life), ``observed`` (end of life already logged),
-        ``threshold_Ah``, ``shape`` and ``knee_efc`` of the trend, ``points`` (per
+        ``threshold_Ah``, ``shape`` and ``knee_efc`` of the trend, ``forecast_status``
+        and ``forecast_note`` (why no end of life is given yet), ``points`` (per
         event: efc, kind, capacity_Ah, capacity_interval95, resistance_ohm, outlier)
         and ``band`` (the capacity trend's 95 % band and the forecast's, or None).
     """
@@ -62,7 +63,10 @@ def fleet_row(h, row: dict) -> dict:
         "eol_efc_interval95": None if f is None else list(f.eol_efc_interval95),
         "efc_left": left, "observed": bool(f is not None and f.observed),
         "threshold_Ah": None if f is None else f.threshold_Ah,
-        "shape": None if f is None else f.shape, "knee_efc": None if f is None else f.knee_efc,
+        "shape": None if f is None or not f.shape else f.shape,
+        "knee_efc": None if f is None else f.knee_efc,
+        "forecast_status": "no fade" if f is None else f.status,
+        "forecast_note": "no fade measured yet" if f is None else f.message,
         "points": points, "band": None if f is None else f.band_points(points=60)})
 
 
@@ -125,7 +129,7 @@ class FleetReport:
                 f"<td>{text['capacity_fraction']}</td>"
                 f"<td>{text['resistance_ohm']} m&Omega;</td>"
                 f"<td>{_e(_shape(r))}</td>"
-                f"<td>{text['eol_efc']}</td><td>{_e(text['eol_efc_interval95'])}</td>"
+                f"<td>{_eol(r)}</td><td>{_e(text['eol_efc_interval95'])}</td>"
                 f"<td>{status}</td><td>{_spark_capacity(r)}</td><td>{_spark_resistance(r)}</td>"
                 "</tr>")
         failed = "".join(f'<p class="warn">{_e(p)}: {_e(reason)}</p>'
@@ -156,6 +160,16 @@ class FleetReport:
 #: How each trend shape reads in the report.
 SHAPES = {"line": "straight", "early": "early fade, then straight", "knee": "knee",
           "early+knee": "early fade and knee"}
+
+
+def _eol(row: dict) -> str:
+    """The end of life, or why there is none yet (no fade measured, or not enough)."""
+    if row.get("eol_efc") is not None:
+        return _n(row["eol_efc"], 0)
+    words = {"no fade": "no fade measured yet", "uncertain": "fade not yet enough"}
+    note = row.get("forecast_note") or ""
+    return (f'<span title="{_e(note)}">{_e(words.get(row.get("forecast_status"), "-"))}'
+            "</span>")
 
 
 def _shape(row: dict) -> str:

@@ -42,6 +42,28 @@ The end of life is where a future first reaches the threshold: the median, and t
 The constants were chosen on seeded synthetic lives with and without knees
 (``benchmarks/forecast.py`` prints the coverage), never on a measured cell.
 
+**Only with evidence** (:func:`measure_fade`). No end of life is dated until the fade
+is told apart from zero: a straight line with one intercept per kind of estimate (full
+discharge, partial, charge, flight: a difference between kinds is an offset, never a
+fade) and one common slope, weighted least squares with each estimate's variance from
+its interval plus a nugget (profiled from the residuals with four or more degrees of
+freedom, else :data:`~.trend.DEFAULT_NUGGET_SHARE` assumed; never below the capacity
+trend's own nugget, so the trend's band counts), the slope's variance
+widened by the residuals' autocorrelation ``(1 + rho) / (1 - rho)`` and by the trend's
+shared error (the part of its band that does not average out, ``s``) as an error of the
+level at each end of the span: ``var(r) += 2 s^2 / span^2``. The fade is measured when
+``r / sd(r) >= Z_MEASURED`` (its two-sided 95 % interval excludes zero). An end of life
+whose 95 % interval reaches inside :data:`SOON_FACTOR` times today's EFC also needs
+``r / sd(r) >= Z_SOON`` over a span of at least :data:`SPAN_SOON` EFC.
+
+Until a fade is measured the forecast says so and when it could be: with ``rho_e``
+estimates per EFC so far, each with a relative scatter ``sigma`` (median of interval and
+nugget), a slope fitted over a span ``S`` of evenly spread estimates has
+``var(r) = 12 sigma^2 / (rho_e S^3) + 2 s^2 / S^2`` (``sum (x - mean)^2 = n S^2 / 12``
+for ``n = rho_e S`` estimates); the EFC needed is the first estimate's EFC plus the
+smallest ``S`` at which a typical fade of the chemistry (:data:`TYPICAL_LIFE_EFC`) is
+``Z_MEASURED`` standard deviations.
+
 References
 ----------
 .. [1] P. M. Attia, A. Bills, F. Brosa Planella, et al., "Review - 'Knees' in
@@ -58,6 +80,9 @@ References
 .. [5] G. Schwarz, "Estimating the dimension of a model", Ann. Stat. 6 (1978) 461-464.
 .. [6] W. Diao, S. Saxena, B. Han, M. Pecht, "Algorithm to determine the knee point on
    capacity fade curves of lithium-ion cells", Energies 12 (2019) 2910.
+.. [7] Y. Preger, H. M. Barkholtz, A. Fresquez, et al., "Degradation of commercial
+   lithium-ion cells as a function of chemistry and cycling conditions",
+   J. Electrochem. Soc. 167 (2020) 120532.
 """
 
 from __future__ import annotations
@@ -94,6 +119,25 @@ HORIZON_FACTOR = 30.0
 
 #: Estimates needed for a forecast.
 MIN_ESTIMATES = 3
+
+#: z of a fade told apart from zero: its two-sided 95 % interval excludes zero.
+Z_MEASURED = 1.959963984540054
+
+#: An end of life whose 95 % interval reaches inside this many times today's EFC ...
+SOON_FACTOR = 5.0
+#: ... needs a fade of at least this many standard deviations ...
+Z_SOON = 3.0
+#: ... measured over estimates spanning at least this many EFC (``benchmarks/fade_span.py``).
+SPAN_SOON = 20.0
+
+#: Typical EFC to 80 % of the capacity new, per chemistry, for the EFC a fade needs to
+#: show (not for dating): LiCoO2/LiPo a few hundred cycles, NMC/NCA 18650 several
+#: hundred to a thousand, LiFePO4 thousands (Preger et al. 2020).
+TYPICAL_LIFE_EFC = {"lipo": 400.0, "li-ion": 800.0, "lifepo4": 3000.0}
+
+#: Relative scatter floor of the fade fit's nugget (below the 0.2-0.3 % of repeated
+#: capacity tests of a real cell).
+NUGGET_FLOOR = 1e-3
 
 
 @dataclass
@@ -306,6 +350,195 @@ def fit_fade(efc, capacity_Ah, low95=None, high95=None, weights=None) -> FadeFit
 
 
 @dataclass
+class FadeEvidence:
+    """How well the capacity estimates measure a fade (module docstring).
+
+    Attributes
+    ----------
+    rate, rate_sd : float or None
+        Fade per EFC as a share of the capacity (positive: losing) and its standard
+        deviation; None when no kind of estimate has two at different EFC.
+    z : float
+        ``rate / rate_sd`` (0 when not measurable).
+    span_efc : float
+        EFC spanned by the estimates that carry the slope.
+    estimates : int
+        Estimates that carry the slope.
+    kinds : list of str
+        Kinds of estimate that carry it.
+    efc_now : float
+        EFC of the last estimate.
+    typical_rate : float
+        A typical fade of the chemistry [share per EFC].
+    efc_needed : float or None
+        EFC at which the present noise would let the typical fade be measured (None
+        when it never would: the shared error is larger than any span can beat).
+    sigma, per_efc, shared, first_efc : float
+        The present noise: each estimate's relative scatter, estimates per EFC, the
+        shared error [share], and the first estimate's EFC (:func:`efc_to_measure`).
+    chemistry : str
+        The chemistry of the typical fade.
+    """
+
+    rate: float | None
+    rate_sd: float | None
+    z: float
+    span_efc: float
+    estimates: int
+    kinds: list
+    efc_now: float
+    typical_rate: float
+    efc_needed: float | None
+    sigma: float = 0.0
+    per_efc: float = 0.0
+    shared: float = 0.0
+    first_efc: float = 0.0
+    chemistry: str = ""
+
+    def efc_for(self, rate: float, z: float, min_span: float = 0.0) -> float | None:
+        """EFC at which a fade ``rate`` would be ``z`` standard deviations with the present
+        noise, over at least ``min_span`` EFC (None: never)."""
+        span = efc_to_measure(rate, self.sigma, self.per_efc, self.shared, z=z)
+        return None if span is None else self.first_efc + max(span, min_span)
+
+    @property
+    def measured(self) -> bool:
+        """The fade's two-sided 95 % interval excludes zero (a loss)."""
+        return self.z >= Z_MEASURED
+
+    @property
+    def strong(self) -> bool:
+        """Measured well outside the noise: :data:`Z_SOON` over :data:`SPAN_SOON` EFC."""
+        return self.z >= Z_SOON and self.span_efc >= SPAN_SOON
+
+    def interval95(self) -> list:
+        """95 % interval of the fade [share per EFC] ([None, None] when not measurable)."""
+        if self.rate is None:
+            return [None, None]
+        return [self.rate - Z_MEASURED * self.rate_sd, self.rate + Z_MEASURED * self.rate_sd]
+
+    def to_dict(self) -> dict:
+        lo, hi = self.interval95()
+        return {"rate_per_efc": self.rate, "rate_sd": self.rate_sd,
+                "rate_interval95": [lo, hi], "z": self.z, "measured": self.measured,
+                "strong": self.strong, "span_efc": self.span_efc,
+                "estimates": self.estimates, "kinds": list(self.kinds),
+                "typical_rate_per_efc": self.typical_rate, "efc_needed": self.efc_needed}
+
+
+def typical_rate(chemistry: str | None) -> float:
+    """A typical fade [share of the capacity per EFC]: 20 % over :data:`TYPICAL_LIFE_EFC`."""
+    return 0.2 / typical_life(chemistry)
+
+
+def typical_life(chemistry: str | None) -> float:
+    """:data:`TYPICAL_LIFE_EFC` of ``chemistry`` (the default chemistry's when unknown)."""
+    from ..ocv import DEFAULT_CHEMISTRY
+
+    return TYPICAL_LIFE_EFC.get(chemistry or DEFAULT_CHEMISTRY,
+                                TYPICAL_LIFE_EFC[DEFAULT_CHEMISTRY])
+
+
+def efc_to_measure(rate: float, sigma: float, per_efc: float, shared: float,
+                   z: float = Z_MEASURED) -> float | None:
+    """Smallest span ``S`` [EFC] of evenly spread estimates over which a fade ``rate``
+    [share per EFC] is ``z`` standard deviations, with ``var = 12 sigma^2 / (per_efc
+    S^3) + 2 shared^2 / S^2`` (module docstring); None when no span up to 1e6 EFC does."""
+    if rate <= 0 or per_efc <= 0:
+        return None
+
+    def enough(span):
+        var = 12 * sigma ** 2 / (per_efc * span ** 3) + 2 * shared ** 2 / span ** 2
+        return rate >= z * np.sqrt(var)
+
+    lo, hi = 1e-3, 1e6
+    if not enough(hi):
+        return None
+    if enough(lo):
+        return lo
+    for _ in range(80):  # bisection in ln(S), bounded
+        mid = np.sqrt(lo * hi)
+        lo, hi = (lo, mid) if enough(mid) else (mid, hi)
+    return float(hi)
+
+
+def measure_fade(efc, capacity_Ah, low95, high95, kinds, *, weights=None,
+                 shared_Ah: float = 0.0, nugget_Ah: float = 0.0,
+                 chemistry: str | None = None) -> FadeEvidence:
+    """The fade so far, one intercept per kind of estimate and one slope (module
+    docstring), and the EFC a typical fade needs to show with the present noise.
+
+    Parameters
+    ----------
+    efc, capacity_Ah, low95, high95 : array_like
+        Estimates (outliers left out) and their 95 % intervals [EFC], [Ah].
+    kinds : sequence of str
+        Each estimate's kind (``"full"``, ``"partial"``, ``"charge"``, ``"flight"``...).
+    weights : array_like, optional
+        Robust weights (0-1) of the estimates (:attr:`.trend.Smoothed.weights`).
+    shared_Ah : float
+        The trend's shared error today (:attr:`.trend.Smoothed.systematic`) [Ah].
+    nugget_Ah : float
+        The trend's scatter between estimates beyond their intervals
+        (:attr:`.trend.Smoothed.nugget`) [Ah]: the fade fit's nugget is at least this.
+    chemistry : str, optional
+        For the typical fade (:data:`TYPICAL_LIFE_EFC`).
+    """
+    from .trend import DEFAULT_NUGGET_SHARE, sd_from_interval
+
+    x = np.asarray(efc, dtype=float)
+    q = np.asarray(capacity_Ah, dtype=float)
+    sd = sd_from_interval(low95, high95)
+    w = np.ones_like(q) if weights is None else \
+        np.clip(np.nan_to_num(np.asarray(weights, float), nan=1.0), 0.05, 1)
+    k = np.asarray([str(v) for v in kinds], dtype=object)
+    ok = np.isfinite(x) & np.isfinite(q) & (q > 0)
+    x, q, sd, w, k = x[ok], q[ok], sd[ok], w[ok], k[ok]
+    typical = typical_rate(chemistry)
+    efc_now = float(x.max()) if x.size else 0.0
+    if x.size == 0:
+        return FadeEvidence(None, None, 0.0, 0.0, 0, [], efc_now, typical, None,
+                            chemistry=chemistry or "")
+    level = float(np.median(q))
+    y, s2 = q / level, (sd / level) ** 2
+    shared = float(shared_Ah) / level
+    carry = [kind for kind in dict.fromkeys(k) if np.ptp(x[k == kind]) > 0]
+    use = np.isin(k, carry)
+    rate = rate_sd = None
+    z, span, nugget2, factor = 0.0, 0.0, DEFAULT_NUGGET_SHARE ** 2, 1.0
+    if carry:
+        xs, ys, ss, ws, ks = x[use], y[use], s2[use], w[use], k[use]
+        order = np.argsort(xs, kind="stable")
+        xs, ys, ss, ws, ks = xs[order], ys[order], ss[order], ws[order], ks[order]
+        design = np.column_stack([(ks == kind).astype(float) for kind in carry]
+                                 + [-(xs - xs.mean())])
+        if xs.size - design.shape[1] >= 4:
+            fit = _fit_point(design, ys, ss, ws)
+            nugget2 = max(fit[4], NUGGET_FLOOR ** 2) if fit is not None else nugget2
+        nugget2 = max(nugget2, (float(nugget_Ah) / level) ** 2)
+        out = _wls(design, ys, ss / ws, nugget2 / ws)
+        if out is not None:
+            coef, cov, resid, var = out
+            zres = resid / np.sqrt(var)
+            rho = float(np.clip(np.corrcoef(zres[:-1], zres[1:])[0, 1], 0.0, 0.9)) \
+                if zres.size >= 6 and np.std(zres) > 0 else 0.0
+            factor = (1 + rho) / (1 - rho)
+            span = float(np.ptp(xs))
+            rate = float(coef[-1])
+            rate_sd = float(np.sqrt(cov[-1, -1] * factor + 2 * shared ** 2 / span ** 2))
+            z = rate / rate_sd if rate_sd > 0 else 0.0
+    sigma = float(np.sqrt(np.median(s2 + nugget2) * factor))
+    per_efc = x.size / max(efc_now - float(x.min()), efc_now, 1.0)
+    need = efc_to_measure(typical, sigma, per_efc, shared)
+    return FadeEvidence(rate=rate, rate_sd=rate_sd, z=float(max(z, 0.0)), span_efc=span,
+                        estimates=int(use.sum()), kinds=list(carry), efc_now=efc_now,
+                        typical_rate=typical,
+                        efc_needed=None if need is None else float(x.min()) + need,
+                        sigma=sigma, per_efc=per_efc, shared=shared, first_efc=float(x.min()),
+                        chemistry=chemistry or "")
+
+
+@dataclass
 class EolForecast:
     """Simulated futures of the capacity and where they reach the threshold.
 
@@ -343,8 +576,13 @@ def _normal_draws(rng, mean, cov, size: int) -> np.ndarray:
 
 
 def simulate(fit: FadeFit, reference_Ah: float, paths: int = PATHS, steps: int = STEPS,
-             seed: int = 0, horizon: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+             seed: int = 0, horizon: float | None = None,
+             start: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Simulated futures of the log-capacity from today (module docstring).
+
+    ``start``: the capacity trend's value and standard deviation at the last estimate
+    [Ah] (:mod:`.trend`, what the health today shows); the futures start there, drawn
+    from it, so that they never contradict it. Without it they start on the fitted shape.
 
     Returns
     -------
@@ -373,6 +611,9 @@ def simulate(fit: FadeFit, reference_Ah: float, paths: int = PATHS, steps: int =
         level[rows] = np.log(fit.scale * now)
         rate[rows] = -(coef @ _slope(one, tau, knee, width, family=fam)[0]) / x_now / now
         knee_seen[rows] = "knee" in fam
+    if start is not None and start[0] > 0:
+        mean, sd = float(start[0]), max(float(start[1]), 0.0)
+        level = np.log(mean) + (sd / mean) * rng.standard_normal(paths)
     # a trend that does not fall today still fades: at least a tenth of the life's mean
     floor = 0.1 * max(float(np.median(np.log(reference_Ah) - level)), 0.0) / x_now
     rate = np.maximum(rate, max(floor, 1e-12))
@@ -401,7 +642,8 @@ def simulate(fit: FadeFit, reference_Ah: float, paths: int = PATHS, steps: int =
 
 
 def forecast_eol(fit: FadeFit, reference_Ah: float, threshold_Ah: float, *,
-                 seed: int = 0, paths: int = PATHS) -> EolForecast:
+                 seed: int = 0, paths: int = PATHS,
+                 start: tuple[float, float] | None = None) -> EolForecast:
     """EFC at which the capacity reaches ``threshold_Ah``: median and 95 % interval.
 
     Parameters
@@ -412,8 +654,10 @@ def forecast_eol(fit: FadeFit, reference_Ah: float, threshold_Ah: float, *,
         The pack's reference capacity [Ah] (where knees start is a share of it).
     threshold_Ah : float
         End of life [Ah], e.g. 0.8 x the reference.
+    start : (float, float), optional
+        Where the futures start (:func:`simulate`).
     """
-    efc, logq = simulate(fit, reference_Ah, paths=paths, seed=seed)
+    efc, logq = simulate(fit, reference_Ah, paths=paths, seed=seed, start=start)
     level = np.log(threshold_Ah)
     below = logq <= level
     crossed = below.any(axis=1)
@@ -437,7 +681,8 @@ def forecast_eol(fit: FadeFit, reference_Ah: float, threshold_Ah: float, *,
 
 
 def forecast_capacity(efc, capacity_Ah, low95, high95, reference_Ah: float,
-                      threshold_Ah: float, weights=None, seed: int = 0):
+                      threshold_Ah: float, weights=None, seed: int = 0,
+                      start: tuple[float, float] | None = None):
     """:func:`fit_fade` then :func:`forecast_eol`: what a pack's health does with its
     capacity estimates (outliers left out) [EFC], [Ah].
 
@@ -449,10 +694,66 @@ def forecast_capacity(efc, capacity_Ah, low95, high95, reference_Ah: float,
     fit = fit_fade(efc, capacity_Ah, low95, high95, weights=weights)
     if fit is None:
         return None
-    return fit, forecast_eol(fit, reference_Ah, threshold_Ah, seed=seed)
+    return fit, forecast_eol(fit, reference_Ah, threshold_Ah, seed=seed, start=start)
 
 
-__all__ = ["FadeFit", "EolForecast", "fit_fade", "forecast_eol", "forecast_capacity",
-           "simulate", "PATHS",
+def dating(evidence: FadeEvidence, ahead: EolForecast | None, efc_now: float) -> str:
+    """Whether an end of life may be given: ``"dated"``, ``"no fade"`` (the fade is not
+    told apart from zero) or ``"uncertain"`` (measured, but its 95 % interval reaches inside
+    :data:`SOON_FACTOR` times ``efc_now`` without a :attr:`FadeEvidence.strong` fade)."""
+    if not evidence.measured:
+        return "no fade"
+    if ahead is None:
+        return "uncertain"
+    low = ahead.interval95[0] if ahead.interval95[0] is not None else ahead.eol_efc
+    if low is not None and low < SOON_FACTOR * efc_now and not evidence.strong:
+        return "uncertain"
+    return "dated"
+
+
+def _pct(rate: float | None) -> str:
+    """A fade per EFC as per cent per 100 EFC."""
+    if rate is None:
+        return "-"
+    v = 1e4 * rate
+    return f"{v:.0f} %" if abs(v) >= 10 else f"{v:.1f} %" if abs(v) >= 1 else f"{v:.2f} %"
+
+
+def evidence_words(evidence: FadeEvidence, status: str, efc_now: float) -> str:
+    """The forecast in words when no end of life is given (``status`` of :func:`dating`)."""
+    from ..ocv import DEFAULT_CHEMISTRY
+
+    chem = evidence.chemistry or DEFAULT_CHEMISTRY
+    life = 0.2 / evidence.typical_rate
+    unset = "" if evidence.chemistry else ", chemistry not set"
+    typical = f"a typical {chem} fade (20 % in {life:.0f} EFC{unset})"
+    if status == "uncertain":
+        need = evidence.efc_for(evidence.rate, Z_SOON, SPAN_SOON)
+        when = "" if need is None else f": about {max(need, efc_now):.0f} EFC"
+        return (f"fade measured ({_pct(evidence.rate)} per 100 EFC, {evidence.z:.1f} sigma over "
+                f"{evidence.span_efc:.0f} EFC) but not yet enough to date an end of life "
+                f"before {SOON_FACTOR * efc_now:.0f} EFC (needs {Z_SOON:g} sigma over "
+                f"{SPAN_SOON:g} EFC{when})")
+    if evidence.rate is None:
+        seen = "one estimate of each kind so far"
+    else:
+        lo, hi = evidence.interval95()
+        seen = (f"fade {_pct(evidence.rate)} per 100 EFC, 95 %: {_pct(lo)} to {_pct(hi)}, "
+                f"over {evidence.span_efc:.1f} EFC")
+    need = evidence.efc_needed
+    if need is None:
+        ahead = (f"{typical} stays hidden in the estimates' shared error at any span: a "
+                 "full discharge from full (a capacity test) now and then would measure it")
+    elif need <= efc_now:
+        ahead = f"the fade is slower than {typical}, which would show by now"
+    else:
+        ahead = f"{typical} would show at about {need:.0f} EFC with the present noise"
+    return f"no fade measured yet ({seen}); {ahead}"
+
+
+__all__ = ["FadeFit", "EolForecast", "FadeEvidence", "fit_fade", "forecast_eol",
+           "forecast_capacity", "measure_fade", "dating", "evidence_words", "efc_to_measure",
+           "typical_rate", "simulate",
+           "PATHS", "Z_MEASURED", "Z_SOON", "SPAN_SOON", "SOON_FACTOR", "TYPICAL_LIFE_EFC",
            "HORIZON_FACTOR", "KNEE_PROBABILITY", "KNEE_ONSET", "KNEE_FACTOR", "SIGMA_RATE",
            "FAMILY_PRIOR"]

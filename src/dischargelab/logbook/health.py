@@ -24,8 +24,10 @@ the database.
   pack's own, learned from its slow full discharge nearest in its life
   (:meth:`~dischargelab.logbook.estimates.OcvCurve.from_discharge`, the drop added
   back measured :data:`SETTLE_S` into the load), else the chemistry's generic curve.
-  A charge that ends in a constant-voltage taper at the pack's full voltage ends
-  full (``FULL_SOC`` of :mod:`.estimates`), as a charger and a fuel gauge define it.
+  A charge that ends in a constant-voltage taper at the chemistry's charge voltage
+  ends full (``FULL_SOC`` of :mod:`.estimates`), as a charger and a fuel gauge define
+  it; one that stops lower (a charger set to 4.0 V, a storage charge) is read through
+  the curve like any other rest.
 * **Partial discharges without a rest after them** (a bench discharge stopped under
   load). The charge drawn divided by the share of the capacity it used, read from the
   pack's full discharges whose voltage curves over the same charge match it best
@@ -85,6 +87,7 @@ from .estimates import (
 )
 from .references import (
     RELAXED_S,
+    SAME_RATE_SHARE,
     SETTLE_S,
     VOLTAGE_SD_CELL_V,
     ReferenceCurve,
@@ -93,6 +96,7 @@ from .references import (
     learned_curve,
     matched_capacity,
     partial_capacity,
+    run_to_empty_capacity,
     settled_drop,
 )
 
@@ -116,8 +120,9 @@ SOON_S = 30.0
 #: capacity nor a full discharge.
 FIRST_ESTIMATES = 5
 
-#: A charge ends full when its highest voltage per cell is within this of the pack's
-#: full voltage (its full discharges' rest voltage, else the chemistry's charge voltage).
+#: A charge ends full when its highest voltage per cell is within this of the chemistry's
+#: charge voltage (:func:`dischargelab.ocv.charge_cell_V`): a charger's regulation and the
+#: leads' drop at the taper's end current, not a lower stop voltage.
 FULL_VOLTAGE_MARGIN_CELL_V = 0.03
 
 #: Standard deviation of a loaded end voltage read through the open-circuit voltage, as a
@@ -536,7 +541,8 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     sampling = details.get("sampling") or {}
     fade = _fade_since(curve, cap, ctx)
     read = [s for s, anchored in ((soc_a, begins_full), (soc_b, ends_full)) if not anchored]
-    h.capacity_systematic = systematic_share(curve, read, soc_a - soc_b, fade)
+    # the curve's ageing after the last full discharge is the trend's (results.DRIFT_SHARE)
+    h.capacity_systematic = systematic_share(curve, read, soc_a - soc_b, None)
     if fade:
         interval = widen(cap, interval, OCV_AGEING_SD * fade)
     h.capacity_Ah, h.capacity_interval95 = cap, interval
@@ -611,12 +617,51 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
                                                 soc_a, sd_a, soc_b, sd_b)
     if cap is None:
         return how + " (read from its loaded end: no rest after it)"
-    h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b,
-                                             _fade_since(curve, cap, ctx))
+    h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b, None)
     h.capacity_Ah, h.capacity_interval95 = cap, interval
     h.capacity_method = "rest before, loaded end"
     h.notes.append(f"no rest after it: its end is the last loaded voltage plus the resistive "
                    f"drop ({drop:.2f} V), read through {curve.source}")
+    return None
+
+
+#: Standard deviation of the state of charge a discharge run to its cutoff ends at, on
+#: the scale of the pack's curve (a full discharge at another rate or temperature ends a
+#: little above or below its empty).
+EMPTY_SOC_SD = 0.02
+
+
+def _empty_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int,
+                        position: int) -> str | None:
+    """Capacity of a load from a rest to its cutoff (a discharge from a storage or part
+    charge run to empty): laid on the pack's full discharges at its rate when it has
+    some (:func:`~.references.run_to_empty_capacity`), else its start read through the
+    curve and its end empty."""
+    details = e.get("details") or {}
+    before = details.get("rest_before")
+    if before is None and e.get("rest_voltage_V") is not None:   # a bench file's rest sample
+        before = {"relaxed_V": float(e["rest_voltage_V"]), "current_A": 0.0,
+                  "temperature_C": e.get("temperature_start_C")}
+    if before is None or not e.get("reaches_knee") or h.full or \
+            not ends_empty(e, n_cells, ctx.chemistry):
+        return "not run to empty from a rest"
+    cap, interval, how = run_to_empty_capacity(e, [(f, c) for _, f, c in ctx.fulls], n_cells)
+    if cap is not None:
+        h.capacity_Ah, h.capacity_interval95, h.capacity_method = cap, interval, how
+        h.soc_start, h.soc_end = float(e.get("discharged_Ah") or 0.0) / cap, 0.0
+        return None
+    curve = ctx.curve_at(position)
+    soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=e.get("resistance_ohm"))
+    q = float(details.get("counted_Ah") or e.get("discharged_Ah") or 0.0)
+    cap, interval, how = capacity_between_rests(q, float(details.get("counted_sd_Ah") or 0.0),
+                                                soc_a, sd_a, 0.0, EMPTY_SOC_SD)
+    if cap is None:
+        return how
+    h.soc_start, h.soc_end = soc_a, 0.0
+    h.capacity_systematic = systematic_share(curve, [soc_a], soc_a, None)
+    h.capacity_Ah, h.capacity_interval95 = cap, interval
+    h.capacity_method = "rest before, run to empty"
+    h.notes.append(f"from a rest at {soc_a:.0%} to the cutoff, read through {curve.source}")
     return None
 
 
@@ -626,6 +671,8 @@ def _capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, position:
         return
     why = _rest_capacity(e, h, ctx, n_cells, position)
     if why is None:
+        return
+    if h.kind != "charge" and _empty_end_capacity(e, h, ctx, n_cells, position) is None:
         return
     if h.kind != "charge" and ctx.fulls and \
             not ((e.get("details") or {}).get("rest_after") and
@@ -692,14 +739,41 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
     from ..ocv import charge_cell_V
 
     top = highest_rest_cell_V(ordered, cells, chemistry)
-    prior = OcvCurve.prior(chemistry, top)
+    from ..ocv import is_lihv
+
+    read = ""
+    if chemistry is None and not is_lihv(None, top):
+        from .chemistry import chemistry_from_loads
+
+        loads = [(e, pack_cells(e, cells, None)) for e in ordered
+                 if e.get("kind") in ("discharge", "flight")]
+        chemistry, read = chemistry_from_loads(loads)
+    # a 4.2 V pack of no known chemistry reads through both generic curves' mean, their
+    # difference carried in the interval (a LiPo curve read on an NMC cell: -27 %)
+    prior = OcvCurve.unknown() if chemistry is None and not is_lihv(None, top) else \
+        OcvCurve.prior(chemistry, top)
+    if read:
+        prior.source = f"{prior.source} (chemistry {read})"
+    # full is the chemistry's charge voltage: a constant-voltage end lower (a charger set
+    # to 4.0 or 4.1 V, a storage charge) leaves the pack part-charged, whatever the pack's
+    # first full discharge started from
     full_cell = charge_cell_V(chemistry, top)
-    if fulls:
-        e = fulls[0][1]
-        if e.get("rest_voltage_V"):
-            full_cell = float(e["rest_voltage_V"]) / pack_cells(e, cells, chemistry)
     return PackContext(cells=cells, chemistry=chemistry, model=model, fulls=fulls,
                        curves=curves, prior=prior, full_cell_V=full_cell, label_Ah=label_Ah)
+
+
+def _rate_kinds(ordered: list[dict], out: list[EventHealth]) -> None:
+    """Full discharges much faster than the pack's slowest ones (a mission run to its
+    cutoff beside C/5 capacity tests) deliver less by the rate-capacity effect: their
+    coulomb count is a kind of estimate of its own."""
+    rates = {k: float(ordered[k].get("mean_current_A") or 0.0) / h.capacity_Ah
+             for k, h in enumerate(out) if h.full and h.capacity_Ah}
+    if not rates:
+        return
+    slowest = min(rates.values())
+    for k, rate in rates.items():
+        if rate > (1.0 + SAME_RATE_SHARE) * slowest:
+            out[k].capacity_method = "coulomb count at a high rate"
 
 
 def highest_rest_cell_V(ordered: list[dict], cells: int | None, chemistry: str | None
@@ -750,9 +824,12 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
             h.resistance_interval95 = [e["resistance_low_ohm"], e["resistance_high_ohm"]]
         if full:
             h.capacity_Ah, h.capacity_interval95 = full_capacity(e)
+            # a full discharge at a high rate (a mission run to its cutoff) delivers less
+            # than a slow one: a kind of estimate of its own
             h.capacity_method = "coulomb count"
             h.soc_start, h.soc_end = 1.0, 0.0
         out.append(h)
+    _rate_kinds(ordered, out)
     ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah)
     charges = [k for k, e in enumerate(ordered) if e.get("kind") == "charge"]
     added = charge_start_corrections([((ordered[k].get("details") or {}).get("charge") or {})

@@ -12,6 +12,12 @@ The client is the only writer of the database. For a list of files and folders i
    the raw file (zlib) in ``blobs``, the source, its events. ``sources.sha256`` and
    ``(events.source_id, events.idx)`` are unique and inserts skip conflicts, so two
    writers adding the same files store each event once.
+5. keeps one copy of the same flights or tests in other bytes (a raw log and its CSV
+   export): a file whose events are those of a file of the pack already stored
+   (:mod:`.duplicates`: kind, duration, samples, charge, voltages, currents, clock) is
+   skipped and reported with the file it repeats. Within one add the richer file is kept
+   (more samples, then more bytes; files are sent largest first), across adds the one
+   stored first stays.
 
 A file a reader cannot use is rejected with one line and the others go in; an
 error that is not a data problem (a bug) is raised after the finished batches are
@@ -28,11 +34,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from sqlalchemy import func as sqlalchemy_func
 from sqlalchemy import select
 
 from ..errors import DischargelabError, LogbookError
 from ..io.prepare import LOGGER_STOP
-from . import schema
+from . import duplicates, schema
 from .summarise import (
     SourceSummary,
     check_reader_options,
@@ -86,6 +93,10 @@ class AddResult:
     notes : list of (str, str)
         ``(file name, note)`` for what a reader dropped from a file that went in (the
         logger's record of zeros that ends a test cut short).
+    copies : list of (str, str)
+        ``(file name, why)`` of files skipped because another file of the pack holds the
+        same flights or tests in other bytes (a raw log and its export); ``why`` names
+        the file kept.
     """
 
     added: list[str] = field(default_factory=list)
@@ -94,12 +105,18 @@ class AddResult:
     events: int = 0
     changed: set[str] = field(default_factory=set)
     notes: list[tuple[str, str]] = field(default_factory=list)
+    copies: list[tuple[str, str]] = field(default_factory=list)
+    #: Sources this add stored: id -> (file name, events), so a richer copy found later in
+    #: the same add replaces its poorer twin.
+    stored_now: dict = field(default_factory=dict, repr=False)
 
     def summary(self) -> str:
         """One line: files added, events, files already there, files rejected."""
         text = f"added {len(self.added)} file(s), {self.events} event(s)"
         if self.skipped:
             text += f"; {len(self.skipped)} already in the logbook"
+        if self.copies:
+            text += f"; {len(self.copies)} skipped as copies of another file"
         if self.rejected:
             text += f"; {len(self.rejected)} rejected"
         return text
@@ -108,6 +125,7 @@ class AddResult:
         """One line per note, skipped file and rejected file, for printing."""
         out = [f"{name}: {note}" for name, note in self.notes]
         out += [f"{name}: already in the logbook" for name in self.skipped]
+        out += [f"{name}: skipped: {why}" for name, why in self.copies]
         out += [f"{Path(path).name}: rejected: {reason}" for path, reason in self.rejected]
         return out
 
@@ -115,6 +133,7 @@ class AddResult:
         return {"added": list(self.added), "skipped": list(self.skipped),
                 "rejected": [{"path": p, "reason": r} for p, r in self.rejected],
                 "events": int(self.events),
+                "copies": [{"file": f, "reason": r} for f, r in self.copies],
                 "notes": [{"file": f, "note": n} for f, n in self.notes]}
 
 
@@ -207,6 +226,55 @@ def event_row(event: dict) -> dict:
             for k, v in row.items()}
 
 
+#: Stored sources compared with a new file at most (those whose first event has its kind
+#: and duration), so a pack of many similar files costs a bounded lookup.
+MAX_CANDIDATES = 50
+
+
+def stored_copy(conn, pack_id: int, mine: list[dict]) -> int | None:
+    """The id of a stored source of the pack whose events are ``mine`` (the content of a new
+    file, :func:`~dischargelab.logbook.duplicates.content`), or None."""
+    if not mine or mine[0].get("duration_s") is None:
+        return None
+    e = schema.events
+    first = mine[0]
+    d = float(first["duration_s"])
+    slack = duplicates.ABS_TOL["duration_s"] + duplicates.REL_TOL * abs(d)
+    found = conn.execute(select(e.c.source_id).where(
+        e.c.pack_id == pack_id, e.c.kind == first["kind"],
+        e.c.duration_s.between(d - slack, d + slack)).distinct()
+        .order_by(e.c.source_id).limit(MAX_CANDIDATES)).scalars().all()
+    for sid in found:
+        rows = conn.execute(select(*[e.c[n] for n in duplicates.FIELDS])
+                            .where(e.c.source_id == sid)).mappings()
+        if duplicates.same_content(mine, duplicates.content([dict(r) for r in rows])):
+            return int(sid)
+    return None
+
+
+def source_size(conn, source_id: int) -> tuple[str, int, int]:
+    """``(file name, bytes, samples of its load events)`` of a stored source."""
+    s, e = schema.sources, schema.events
+    name, size = conn.execute(select(s.c.file_name, s.c.size_bytes)
+                              .where(s.c.id == source_id)).one()
+    samples = conn.execute(select(sqlalchemy_func.sum(e.c.samples)).where(
+        e.c.source_id == source_id, e.c.kind.in_(duplicates.LOAD_KINDS))).scalar()
+    return str(name), int(size), int(samples or 0)
+
+
+def drop_source(conn, source_id: int) -> None:
+    """Remove a stored source, its events and its bytes (a poorer copy of a file this add
+    stores instead)."""
+    s, e = schema.sources, schema.events
+    ids = select(e.c.id).where(e.c.source_id == source_id)
+    conn.execute(schema.models.update().where(schema.models.c.reference_event_id.in_(ids))
+                 .values(reference_event_id=None))
+    conn.execute(e.delete().where(e.c.source_id == source_id))
+    sha = conn.execute(select(s.c.sha256).where(s.c.id == source_id)).scalar_one()
+    conn.execute(s.delete().where(s.c.id == source_id))
+    conn.execute(schema.blobs.delete().where(schema.blobs.c.sha256 == sha))
+
+
 def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
                     result: AddResult) -> None:
     """Store ``(summary, pack, original path)`` items in one transaction (the raw file
@@ -225,7 +293,29 @@ def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
     def work(conn) -> tuple[list, list, int, set]:
         ids = pack_ids(conn, [pack for _, pack, _ in ordered])
         added, skipped, events, changed = [], [], 0, set()
+        copies: list = []                   # (file skipped, why)
+        replaced: dict = {}                 # source id -> (file name, events) dropped
+        now = dict(stored_now)              # sources this add stored, as the batch goes
         for summary, pack, path in ordered:
+            if conn.execute(select(schema.sources.c.id).where(
+                    schema.sources.c.sha256 == summary.sha256)).scalar() is not None:
+                skipped.append(summary.file_name)   # another writer stored it first
+                continue
+            mine = duplicates.content(summary.events)
+            twin = stored_copy(conn, ids[pack], mine)
+            if twin is not None:
+                twin_name, twin_size, twin_samples = source_size(conn, twin)
+                richer = duplicates.richness(sum(int(e.get("samples") or 0) for e in mine),
+                                             summary.size_bytes) \
+                    > duplicates.richness(twin_samples, twin_size)
+                if twin in now and richer:
+                    drop_source(conn, twin)
+                    replaced[twin] = now.pop(twin)
+                    copies.append((twin_name, duplicates.reason(summary.file_name, len(mine))))
+                    changed.add(pack)
+                else:
+                    copies.append((summary.file_name, duplicates.reason(twin_name, len(mine))))
+                    continue
             if summary.raw_zlib:          # else only the path is recorded (keep_raw=False)
                 conn.execute(_insert(conn, schema.blobs).values(
                     sha256=summary.sha256, compression="zlib", size_bytes=summary.size_bytes,
@@ -245,15 +335,23 @@ def write_summaries(engine, batch: list[tuple[SourceSummary, str, str | None]],
             if rows:
                 conn.execute(schema.events.insert(), rows)
             added.append(summary.file_name)
+            now[source_id] = (summary.file_name, len(rows))
             events += len(rows)
             changed.add(pack)
         bump_versions(conn, [ids[pack] for pack in changed])
-        return added, skipped, events, changed
+        return added, skipped, events, changed, copies, replaced, now
 
-    added, skipped, events, changed = schema.write(engine, work)
+    stored_now = result.stored_now
+    added, skipped, events, changed, copies, replaced, now = schema.write(engine, work)
     result.added += added
-    result.skipped += skipped
     result.events += events
+    for name, count in replaced.values():       # a poorer copy stored earlier in this add
+        if name in result.added:
+            result.added.remove(name)
+            result.events -= count
+    result.stored_now = now
+    result.copies += copies
+    result.skipped += skipped
     result.changed.update(changed)
     stored = set(added)
     result.notes += [(summary.file_name, note) for summary, _, _ in ordered
@@ -290,7 +388,9 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
     done = total - len(hashed)
     if progress is not None and done:
         progress(done, total, f"{done} already in the logbook")
-    by_path = {str(path): (path, pack_name, sha) for path, pack_name, sha in hashed.values()}
+    # largest first: of two copies of the same flights, the richer is usually stored first
+    largest = sorted(hashed.values(), key=lambda item: (-item[0].stat().st_size, str(item[0])))
+    by_path = {str(path): (path, pack_name, sha) for path, pack_name, sha in largest}
     task = functools.partial(summarise_source, options=options, keep_raw=keep_raw)
     executor = executor or InProcessExecutor()
     batch: list = []

@@ -114,6 +114,11 @@ def partial_capacity(event: dict, ref: ReferenceCurve, cells: int
     """Capacity [Ah] of a partial discharge or flight from the reference curve."""
     sd = VOLTAGE_SD_CELL_V * cells
     r_now = event.get("resistance_ohm")
+    rest, top = event.get("rest_voltage_V"), ref.event.get("rest_voltage_V")
+    if r_now is not None and rest is not None and top is not None and rest > top + sd:
+        # a rest above the full discharge's own: a charge still relaxing, whose excess the
+        # first load step would count as resistance (and move the end: +8 % at 40 mV)
+        r_now = None
     curve = event["curve"]
     if event.get("rest_voltage_V") is not None:
         start = ref.place(event["rest_voltage_V"], ref.ocv, sd)
@@ -229,3 +234,70 @@ def learned_curve(event: dict, capacity_Ah: float, cells: int, chemistry: str | 
 __all__ = ["ReferenceCurve", "partial_capacity", "curve_match", "matched_capacity",
            "learned_curve", "is_slow", "settled_drop", "VOLTAGE_SD_CELL_V", "RELAXED_S",
            "MIN_SHARE", "MATCH_REFERENCES", "SLOW_C_RATE", "SETTLE_S"]
+
+
+#: A full discharge is laid on a run to empty when their mean currents agree within this
+#: share (the rate moves where a discharge ends).
+SAME_RATE_SHARE = 0.25
+
+#: Capacities tried when laying a run to empty on a full discharge, as shares of the
+#: charge the run delivered (from a start at full to one at 10 % charge).
+_SCALES = 1.0 / np.linspace(1.0, 0.1, 361)
+
+
+def _tail_fit(q, v, total, ref: dict, ref_cap: float, cells: int) -> tuple[float, float]:
+    """The capacity [Ah] at which a run to empty's loaded curve, counted back from its
+    end, lies best on a full discharge's (both at one rate, by state of charge), and the
+    rms [V per cell] left."""
+    rc = ref.get("curve") or {}
+    rq = np.asarray(rc.get("charge_Ah") or [], dtype=float)
+    rv = np.asarray(rc.get("voltage_V") or [], dtype=float) / cells
+    soc_ref = 1.0 - rq / ref_cap
+    order = np.argsort(soc_ref)
+    soc_ref, rv = soc_ref[order], rv[order]
+    left = total - q
+    best = (np.inf, np.nan)
+    for cap in total * _SCALES:
+        soc = left / cap
+        ok = soc <= soc_ref[-1]
+        if ok.sum() < 5:
+            continue
+        rms = float(np.sqrt(np.mean((v[ok] - np.interp(soc[ok], soc_ref, rv)) ** 2)))
+        best = min(best, (rms, float(cap)))
+    return best[1], best[0]
+
+
+def run_to_empty_capacity(event: dict, refs: list[tuple[dict, float]], cells: int
+                          ) -> tuple[float | None, list | None, str]:
+    """Capacity of a discharge run from part charge to its cutoff: its loaded curve,
+    counted back from its end (empty at that rate), laid on the full discharges at the
+    same rate (:data:`SAME_RATE_SHARE`) by state of charge; the capacity that fits best
+    over its curve after :data:`SETTLE_S` (the start's polarisation left out), weighted
+    ``1 / rms^2`` over the :data:`MATCH_REFERENCES` that fit best. The 95 % interval: the
+    spread between them and the fit of the curve moved by +-2 :data:`VOLTAGE_SD_CELL_V`."""
+    c = event.get("curve") or {}
+    q = np.asarray(c.get("charge_Ah") or [], dtype=float)
+    v = np.asarray(c.get("voltage_V") or [], dtype=float) / cells
+    total = float(event.get("discharged_Ah") or (q[-1] if q.size else 0.0))
+    current = float(event.get("mean_current_A") or 0.0)
+    same = [(e, cap) for e, cap in refs
+            if abs(float(e.get("mean_current_A") or 0.0) - current) <= SAME_RATE_SHARE * current]
+    if q.size < 10 or total <= 0 or not same:
+        return None, None, "no full discharge at its rate to lay it on"
+    keep = q >= current * SETTLE_S / 3600.0
+    if keep.sum() < 5:
+        return None, None, "too short to lay on a full discharge"
+    fits = sorted((_tail_fit(q[keep], v[keep], total, e, cap, cells) + (e, cap)
+                   for e, cap in same), key=lambda f: f[1])[:MATCH_REFERENCES]
+    fits = [f for f in fits if np.isfinite(f[0])]
+    if not fits:
+        return None, None, "its curve lies on no full discharge"
+    w = np.array([1.0 / max(f[1], 1e-4) ** 2 for f in fits])
+    caps = np.array([f[0] for f in fits])
+    value = float(w @ caps / w.sum())
+    moved = [_tail_fit(q[keep], v[keep] + s * 2 * VOLTAGE_SD_CELL_V, total, e, cap, cells)[0]
+             for s in (-1.0, 1.0) for _, _, e, cap in fits[:1]]
+    low = min(float(caps.min()), *moved)
+    high = max(float(caps.max()), *moved)
+    return value, [low, high], (f"run to empty, laid on {len(fits)} full discharge(s) at its "
+                                "rate")

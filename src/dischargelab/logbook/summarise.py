@@ -84,6 +84,30 @@ READER_OPTIONS = ("columns", "current_A", "sign", "units", "delimiter", "header"
 _CYCLE = re.compile(r"cycle[\s_\-]*0*(\d{1,5})(?!\d)", re.IGNORECASE)
 
 
+#: A date and time in a file name (``2020_01_21_20_55``, ``20200121-205530``,
+#: ``2020-01-21T20.55``): year, month, day, hour, minute, optional seconds. A date alone
+#: (``2020-01-21``) is read at midnight.
+_NAME_CLOCK = re.compile(r"(?<!\d)(20\d\d|19\d\d)[-_.]?(\d\d)[-_.]?(\d\d)"
+                         r"(?:[T_\- ]?(\d\d)[-_.:h]?(\d\d)(?:[-_.:m]?(\d\d))?)?(?!\d)")
+
+
+def name_clock(name) -> datetime | None:
+    """The date and time a file name carries (loggers and ground-station apps name their
+    files by when they started), or None; the last such stamp in the name counts."""
+    found = None
+    for match in _NAME_CLOCK.finditer(Path(str(name)).stem):
+        parts = [int(g) if g else 0 for g in match.groups()]
+        try:
+            found = datetime(*parts)
+        except ValueError:
+            continue
+    return found
+
+
+#: Said once per file whose events are dated by its name.
+NAME_CLOCK_NOTE = "clock time from the file name (the file records no date)"
+
+
 @dataclass
 class SourceSummary:
     """What one source file holds, small enough to send between processes.
@@ -230,7 +254,7 @@ def _summarise_path(path: Path, name: str, data: bytes, options: dict,
     events = None
     if whole is not None and str(whole_meta.get("format")) not in FLIGHT_FORMATS \
             and len(whole) >= 2:
-        events = _long_log_events(whole, whole_meta)
+        events = _long_log_events(whole, whole_meta, name)
     if events is not None:
         fmt = str(whole_meta.get("format", "unknown"))
         notes = list(whole_meta.get("notes", []))
@@ -247,37 +271,43 @@ def _summarise_path(path: Path, name: str, data: bytes, options: dict,
             cycle = int(match.group(1))
         events = []
         for index, (frame, meta) in enumerate(reads):
-            event = summarise_event(frame, meta, whole, whole_meta)
+            event = summarise_event(frame, meta, whole, whole_meta, name=name)
             event["index"] = index
             event["kind"] = "flight" if fmt in FLIGHT_FORMATS else "discharge"
             event["cycle"] = meta.get("cycle", cycle)  # a tester's step knows its cycle
             events.append(event)
         notes = list(dict.fromkeys(n for _, meta in reads for n in meta.get("notes", [])))
+    if any(e.get("start_time") for e in events) and name_clock(name) is not None \
+            and _start_time(dict(whole_meta or {}, time_offset_s=0.0)) is None:
+        notes.append(NAME_CLOCK_NOTE)
     return SourceSummary(sha256=sha256_bytes(data), file_name=name, size_bytes=len(data),
                          format=fmt, notes=notes, events=events, options=options,
                          raw_zlib=zlib.compress(data, RAW_ZLIB_LEVEL) if keep_raw else b"")
 
 
-def _long_log_events(whole, whole_meta: dict) -> list[dict] | None:
+def _long_log_events(whole, whole_meta: dict, name: str | None = None) -> list[dict] | None:
     """The events of a long log (a tester's steps, or charges among the discharges), or
     None when the file is read by its discharge segments."""
     t = whole["time_s"].to_numpy(dtype=float)
     i = whole["current_A"].to_numpy(dtype=float)
     steps = whole["step_index"].to_numpy() if "step_index" in whole else None
     cycles = whole["cycle_index"].to_numpy() if "cycle_index" in whole else None
-    spans = split_log(t, i, step_index=steps, cycle_index=cycles)
+    table = whole_meta.get("steps") if steps is not None else None
+    kinds = None if not table else {(int(s["cycle"]), int(s["step"])): s["kind"] for s in table}
+    spans = split_log(t, i, step_index=steps, cycle_index=cycles, step_kinds=kinds)
     if not is_long_log(spans, t, i, steps):
         return None
     offset = float(whole_meta.get("time_offset_s") or 0.0)
 
     def start_time_of(time_s: float) -> str | None:
-        return _start_time(dict(whole_meta, time_offset_s=offset + time_s))
+        return _start_time(dict(whole_meta, time_offset_s=offset + time_s), name)
 
     return log_events(whole, spans, start_time_of=start_time_of, cells=whole_meta.get("cells"))
 
 
-def _start_time(meta: dict) -> str | None:
-    """Clock time of the load start (ISO 8601), when the file records one."""
+def _start_time(meta: dict, name: str | None = None) -> str | None:
+    """Clock time of the load start (ISO 8601), when the file records one, else from the
+    date and time in the file's name (:func:`name_clock`) when ``name`` is given."""
     offset = float(meta.get("time_offset_s") or 0.0)
     header = meta.get("lvm_header") or {}
     stamp = None
@@ -296,12 +326,15 @@ def _start_time(meta: dict) -> str | None:
             stamp = datetime.fromisoformat(str(meta["start_time"]))
         except ValueError:
             stamp = None
+    elif name is not None:
+        stamp = name_clock(name)
     if stamp is None:
         return None
     return (stamp + timedelta(seconds=offset)).isoformat(timespec="seconds")
 
 
-def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = None) -> dict:
+def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = None,
+                    name: str | None = None) -> dict:
     """The numbers of one discharge or flight (see the module docstring).
 
     Parameters
@@ -311,6 +344,8 @@ def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = Non
     whole, whole_meta : DataFrame, dict, optional
         The same file read with ``segment="none"`` (every row), for the rests on either
         side of the load (and what they read, in ``details``).
+    name : str, optional
+        The file's name: its date and time date the event when the file records none.
     """
     log = LogArrays.from_frame(frame)
     around = _rests_around(meta, whole, whole_meta)
@@ -328,7 +363,7 @@ def summarise_event(frame, meta: dict, whole=None, whole_meta: dict | None = Non
         if "ambient_temperature_C" in frame else None
     event = load_figures(log, rest=rest, after=after, ambient_C=ambient)
     details["resistance_method"] = event.pop("resistance_method")
-    event.update(start_time=_start_time(meta), cells=meta.get("cells") or _gauge_cells(whole),
+    event.update(start_time=_start_time(meta, name), cells=meta.get("cells") or _gauge_cells(whole),
                  segment=meta.get("segment"), details=details)
     return event
 

@@ -35,6 +35,14 @@ today's value, elsewhere the running mean over the :data:`SYSTEMATIC_WINDOW` nea
 estimates on each side. Without it ~1,000 estimates read through one
 curve make a band of +-1 % that misses the truth by 4 % (the CMU eVTOL cells).
 
+Kinds of estimate: estimates made differently (a charge, a load between two rests, a full
+discharge) may each sit off the values' scale by an offset of their own kind. Each kind
+given an ``offset_sd`` is one more state, constant over the life, with that prior standard
+deviation: ``estimate_k = level(x_k) + offset_kind(k) + e_k``. Where kinds overlap the
+offsets are learned from the data; where the scale's own kind is missing they stay at their
+prior, and the level's variance carries it (a difference between kinds is never a trend).
+Estimates at one EFC are each an observation.
+
 Outliers: the errors are taken as Student's t with :data:`T_DOF` degrees of freedom,
 fitted by iteratively reweighting each event's variance (the EM algorithm of the
 t model: weight ``(nu + 1) / (nu + r^2)`` for a standardised residual ``r``), so an
@@ -56,7 +64,7 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
@@ -138,6 +146,8 @@ class Smoothed:
     n: int
     quantile: float = Z95
     systematic: float = 0.0
+    offsets: dict = field(default_factory=dict)
+    offsets_at_last: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     def band(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper 95 % band at :attr:`efc`."""
@@ -175,7 +185,8 @@ class Smoothed:
         return {"efc": self.efc[idx].tolist(), "value": self.level[idx].tolist(),
                 "sd": self.level_sd[idx].tolist(), "lo": lo[idx].tolist(),
                 "hi": hi[idx].tolist(), "quantile": self.quantile, "drift": self.drift,
-                "nugget": self.nugget, "estimates": self.n, "systematic": self.systematic}
+                "nugget": self.nugget, "estimates": self.n, "systematic": self.systematic,
+                "offsets": dict(self.offsets)}
 
     @classmethod
     def from_dict(cls, d: dict) -> Smoothed:
@@ -190,7 +201,8 @@ class Smoothed:
                    drift=float(d.get("drift") or 0.0), nugget=float(d.get("nugget") or 0.0),
                    weights=np.ones(0), influence=np.ones(0), n=int(d.get("estimates") or 0),
                    quantile=float(d.get("quantile") or Z95),
-                   systematic=float(d.get("systematic") or 0.0))
+                   systematic=float(d.get("systematic") or 0.0),
+                   offsets=dict(d.get("offsets") or {}))
 
 
 def sd_from_interval(low95, high95) -> np.ndarray:
@@ -215,87 +227,122 @@ def _floor2(x, y) -> float:
     return (max(abs(float(y[-1] - y[0])), float(np.std(y))) / span) ** 2
 
 
-def _filter_loglik(x, y, r, w, q, nugget2):
+def _design(kinds, n: int) -> np.ndarray:
+    """Observation rows ``h`` (n x D): the level, the rate (never observed) and one offset
+    per kind other than the reference (index 0 of ``kinds``' codes)."""
+    codes = np.zeros(n, dtype=int) if kinds is None else np.asarray(kinds, dtype=int)
+    k = int(codes.max()) if codes.size else 0
+    h = np.zeros((n, 2 + k))
+    h[:, 0] = 1.0
+    for j in range(1, k + 1):
+        h[codes == j, 1 + j] = 1.0
+    return h
+
+
+def _start(x, y, r, h, offset_var):
+    """Start mean and covariance: a diffuse level and rate, each offset its prior."""
+    big, big_rate = _diffuse(x, y, r)
+    d = h.shape[1]
+    m = np.zeros(d)
+    m[0] = y[0]
+    p = np.zeros((d, d))
+    p[0, 0], p[1, 1] = big, big_rate
+    for j in range(2, d):
+        p[j, j] = offset_var[j - 2]
+    return m, p
+
+
+def _filter_loglik(x, y, r, w, q, nugget2, h, offset_var):
     """Log-likelihood of the local linear trend for arrays of ``q`` and ``nugget2``
     (vectorised over them); ``r`` holds each estimate's own variance, ``w`` its weight
-    (its error variance is ``(r + nugget2) / w``)."""
+    (its error variance is ``(r + nugget2) / w``), ``h`` its observation row."""
     q = np.asarray(q, dtype=float)
     nugget2 = np.asarray(nugget2, dtype=float)
-    big, big_rate = _diffuse(x, y, r)
-    m0 = np.full(q.shape, y[0])
-    m1 = np.zeros(q.shape)
-    p00 = np.full(q.shape, big)
-    p01 = np.zeros(q.shape)
-    p11 = np.full(q.shape, big_rate)
-    ll = np.zeros(q.shape)
+    g = q.size
+    m0, p0 = _start(x, y, r, h, offset_var)
+    m = np.tile(m0, (g, 1))
+    p = np.tile(p0, (g, 1, 1))
+    ll = np.zeros(g)
     floor2, span = _floor2(x, y), max(float(np.ptp(x)), 1e-9)
     prev = x[0]
     for k in range(x.size):
         d = x[k] - prev
         prev = x[k]
         if d > 0:
-            qk = q * (m1 * m1 + floor2) / span
-            m0 = m0 + d * m1
-            p00, p01 = (p00 + 2 * d * p01 + d * d * p11 + qk * d ** 3 / 3,
-                        p01 + d * p11 + qk * d * d / 2)
-            p11 = p11 + qk * d
-        s = p00 + (r[k] + nugget2) / w[k]
-        v = y[k] - m0
+            qk = q * (m[:, 1] ** 2 + floor2) / span
+            m[:, 0] += d * m[:, 1]
+            # F P F' with F = [[1, d], [0, 1]] on the level and rate, identity on offsets
+            p[:, 0, :] += d * p[:, 1, :]
+            p[:, :, 0] += d * p[:, :, 1]
+            p[:, 0, 0] += qk * d ** 3 / 3
+            p[:, 0, 1] += qk * d * d / 2
+            p[:, 1, 0] += qk * d * d / 2
+            p[:, 1, 1] += qk * d
+        hk = h[k]
+        ph = p @ hk                                   # (g, D)
+        s = ph @ hk + (r[k] + nugget2) / w[k]
+        v = y[k] - m @ hk
         if k >= 2:
             ll -= 0.5 * (np.log(2 * np.pi * s) + v * v / s)
-        g0, g1 = p00 / s, p01 / s
-        m0, m1 = m0 + g0 * v, m1 + g1 * v
-        p00, p01, p11 = p00 - g0 * p00, p01 - g0 * p01, p11 - g1 * p01
-    return ll, (m0, m1, p00, p01, p11)
+        gain = ph / s[:, None]
+        m += gain * v[:, None]
+        p -= gain[:, :, None] * ph[:, None, :]
+    return ll, (m, p)
 
 
-def _smooth(x, y, r, w, q, nugget2, grid):
-    """Kalman filter and RTS smoother at the union of ``x`` (observed) and ``grid``.
+def _smooth(x, y, r, w, q, nugget2, grid, h, offset_var):
+    """Kalman filter and RTS smoother at the union of ``x`` (observed; several estimates
+    may share one EFC) and ``grid``.
 
-    Returns the points, the smoothed means and covariances, and the weight of each
-    estimate in the last point's level (the filter is linear in the estimates once its
-    gains are set: ``level_last = influence @ y``)."""
+    Returns the points, the smoothed means and covariances, the weight of each estimate
+    in the last point's level (the filter is linear in the estimates once its gains are
+    set: ``level_last = influence @ y``) and each estimate's squared standardised
+    one-step-ahead error."""
     pts = np.union1d(x, grid)
-    obs = {float(v): k for k, v in enumerate(x)}
-    n = pts.size
-    big, big_rate = _diffuse(x, y, r)
-    m = np.array([y[0], 0.0])
-    p = np.diag([big, big_rate])
-    c0, c1 = np.zeros(x.size), np.zeros(x.size)  # level and rate as weights of the y's
-    c0[0] = 1.0
-    surprise = np.zeros(x.size)  # squared standardised one-step-ahead errors
-    mf, pf, mp, pp = (np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)),
-                      np.empty((n, 2, 2)))
+    at = np.searchsorted(pts, x)
+    n, dim = pts.size, h.shape[1]
+    m, p = _start(x, y, r, h, offset_var)
+    c = np.zeros((dim, x.size))       # the state as weights of the y's
+    c[0, 0] = 1.0
+    surprise = np.zeros(x.size)
+    mf, pf, mp, pp = (np.empty((n, dim)), np.empty((n, dim, dim)), np.empty((n, dim)),
+                      np.empty((n, dim, dim)))
     floor2, span = _floor2(x, y), max(float(np.ptp(x)), 1e-9)
     prev = pts[0]
+    j = 0
     for k in range(n):
         d = pts[k] - prev
         prev = pts[k]
-        f = np.array([[1.0, d], [0.0, 1.0]])
+        f = np.eye(dim)
+        f[0, 1] = d
         qk = q * (m[1] * m[1] + floor2) / span
         m = f @ m
-        c0 = c0 + d * c1
-        p = f @ p @ f.T + qk * np.array([[d ** 3 / 3, d * d / 2], [d * d / 2, d]])
+        c = f @ c
+        p = f @ p @ f.T
+        p[:2, :2] += qk * np.array([[d ** 3 / 3, d * d / 2], [d * d / 2, d]])
         mp[k], pp[k] = m, p
-        j = obs.get(float(pts[k]))
-        if j is not None:
-            s = p[0, 0] + (r[j] + nugget2) / w[j]
-            surprise[j] = w[j] * (y[j] - m[0]) ** 2 / (p[0, 0] * w[j] + r[j] + nugget2)
-            gain = p[:, 0] / s
-            m = m + gain * (y[j] - m[0])
-            innovation = -c0
+        while j < x.size and at[j] == k:
+            hj = h[j]
+            ph = p @ hj
+            s = ph @ hj + (r[j] + nugget2) / w[j]
+            v = y[j] - m @ hj
+            surprise[j] = w[j] * v * v / (w[j] * (ph @ hj) + r[j] + nugget2)
+            gain = ph / s
+            m = m + gain * v
+            innovation = -(hj @ c)
             innovation[j] += 1.0
-            c0, c1 = c0 + gain[0] * innovation, c1 + gain[1] * innovation
-            p = p - np.outer(gain, p[0, :])
+            c = c + np.outer(gain, innovation)
+            p = p - np.outer(gain, ph)
+            j += 1
         mf[k], pf[k] = m, p
     ms, ps = mf.copy(), pf.copy()
     for k in range(n - 2, -1, -1):
-        d = pts[k + 1] - pts[k]
-        f = np.array([[1.0, d], [0.0, 1.0]])
-        c = pf[k] @ f.T @ np.linalg.pinv(pp[k + 1])
-        ms[k] = mf[k] + c @ (ms[k + 1] - mp[k + 1])
-        ps[k] = pf[k] + c @ (ps[k + 1] - pp[k + 1]) @ c.T
-    return pts, ms, ps, c0, surprise
+        f = np.eye(dim)
+        f[0, 1] = pts[k + 1] - pts[k]
+        g = pf[k] @ f.T @ np.linalg.pinv(pp[k + 1])
+        ms[k] = mf[k] + g @ (ms[k + 1] - mp[k + 1])
+        ps[k] = pf[k] + g @ (ps[k + 1] - pp[k + 1]) @ g.T
+    return pts, ms, ps, c[0], surprise
 
 
 #: Grid of the hyperparameters: log of q and of nugget^2 / scale^2 (``scale`` the spread
@@ -304,31 +351,41 @@ LOG_DRIFT = np.arange(-6.0, 6.01, 0.75)
 LOG_NUGGET = np.arange(-12.0, 2.01, 0.5)
 
 
-def _hyper_grid(x, y, r, w, scale, span):
+def _hyper_grid(x, y, r, w, scale, h, offset_var):
     """Likelihood over the (q, nugget^2) grid and the filtered state at the last point."""
     aa, bb = np.meshgrid(LOG_DRIFT, LOG_NUGGET, indexing="ij")
     q = np.exp(aa.ravel())
     n2 = np.exp(bb.ravel()) * scale ** 2
-    ll, last = _filter_loglik(x, y, r, w, q, n2)
+    ll, last = _filter_loglik(x, y, r, w, q, n2, h, offset_var)
     ll = np.where(np.isfinite(ll), ll, -np.inf)
     return q, n2, ll, last
 
 
 def _mixture(ll, last):
-    """Posterior mixture (flat prior on the log grid) of the last point's level: mean,
-    variance and the (level, rate) covariance."""
+    """Posterior mixture (flat prior on the log grid) of the last point's level and rate:
+    their mean and 2x2 covariance."""
     p = np.exp(ll - ll.max())
     p /= p.sum()
-    m0, m1, p00, p01, p11 = last
-    mean = np.array([p @ m0, p @ m1])
-    cov = np.array([[p @ (p00 + m0 * m0), p @ (p01 + m0 * m1)],
-                    [p @ (p01 + m0 * m1), p @ (p11 + m1 * m1)]]) - np.outer(mean, mean)
-    return mean, cov
+    m, cov = last[0][:, :2], last[1][:, :2, :2]
+    mean = p @ m
+    second = np.einsum("g,gij->ij", p, cov + m[:, :, None] * m[:, None, :])
+    return mean, second - np.outer(mean, mean)
+
+
+def _codes(kinds, offset_sd, n, y) -> tuple[np.ndarray | None, np.ndarray, list]:
+    """Each estimate's offset code (0: the reference scale), the offsets' prior variances
+    [unit^2] and their labels."""
+    if kinds is None or not offset_sd:
+        return None, np.zeros(0), []
+    labels = [k for k in dict.fromkeys(kinds) if (offset_sd.get(k) or 0.0) > 0]
+    codes = np.array([labels.index(k) + 1 if k in labels else 0 for k in kinds], dtype=int)
+    var = np.array([float(offset_sd[k]) ** 2 for k in labels])
+    return codes, var, labels
 
 
 def smooth(efc, values, low95=None, high95=None, *, robust: bool = True,
-           grid_points: int = GRID_POINTS,
-           nugget_share: float = DEFAULT_NUGGET_SHARE, systematic=None) -> Smoothed | None:
+           grid_points: int = GRID_POINTS, nugget_share: float = DEFAULT_NUGGET_SHARE,
+           systematic=None, kinds=None, offset_sd: dict | None = None) -> Smoothed | None:
     """The smoothed value over EFC with its 95 % band (module docstring).
 
     Parameters
@@ -351,6 +408,11 @@ def smooth(efc, values, low95=None, high95=None, *, robust: bool = True,
     systematic : array_like, optional
         Standard deviation of the part of each estimate's error that all estimates share
         [same unit] (NaN or missing: none); added to the band (module docstring).
+    kinds : sequence, optional
+        Each estimate's kind (how it was made: a label).
+    offset_sd : dict, optional
+        Prior standard deviation [unit] of each kind's offset from the values' scale;
+        kinds missing or at 0 are on that scale (module docstring: kinds).
 
     Returns
     -------
@@ -369,27 +431,20 @@ def smooth(efc, values, low95=None, high95=None, *, robust: bool = True,
     shared = np.zeros(ok.size) if systematic is None else \
         np.nan_to_num(np.asarray(systematic, dtype=float), nan=0.0)
     shared = shared[order]
-    # estimates at the same EFC are merged into one, weighted by their variances
-    ux, inv = np.unique(x, return_inverse=True)
-    share = np.ones(x.size)
-    if ux.size < x.size:
-        w = 1.0 / np.maximum(sd ** 2, 1e-12 * (1 + y * y))
-        share = w / np.bincount(inv, w)[inv]
-        shared = np.bincount(inv, w * shared) / np.bincount(inv, w)
-        y = np.bincount(inv, w * y) / np.bincount(inv, w)
-        has = np.bincount(inv, sd > 0) > 0
-        sd = np.where(has, np.sqrt(1.0 / np.bincount(inv, w)), 0.0)
-        x = ux
+    codes, offset_var, labels = _codes(None if kinds is None else [kinds[k] for k in order],
+                                       offset_sd, x.size, y)
+    h = _design(codes, x.size)
     n = x.size
     level_scale = float(np.median(np.abs(y))) or 1.0
     if n < MIN_FOR_NUGGET or np.ptp(x) <= 0:
-        out = _few(x, y, sd, nugget_share * level_scale, n)
+        out = _few(x, y, sd, nugget_share * level_scale, n, h, offset_var)
     else:
-        out = _smooth_many(x, y, sd, level_scale, robust, grid_points)
+        out = _smooth_many(x, y, sd, level_scale, robust, grid_points, h, offset_var)
+    out.offsets = {label: float(v) for label, v in zip(labels, out.offsets_at_last)}
 
-    def per_given(values):  # back to the order given (merged estimates share)
+    def per_given(values):  # back to the order given
         full = np.full(ok.size, np.nan)
-        full[order] = values[inv] * (share if values is out.influence else 1.0)
+        full[order] = values
         return full
 
     if np.any(shared > 0):
@@ -415,8 +470,8 @@ def _add_systematic(out: Smoothed, x: np.ndarray, shared: np.ndarray) -> None:
     out.systematic = last
 
 
-def _smooth_many(x, y, sd, level_scale, robust, grid_points) -> Smoothed:
-    """:func:`smooth` of at least :data:`MIN_FOR_NUGGET` estimates at distinct EFC."""
+def _smooth_many(x, y, sd, level_scale, robust, grid_points, h, offset_var) -> Smoothed:
+    """:func:`smooth` of at least :data:`MIN_FOR_NUGGET` estimates."""
     n = x.size
     r0 = sd ** 2
     span = float(np.ptp(x))
@@ -424,14 +479,17 @@ def _smooth_many(x, y, sd, level_scale, robust, grid_points) -> Smoothed:
     weights = np.ones(n)
     grid = np.linspace(x[0], x[-1], grid_points)
     for _ in range(ROBUST_PASSES if robust else 1):
-        q_all, n2_all, ll, last = _hyper_grid(x, y, r0, weights, scale, span)
+        q_all, n2_all, ll, last = _hyper_grid(x, y, r0, weights, scale, h, offset_var)
         best = int(np.argmax(ll))
         q, nugget2 = float(q_all[best]), float(n2_all[best])
-        pts, ms, ps, influence, surprise = _smooth(x, y, r0, weights, q, nugget2, grid)
+        pts, ms, ps, influence, surprise = _smooth(x, y, r0, weights, q, nugget2, grid, h,
+                                                   offset_var)
         if not robust:
             break
         at_obs = np.searchsorted(pts, x)
-        resid2 = (y - ms[at_obs, 0]) ** 2 / (r0 + nugget2 + ps[at_obs, 0, 0])
+        fitted = np.einsum("ij,ij->i", h, ms[at_obs])
+        var = np.einsum("ij,ijk,ik->i", h, ps[at_obs], h)
+        resid2 = (y - fitted) ** 2 / (r0 + nugget2 + var)
         new = (T_DOF + 1.0) / (T_DOF + resid2)
         if np.allclose(new, weights, atol=1e-3):
             break
@@ -439,22 +497,29 @@ def _smooth_many(x, y, sd, level_scale, robust, grid_points) -> Smoothed:
     mean, cov = _mixture(ll, last)
     recent = surprise[2:][-RECENT_EVENTS:]
     cov = cov * max(1.0, float(np.mean(recent))) if recent.size else cov
-    ms[-1], ps[-1] = mean, cov
-    level_sd = np.sqrt(np.clip(ps[:, 0, 0], 0, None))
+    level, level_var = ms[:, 0].copy(), ps[:, 0, 0].copy()
+    level[-1], level_var[-1] = mean[0], cov[0, 0]
+    rate = ms[:, 1].copy()
+    rate[-1] = mean[1]
     drift = q * (mean[1] ** 2 + _floor2(x, y)) / span
-    return Smoothed(efc=pts, level=ms[:, 0], level_sd=level_sd,
-                    rate=ms[:, 1], rate_sd=np.sqrt(np.clip(ps[:, 1, 1], 0, None)),
-                    last_cov=ps[-1], drift=float(drift), nugget=float(np.sqrt(nugget2)),
+    return Smoothed(efc=pts, level=level, level_sd=np.sqrt(np.clip(level_var, 0, None)),
+                    rate=rate, rate_sd=np.sqrt(np.clip(ps[:, 1, 1], 0, None)),
+                    last_cov=cov, drift=float(drift), nugget=float(np.sqrt(nugget2)),
                     weights=weights, influence=influence, n=n,
-                    quantile=float(stats.t.ppf(0.975, n - 2)))
+                    quantile=float(stats.t.ppf(0.975, n - 2)),
+                    offsets_at_last=ms[-1, 2:].copy())
 
 
-def _few(x, y, sd, nugget, n) -> Smoothed:
+def _few(x, y, sd, nugget, n, h, offset_var) -> Smoothed:
     """Fewer than :data:`MIN_FOR_NUGGET` estimates: a weighted straight line (one
-    estimate: itself), with an assumed ``nugget`` [unit]."""
-    var = sd ** 2 + nugget ** 2
+    estimate, or all at one EFC: their mean), with an assumed ``nugget`` [unit]; an
+    estimate off the reference scale carries its kind's offset as error of its own."""
+    extra = np.zeros(n)
+    if h.shape[1] > 2:
+        extra = h[:, 2:] @ offset_var
+    var = sd ** 2 + nugget ** 2 + extra
+    w = 1 / var
     if n == 1 or np.ptp(x) <= 0:
-        w = 1 / var
         mean = float(np.sum(w * y) / np.sum(w))
         v = float(1 / np.sum(w))
         return Smoothed(efc=x[-1:], level=np.array([mean]), level_sd=np.array([np.sqrt(v)]),
@@ -462,14 +527,12 @@ def _few(x, y, sd, nugget, n) -> Smoothed:
                         last_cov=np.array([[v, 0.0], [0.0, 0.0]]), drift=0.0, nugget=nugget,
                         weights=np.ones(n), influence=w / np.sum(w), n=n)
     design = np.vstack([np.ones_like(x), x - x[-1]]).T
-    w = 1 / var
     cov = np.linalg.inv(design.T @ (design * w[:, None]))
     coef = cov @ design.T @ (w * y)
-    pts = np.linspace(x[0], x[-1], GRID_POINTS)
-    pts = np.union1d(pts, x)
-    h = pts - x[-1]
-    level = coef[0] + coef[1] * h
-    lsd = np.sqrt(np.clip(cov[0, 0] + 2 * h * cov[0, 1] + h * h * cov[1, 1], 0, None))
+    pts = np.union1d(np.linspace(x[0], x[-1], GRID_POINTS), x)
+    d = pts - x[-1]
+    level = coef[0] + coef[1] * d
+    lsd = np.sqrt(np.clip(cov[0, 0] + 2 * d * cov[0, 1] + d * d * cov[1, 1], 0, None))
     influence = (cov @ (design * w[:, None]).T)[0]  # the intercept at the last point
     return Smoothed(efc=pts, level=level, level_sd=lsd, rate=np.full(pts.size, coef[1]),
                     rate_sd=np.full(pts.size, np.sqrt(cov[1, 1])), last_cov=cov, drift=0.0,

@@ -114,6 +114,7 @@ class MissionResult:
             "battery": m.battery.name,
             "cells_series": m.battery.cells_series,
             "strings_parallel": m.battery.strings_parallel,
+            "chemistry": m.battery.chemistry,
             "capacity_Ah": m.capacity_Ah,
             "cutoff_cell_V": m.cutoff_cell_V,
             "cutoff_pack_V": m.cutoff_pack_V,
@@ -319,7 +320,7 @@ def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
     labels = leg.labels[:int(sim.step.max()) + 1]
     rows = _phase_table(mission, sim, labels)
     soc_end = float(100.0 * (1.0 - sim.charge_Ah[-1] / mission.capacity_Ah))
-    warnings = []
+    warnings = list(mission.warnings)
     cannot = load_at_start(mission, leg, sim)
     if cannot is not None:
         cannot["message"] = cannot_deliver_text(mission, cannot)
@@ -347,6 +348,7 @@ def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
         soc_end_pct=soc_end, min_voltage_V=float(np.min(sim.voltage_V)), stretch=stretch,
         warnings=warnings, cannot_deliver=cannot,
     )
+    result.notes.extend(mission.notes)
     extra = mission.battery.extra
     if extra.get("logbook") and extra.get("note"):  # a logbook pack at today's health
         result.notes.append(str(extra["note"]))

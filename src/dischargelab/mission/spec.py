@@ -16,7 +16,9 @@ import numpy as np
 
 from ..engine import Step
 from ..errors import DataError
-from ..model import CUTOFF_CELL_VOLTAGE_V, Battery, load_battery
+from ..identity import resolve
+from ..model import Battery, load_battery
+from ..plausibility import check_cutoff
 from .aircraft import (
     SEA_LEVEL_AIR_DENSITY_KG_M3,
     STANDARD_GRAVITY_M_S2,
@@ -24,6 +26,7 @@ from .aircraft import (
     hover_power_W,
     isa_air_density_kg_m3,
 )
+from .keys import keys_of
 
 #: Range of ambient temperatures accepted for a mission [degC].
 AMBIENT_RANGE_C = (-60.0, 90.0)
@@ -146,6 +149,11 @@ class Mission:
     ambient_C : float or None
         Ambient temperature [degC] the cells start at and cool to (thermal
         families); None = the battery's ``ambient_C`` (that of its fitted data).
+    warnings : tuple of str
+        Where the mission's ``[battery]`` table disagreed with the battery flown
+        (:func:`dischargelab.identity.resolve`), one line each.
+    notes : tuple of str
+        What was taken from the ``[battery]`` table for a battery that did not say.
     """
 
     items: tuple
@@ -157,6 +165,8 @@ class Mission:
     source: str = ""
     aircraft: dict | None = field(default=None, compare=False)
     ambient_C: float | None = None
+    warnings: tuple = field(default=(), compare=False)
+    notes: tuple = field(default=(), compare=False)
 
     def __post_init__(self):
         if not self.items:
@@ -243,17 +253,14 @@ def _item_label(item) -> str:
 # TOML mission files
 # ---------------------------------------------------------------------------------------------
 
-TOP_KEYS = {"name", "description", "ambient_C", "battery", "aircraft", "phase"}
-BATTERY_KEYS = {"source", "series", "parallel", "initial_soc_pct", "cutoff_cell_V", "reserve_pct"}
+TOP_KEYS = keys_of("")
+BATTERY_KEYS = keys_of("battery")
 ATMOSPHERE_KEYS = {"altitude_m", "air_density_kg_m3"}
-FIXED_WING_KEYS = {"mass_kg", "wing_area_m2", "cd0", "aspect_ratio", "span_m",
-                   "span_efficiency", "propulsion_efficiency"} | ATMOSPHERE_KEYS
-MULTIROTOR_KEYS = {"mass_kg", "rotor_disc_area_m2", "rotor_count", "rotor_diameter_m",
-                   "figure_of_merit", "motor_efficiency"} | ATMOSPHERE_KEYS
+FIXED_WING_KEYS = keys_of("aircraft", "aircraft fixed-wing") - {"type"}
+MULTIROTOR_KEYS = keys_of("aircraft", "aircraft multirotor") - {"type"}
 AIRCRAFT_TYPES = ("fixed-wing", "multirotor")
 LOAD_KEYS = ("current_A", "power_W", "speed_m_s", "hover")
-PHASE_KEYS = {"name", "duration_s", "duration_min", "until", "stretch", "current_A", "power_W",
-              "speed_m_s", "climb_rate_m_s", "hover", "repeat", "phases", "note"}
+PHASE_KEYS = keys_of("phase")
 
 
 class _Context:
@@ -496,9 +503,48 @@ def _parse_phase(ctx, where, table, aircraft, allow_block=True):
         raise ctx.error("", str(exc)) from None
 
 
+def _battery(ctx, bat_table, battery, base_dir) -> Battery:
+    """The battery given, else the one ``[battery] source`` names (a path relative to the
+    mission file, or a preset)."""
+    if battery is not None:
+        return load_battery(battery)
+    src = bat_table.get("source")
+    if src is None:
+        raise ctx.error("[battery]", "no battery: give BATTERY (a battery file or preset) or "
+                                     "set source = 'battery.json' | preset name")
+    if not isinstance(src, str) or not src:
+        raise ctx.error("[battery]", "source must be a battery file path or a preset name")
+    from ..model import PRESETS
+
+    candidate = Path(base_dir or ".") / src
+    if candidate.exists() or src not in PRESETS:
+        if not candidate.exists():
+            raise ctx.error("[battery]", f"source {src!r}: no such battery file beside the "
+                                         f"mission ({candidate}) and not a preset "
+                                         f"({', '.join(sorted(PRESETS))})")
+        return load_battery(candidate)
+    return load_battery(src)
+
+
+def _source_chemistry(src: str, base_dir) -> str | None:
+    """Chemistry of a mission's ``[battery] source`` (None when it cannot be read)."""
+    from ..model import PRESETS
+
+    if src in PRESETS:
+        return PRESETS[src].chemistry
+    candidate = Path(base_dir or ".") / src
+    if not candidate.is_file():
+        return None
+    try:
+        return load_battery(candidate).chemistry
+    except DataError:
+        return None
+
+
 def parse_mission(data: dict, *, battery=None, base_dir=None, source: str = "",
                   cutoff_cell_V: float | None = None, reserve_pct: float | None = None,
-                  ambient_C: float | None = None) -> Mission:
+                  ambient_C: float | None = None, cells_series: int | None = None,
+                  strings_parallel: int | None = None) -> Mission:
     """Build a :class:`Mission` from a parsed TOML document.
 
     Parameters
@@ -513,6 +559,9 @@ def parse_mission(data: dict, *, battery=None, base_dir=None, source: str = "",
         File name used in error messages.
     cutoff_cell_V, reserve_pct, ambient_C : float, optional
         Override the file's values.
+    cells_series, strings_parallel : int, optional
+        The pack layout asked for explicitly (``--cells``, ``--parallel``); a logbook
+        pack's measured layout cannot be changed (see :mod:`dischargelab.identity`).
     """
     ctx = _Context(source)
     _check_keys(ctx, "", data, TOP_KEYS)
@@ -521,31 +570,30 @@ def parse_mission(data: dict, *, battery=None, base_dir=None, source: str = "",
         raise ctx.error("", "name must be a string")
     bat_table = data.get("battery", {})
     _check_keys(ctx, "[battery]", bat_table, BATTERY_KEYS)
-    if battery is None:
-        src = bat_table.get("source")
-        if src is None:
-            raise ctx.error("[battery]", "no battery: pass a battery file or preset, or set "
-                                         "source = 'battery.json' | preset name")
-        if not isinstance(src, str):
-            raise ctx.error("[battery]", "source must be a battery file path or a preset name")
-        candidate = Path(base_dir or ".") / src
-        battery = load_battery(candidate if candidate.exists() else src)
-    else:
-        battery = load_battery(battery)
-    series = _integer(ctx, "[battery]", bat_table, "series")
-    parallel = _integer(ctx, "[battery]", bat_table, "parallel")
-    battery = battery.with_pack(series, parallel)
+    battery = _battery(ctx, bat_table, battery, base_dir)
+    where = f"{name if not source else Path(source).name} [battery]"
+    chem = bat_table.get("chemistry")
+    if chem is None and isinstance(bat_table.get("source"), str):
+        chem = _source_chemistry(bat_table["source"], base_dir)
+    try:
+        flown = resolve(
+            battery, where=where, series=_integer(ctx, "[battery]", bat_table, "series"),
+            parallel=_integer(ctx, "[battery]", bat_table, "parallel"), chemistry=chem,
+            cutoff_cell_V=_number(ctx, "[battery]", bat_table, "cutoff_cell_V", positive=True),
+            cells_given=cells_series, parallel_given=strings_parallel,
+            cutoff_given=cutoff_cell_V)
+    except DataError as exc:
+        raise ctx.error("", str(exc)) from None
+    battery, cutoff = flown.battery, flown.cutoff_cell_V
     soc0 = _number(ctx, "[battery]", bat_table, "initial_soc_pct", positive=True, maximum=100,
                    default=100.0)
     reserve = reserve_pct if reserve_pct is not None else _number(
         ctx, "[battery]", bat_table, "reserve_pct", minimum=0, maximum=99.9, default=20.0)
-    cutoff = cutoff_cell_V if cutoff_cell_V is not None else _number(
-        ctx, "[battery]", bat_table, "cutoff_cell_V", positive=True)
     if cutoff is None:
-        cutoff = CUTOFF_CELL_VOLTAGE_V.get(battery.chemistry or "")
-        if cutoff is None:
-            raise ctx.error("[battery]", "battery chemistry unknown: give cutoff_cell_V "
-                                         "(or --cutoff V)")
+        raise ctx.error("[battery]", "battery chemistry unknown: give cutoff_cell_V or "
+                                     "chemistry (or --cutoff V)")
+    warnings = list(flown.warnings) + [f.text({"cutoff_cell_V": "--cutoff"}) for f in
+                                       check_cutoff(cutoff, battery.chemistry)]
     if ambient_C is None:
         ambient_C = _number(ctx, "", data, "ambient_C", minimum=AMBIENT_RANGE_C[0],
                             maximum=AMBIENT_RANGE_C[1])
@@ -559,7 +607,8 @@ def parse_mission(data: dict, *, battery=None, base_dir=None, source: str = "",
         return Mission(items=items, battery=battery, cutoff_cell_V=float(cutoff),
                        reserve_pct=float(reserve), initial_soc_pct=float(soc0), name=name,
                        source=source, aircraft=aircraft,
-                       ambient_C=None if ambient_C is None else float(ambient_C))
+                       ambient_C=None if ambient_C is None else float(ambient_C),
+                       warnings=tuple(warnings), notes=tuple(flown.notes))
     except DataError as exc:
         raise ctx.error("", str(exc)) from None
 
@@ -585,20 +634,25 @@ def mission_path(name_or_path) -> Path:
 
 
 def load_mission(path, *, battery=None, cutoff_cell_V: float | None = None,
-                 reserve_pct: float | None = None, ambient_C: float | None = None) -> Mission:
+                 reserve_pct: float | None = None, ambient_C: float | None = None,
+                 cells_series: int | None = None, strings_parallel: int | None = None
+                 ) -> Mission:
     """Read a mission TOML file.
 
-    Format (all keys with units in their names)::
+    Format (all keys with units in their names; every key with its unit and default:
+    :data:`dischargelab.mission.keys.KEYS`, the page ``docs/mission-format.md``)::
 
         name = "survey"
         ambient_C = 35             # optional: air temperature [degC] for thermal models
                                    # (default: the battery file's, that of its fitted data)
         [battery]                  # all optional
-        source = "battery.json"    # or a preset name; the command-line battery wins
-        series = 4                 # override the battery file's pack configuration
-        parallel = 1
+        source = "battery.json"    # beside this file, or a preset name; the command-line
+                                   # battery wins
+        series = 4                 # defaults for a battery that does not say: a cell is
+        parallel = 1               # placed in this pack, a pack keeps its own (a warning)
+        chemistry = "lipo"         # what the cutoff below was written for
         initial_soc_pct = 100
-        cutoff_cell_V = 3.3        # default by chemistry
+        cutoff_cell_V = 3.3        # default: the battery's own, else its chemistry's
         reserve_pct = 20           # land with 20 % left
 
         [aircraft]                 # only for flight-condition phases
@@ -642,4 +696,37 @@ def load_mission(path, *, battery=None, cutoff_cell_V: float | None = None,
         raise DataError(f"{path}: not a UTF-8 text file") from None
     return parse_mission(data, battery=battery, base_dir=path.parent, source=source,
                          cutoff_cell_V=cutoff_cell_V, reserve_pct=reserve_pct,
-                         ambient_C=ambient_C)
+                         ambient_C=ambient_C, cells_series=cells_series,
+                         strings_parallel=strings_parallel)
+
+
+def mission_catalogue() -> list[dict]:
+    """The bundled missions: ``{"name", "title", "battery", "phases", "path"}`` each."""
+    rows = []
+    for key, path in bundled_missions().items():
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        bat = data.get("battery") or {}
+        rows.append({"name": key, "title": str(data.get("name", key)),
+                     "battery": bat.get("source"), "phases": len(data.get("phase") or []),
+                     "path": str(path)})
+    return rows
+
+
+def bundled_mission_text(name: str) -> str:
+    """The TOML text of a bundled mission (a :class:`DataError` naming the bundled ones
+    for another name)."""
+    bundled = bundled_missions()
+    if name not in bundled:
+        raise DataError(f"no bundled mission {name!r}; choose one of {', '.join(bundled)} "
+                        f"(dischargelab missions list)")
+    return bundled[name].read_text(encoding="utf-8")
+
+
+def copy_mission(name: str, destination, *, force: bool = False) -> Path:
+    """Copy a bundled mission to ``destination`` to edit (atomic; an existing file is kept
+    unless ``force``). Returns the path written."""
+    from ..atomic import check_outputs, write_text
+
+    text = bundled_mission_text(name)
+    (path,) = check_outputs([destination], [], force)
+    return write_text(path, text)

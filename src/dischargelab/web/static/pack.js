@@ -39,6 +39,16 @@
     return series;
   }
 
+  // the end-of-life meter without an end of life: why, and when a fade could show
+  function shortEvidence(fc, efcNow) {
+    const f = fc.fade || {};
+    if (fc.status === "uncertain") return "fade measured, not yet enough to date an end of life (details below)";
+    if (fc.status !== "no fade") return "EFC";
+    const need = f.efc_needed;
+    if (!has(need)) return "no fade measured yet (details below)";
+    return "no fade measured yet" + (need > (efcNow || 0) ? "; a typical fade would show at about " + DL.num(need, 0) + " EFC" : "; slower than a typical fade");
+  }
+
   const RELOAD_MS = 2000;
   let again = null;
 
@@ -69,14 +79,18 @@
     $("m-reference").textContent = DL.num(s.reference_capacity_Ah, 3);
     $("m-efc").textContent = DL.text(s, "efc", 1);
     $("m-resistance").textContent = DL.text(s, "resistance_ohm", 1, 1000);
-    $("m-eol").textContent = fc ? DL.num(fc.eol_efc, 0) : DL.MISSING;
-    $("m-eol-iv").textContent = fc && fc.eol_efc_interval95 ? "EFC (95 %: " + DL.interval(fc.eol_efc_interval95, 0) + ")" : "EFC";
+    // no end of life without a measured fade: the forecast says why and when one could show
+    const dated = fc && has(fc.eol_efc);
+    $("m-eol").textContent = dated ? DL.num(fc.eol_efc, 0) : DL.MISSING;
+    $("m-eol-iv").textContent = dated && fc.eol_efc_interval95 ? "EFC (95 %: " + DL.interval(fc.eol_efc_interval95, 0) + ")"
+      : fc ? shortEvidence(fc, h.efc_now) : "no fade measured yet (no capacity estimate yet)";
     const civ = h.capacity_now_interval95;
     $("m-capacity-iv").textContent = civ ? "95 %: " + DL.interval(civ, 3) : "";
     const lines = [];
     if (h.capacity_now_Ah !== null && h.capacity_now_Ah !== undefined) lines.push("Capacity today from " + fromEvents(h.capacity_from) + ".");
     if (h.resistance_now_ohm !== null && h.resistance_now_ohm !== undefined) lines.push("Resistance today (" + h.resistance_basis + ") from " + fromEvents(h.resistance_from) + ".");
-    if (fc) lines.push("Trend: " + (SHAPES[fc.shape] || fc.shape) + " (odds of a bend against a straight line " + Number(fc.bend_odds).toPrecision(3) + "); " +
+    if (fc && fc.message) lines.push("End of life: " + fc.message + ".");
+    if (dated) lines.push("Trend: " + (SHAPES[fc.shape] || fc.shape) + " (odds of a bend against a straight line " + Number(fc.bend_odds).toPrecision(3) + "); " +
                        (has(fc.knee_efc) ? "knee at " + DL.num(fc.knee_efc, 0) + " EFC." : "no knee in the data yet (the forecast allows one ahead)."));
     $("health-note").textContent = lines.join(" ");
 
@@ -157,7 +171,9 @@
     const t = $("endurance-result");
     t.replaceChildren();
     const cannot = r.cannot_deliver ? r.cannot_deliver.message : null;
-    const rows = [["Mission", r.mission]];
+    const rows = [["Mission", r.mission],
+                  ["Pack as flown", r.cells_series + "S" + r.strings_parallel + "P" + (r.chemistry ? " " + r.chemistry : "") +
+                   ", cutoff " + DL.num(r.cutoff_cell_V, 2) + " V/cell"]];
     if (cannot) rows.push(["Cannot fly", cannot]);
     const unc = r.uncertainty;
     rows.push(["Model", (r.model_family ? r.model_family + " (" + r.model + ")" : r.model) || DL.MISSING],

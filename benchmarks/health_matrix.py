@@ -1,0 +1,331 @@
+"""Capacity now against the truth over a matrix of conditions: does its 95 % band hold?
+
+Each condition is a pack life with a known truth, logged as a BMS or a tester would, with
+every capacity test cut out but the first: after each block of use (the cycles between
+two tests) the logbook's capacity now is compared with the next test's capacity.
+
+* **Synthetic lives** from the project's one engine (``tests/synthetic_life.py``: an
+  ``ecm`` cell with relaxation, diffusion, self-heating and a known fade with a knee,
+  its open-circuit curve 8 mV off the generic one and moved by ageing), one condition
+  changed at a time from the base (CV charge to 4.2 V, 1 Hz samples, 15-minute rests,
+  25 degC): the curve (the generic one; moving faster with age), the routine charge's
+  stop voltage (3.9-4.1 V, the tests still charged to 4.2 V; constant current only),
+  the sampling period (30-200 s, the missions' power steps between samples), the ambient
+  (0 and 45 degC), short rests (60 s), shallow missions.
+* **The shared eVTOL lives** (CMU, VAH27 and VAH30; Bills et al. 2023): as logged,
+  resampled to 30 s and 60 s (interpolated between the logged samples, 166.5 s apart),
+  and with the routine charges ending at 4.0 V: every voltage of the routine moved to
+  the state of charge a 4.0 V constant-voltage end leaves (the cell's own curve, from
+  its latest C/5 test, over the charge not put in, at each sample's state of charge
+  counted from the charge's end), the tests untouched; its blocks end at the first test
+  after a mission that the shift takes below the cutoff (a cell charged to 4.0 V would
+  have stopped there, which a shift cannot show). And with every test cut out, the pack
+  given only its label capacity (3.0 Ah) and chemistry: no full discharge sets the scale.
+
+Prints per condition: blocks, capacity now's error against the next test (median and
+largest), blocks within 2 %, the band's coverage of the next test, its median half
+width, and the mean error (bias). ``--rows FILE.csv`` keeps every block.
+
+References: A. Bills et al., Sci. Data 10, 344 (2023).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import pickle
+import sys
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from _machine import machine_line  # noqa: E402
+from dischargelab.logbook import Logbook  # noqa: E402
+from dischargelab.logbook.results import DEFAULT_EOL, build_health, capacity_now  # noqa: E402
+from health_from_use import CMU, blocks_of, cut_copy, find_tests, load_avg  # noqa: E402
+
+#: The base life of the synthetic conditions.
+BASE = dict(cycles=40, test_every=5, sample_hz=1.0, fade_per_efc=3e-3, knee_efc=40.0,
+            knee_per_efc2=1e-4, ocv_wiggle_V=0.008, lli_share=0.3)
+
+#: Synthetic conditions: name -> changes to the base.
+SYNTHETIC = {
+    "base: CV 4.2 V, 1 Hz, 15 min rests, 25 degC": {},
+    "the generic curve, not ageing": dict(ocv_wiggle_V=0.0, lli_share=0.0),
+    "the curve moves fast with age": dict(lli_share=0.8),
+    "routine charge CV 4.1 V": dict(cv_V=4.1),
+    "routine charge CV 4.0 V": dict(cv_V=4.0),
+    "routine charge CV 3.9 V": dict(cv_V=3.9),
+    "routine charge CC only to 4.2 V": dict(cv=False),
+    "samples every 30 s": dict(sample_hz=1 / 30),
+    "samples every 60 s": dict(sample_hz=1 / 60),
+    "samples every 200 s": dict(sample_hz=1 / 200),
+    "ambient 0 degC": dict(ambient_C=0.0, season_C=3.0),
+    "ambient 45 degC": dict(ambient_C=45.0, season_C=3.0),
+    "rests of 60 s": dict(rest_s=60.0),
+    "shallow missions (60 %)": dict(mission_scale=0.6),
+}
+
+#: The eVTOL cells' cutoff [V].
+CUTOFF_CELL_V = 2.5
+
+#: Real conditions: name -> (cell file, resampling period [s] or None, routine CV [V] or None).
+REAL = {f"{cell} {how}": (cell, period, cv)
+        for cell in ("VAH27", "VAH30")
+        for how, period, cv in (("as logged", None, None), ("resampled 30 s", 30.0, None),
+                                ("resampled 60 s", 60.0, None),
+                                ("charges to 4.0 V", None, 4.0))}
+
+#: Real conditions with every test cut out, the pack given its label capacity and
+#: chemistry only (no full discharge in the logbook).
+LABEL_ONLY = {f"{cell} label only (3.0 Ah, Li-ion)": cell for cell in ("VAH27", "VAH30")}
+
+
+# --------------------------------------------------------------------------- real variants
+
+def resample(frame: pd.DataFrame, period_s: float) -> pd.DataFrame:
+    """The log on a ``period_s`` grid, each column interpolated linearly between its
+    samples (the shared eVTOL logs hold one sample every 166.5 s: a finer grid adds no
+    information, and an estimator must not read it as a load resolved)."""
+    t = frame["time_s"].to_numpy(float)
+    grid = np.arange(t[0], t[-1], period_s)
+    return pd.DataFrame({c: np.interp(grid, t, frame[c].to_numpy(float)) if c != "time_s"
+                         else grid for c in frame.columns})
+
+
+def routine_cv(frame: pd.DataFrame, tests: list[dict], cv_cell_V: float,
+               full_cell_V: float = 4.2) -> pd.DataFrame:
+    """The log as if the routine charges had stopped at ``cv_cell_V`` (module docstring):
+    between two tests, every voltage moves down by the cell's own curve's drop (the
+    earlier test's C/5 discharge, whose resistive drop cancels in a difference) between
+    the state of charge counted from the last charge's end and that less the share a
+    ``cv_cell_V`` end leaves out. The tests (and their charges) keep their voltages."""
+    t = frame["time_s"].to_numpy(float)
+    i = frame["current_A"].to_numpy(float)
+    v = frame["voltage_V"].to_numpy(float).copy()
+    curves = []
+    for test in tests:
+        a, b = test["start"], test["stop"]
+        q = np.r_[0.0, np.cumsum(np.diff(t[a:b]) * 0.5 * (i[a + 1:b] + i[a:b - 1]))] / 3600
+        soc = 1.0 - q / q[-1]
+        curve = (soc[::-1], v[a:b][::-1], float(q[-1]))
+        # the share left out: where the curve lies (full - cv) below its start
+        top = float(np.median(v[a:b][:3]))
+        short = 1.0 - float(np.interp(top - (full_cell_V - cv_cell_V), curve[1], curve[0]))
+        curves.append((curve, short))
+    in_test = np.zeros(t.size, bool)
+    which = np.zeros(t.size, int)
+    for k, test in enumerate(tests):
+        in_test[max(test["start"] - 1, 0):test["cut_stop"]] = True
+        which[test["start"]:] = k
+    dq = np.r_[0.0, np.diff(t) * 0.5 * (i[1:] + i[:-1]) / 3600.0]
+    removed = 0.0
+    for k in range(t.size):
+        removed = max(removed + dq[k], 0.0)
+        if i[k] < -0.02 and v[k] >= full_cell_V - 0.01:
+            removed = 0.0  # a charge's constant-voltage end: full in the logged life
+        if in_test[k]:
+            continue
+        (soc, volts, capacity), short = curves[which[k]]
+        at = max(1.0 - removed / capacity, 0.0)
+        v[k] -= np.interp(at, soc, volts) - np.interp(max(at - short, 0.0), soc, volts)
+    out = frame.copy()
+    out["voltage_V"] = v
+    return out
+
+
+# --------------------------------------------------------------------------- the lives
+
+def _key(*parts) -> str:
+    return hashlib.sha256(repr(parts).encode()).hexdigest()[:12]
+
+
+def synthetic_log(name: str, changes: dict, seed: int, cache: Path):
+    """(log frame, tests) of one synthetic condition, cached by its spec."""
+    import synthetic_life as sl
+
+    spec = replace(sl.LifeSpec(**BASE, seed=seed), **changes)
+    path = cache / f"life_{_key(asdict(spec), sl.GENERATOR_VERSION)}.pkl"
+    if path.exists():
+        life = pickle.loads(path.read_bytes())
+    else:
+        life = sl.synthetic_life(spec)
+        path.write_bytes(pickle.dumps(life))
+    truth = [{"start_s": a, "Ah": q} for a, _, q, _ in life.tests]
+    return life.frame, truth
+
+
+def real_log(cell: str, period, cv):
+    frame = pd.read_csv(CMU / f"{cell}.csv")
+    tests = find_tests(frame)
+    truth = [{"start_s": float(frame["time_s"].iloc[x["start"]]), "Ah": x["Ah"]}
+             for x in tests]
+    if cv is not None:
+        frame = routine_cv(frame, tests, cv)
+        # the emulation holds while every mission ends above the cutoff: a cell charged
+        # to 4.0 V that ran deeper would have stopped, which a shift cannot show
+        below = np.flatnonzero(frame["voltage_V"].to_numpy(float) < CUTOFF_CELL_V)
+        if below.size:
+            stop = float(frame["time_s"].iloc[below[0]])
+            truth = [x for x in truth if x["start_s"] <= stop]
+    if period is not None:
+        frame = resample(frame, period)
+    return frame, truth
+
+
+def logbook_of(frame: pd.DataFrame, label: str, cache: Path, first: bool = True) -> Path:
+    """A logbook holding the log with every test but the first cut out (``first`` false:
+    every test, and the pack given its label capacity and chemistry), cached."""
+    db = cache / (f"lb_{_key(label, len(frame), float(frame['voltage_V'].sum()))}"
+                  f"{'' if first else '_label'}.sqlite")
+    if db.exists():
+        return db
+    tests = find_tests(frame)
+    csv = cache / f"{db.stem}.csv"
+    cut_copy(frame, tests, first, csv)
+    part = db.with_suffix(".part")
+    part.unlink(missing_ok=True)
+    with Logbook(part) as lb:
+        if first:
+            lb.set_pack("cell")
+        else:
+            lb.set_pack("cell", label_capacity_Ah=3.0, chemistry="li-ion")
+        lb.add(csv, pack="cell", refresh=False)
+    part.rename(db)
+    csv.unlink()
+    return db
+
+
+def blocks(db: Path, truth: list[dict]) -> list[dict]:
+    """Per block of use: capacity now at its end against the next test."""
+    with Logbook(db) as lb:
+        row, events, model = lb._pack_data("cell")
+    health = build_health(row, events, model, DEFAULT_EOL)
+    out = []
+    for k, (_block, so_far) in enumerate(blocks_of(health)):
+        if k + 1 >= len(truth):
+            break
+        now = capacity_now([e for e in so_far if e.capacity_Ah is not None
+                            and not e.outlier and e.efc is not None])
+        if now is None:
+            out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": None,
+                        "low": None, "high": None, "why": "no estimate"})
+            continue
+        low, high = now.interval95()
+        out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": now.value_Ah,
+                    "low": low, "high": high, "why": "", "trend_sd": now.trend_sd_Ah,
+                    "drift_unit": now.drift_unit_Ah, "quantile": now.quantile})
+    return out
+
+
+def summary(name: str, rows: list[dict]) -> str:
+    got = [r for r in rows if r["now_Ah"] is not None]
+    if not got:
+        return f"| {name} | {len(rows)} | - | - | - | - | - | - |"
+    err = np.array([100 * (r["now_Ah"] / r["truth_Ah"] - 1) for r in got])
+    cover = np.array([r["low"] <= r["truth_Ah"] <= r["high"] for r in got])
+    half = np.array([50 * (r["high"] - r["low"]) / r["now_Ah"] for r in got])
+    return (f"| {name} | {len(rows)} | {np.median(np.abs(err)):.2f} % | "
+            f"{np.abs(err).max():.2f} % | {np.sum(np.abs(err) <= 2)}/{len(got)} | "
+            f"{cover.sum()}/{len(got)} ({cover.mean():.0%}) | {np.median(half):.1f} % | "
+            f"{err.mean():+.2f} % |")
+
+
+#: Drift shares tried by the calibration (results.DRIFT_SHARE).
+SHARES = np.round(np.arange(0.0, 2.01, 0.05), 2)
+
+
+def needed_share(rows: pd.DataFrame, coverage: float = 0.9) -> float:
+    """The smallest drift share whose band holds the next test in ``coverage`` of the
+    blocks (inf when none does)."""
+    got = rows.dropna(subset=["now_Ah"])
+    if got.empty:
+        return 0.0
+    for share in SHARES:
+        sd = np.hypot(got["trend_sd"], share * got["drift_unit"])
+        held = (got["now_Ah"] - got["truth_Ah"]).abs() <= got["quantile"] * sd
+        if held.mean() >= coverage:
+            return float(share)
+    return float("inf")
+
+
+def calibration(rows: pd.DataFrame) -> None:
+    """The drift share each condition needs, the share chosen without it (the largest
+    the other synthetic conditions need) and the coverage that gives it; each real cell
+    checked at the share the other cell needs."""
+    if rows.empty or "drift_unit" not in rows:
+        return
+    from dischargelab.logbook.results import DRIFT_SHARE
+
+    need = {c: needed_share(g) for c, g in rows.groupby("condition", sort=False)}
+    synthetic = [c for c in need if c in SYNTHETIC]
+    print(f"\n## The drift share (in use: {DRIFT_SHARE})\n")
+    print("| condition | needs | chosen without it | band holds the test at that share |")
+    print("|---|---|---|---|")
+    for c, n in need.items():
+        if c in SYNTHETIC:
+            others = [need[o] for o in synthetic if o != c]
+        else:
+            cell = c.split()[0]
+            others = [need[o] for o in need if o not in SYNTHETIC and not o.startswith(cell)]
+        if not others:
+            print(f"| {c} | {n:.2f} | - | - |")
+            continue
+        chosen = max(others)
+        got = rows[(rows["condition"] == c)].dropna(subset=["now_Ah"])
+        sd = np.hypot(got["trend_sd"], chosen * got["drift_unit"])
+        held = ((got["now_Ah"] - got["truth_Ah"]).abs() <= got["quantile"] * sd).mean()
+        print(f"| {c} | {n:.2f} | {chosen:.2f} | {held:.0%} |")
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=1, help="synthetic lives per condition")
+    parser.add_argument("--cycles", type=int, default=BASE["cycles"],
+                        help="cycles per synthetic life (a test every 5)")
+    parser.add_argument("--only", nargs="*", default=None,
+                        help="conditions whose name contains one of these words")
+    parser.add_argument("--cache", type=Path, default=ROOT / ".cache" / "health_matrix",
+                        help="folder keeping generated lives and their logbooks")
+    parser.add_argument("--rows", type=Path, default=None, help="CSV of every block")
+    args = parser.parse_args(argv)
+    args.cache.mkdir(parents=True, exist_ok=True)
+    print(f"# Capacity now over a matrix of conditions ({machine_line()}; {load_avg()})\n")
+    print("| condition | blocks | median abs error | largest | within 2 % | band holds "
+          "the test | median half width | bias |")
+    print("|---|---|---|---|---|---|---|---|")
+    started = time.perf_counter()
+    every = []
+    todo = [(n, "synthetic", c) for n, c in SYNTHETIC.items()] + \
+        [(n, "real", c) for n, c in REAL.items()] + \
+        [(n, "label", c) for n, c in LABEL_ONLY.items()]
+    for name, kind, conf in todo:
+        if args.only and not any(w.lower() in name.lower() for w in args.only):
+            continue
+        rows = []
+        for seed in range(args.seeds if kind == "synthetic" else 1):
+            if kind == "synthetic":
+                frame, truth = synthetic_log(name, dict(conf, cycles=args.cycles), seed,
+                                             args.cache)
+            else:
+                frame, truth = real_log(*conf) if kind == "real" else real_log(conf, None, None)
+            db = logbook_of(frame, f"{name}/{seed}", args.cache, first=kind != "label")
+            got = blocks(db, truth)
+            rows += [dict(r, condition=name, seed=seed) for r in got]
+        every += rows
+        print(summary(name, rows), flush=True)
+    if args.rows:
+        pd.DataFrame(every).to_csv(args.rows, index=False)
+    calibration(pd.DataFrame(every))
+    print(f"\n(total {time.perf_counter() - started:.0f} s; {load_avg()})")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,139 @@
+"""Capacity today over a pack's life (results.capacity_over_life / capacity_now): kinds
+of estimate on one scale, the band widened by the fade since the last full discharge,
+and a routine charge that stops short of full read as such, on an engine-made life."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dischargelab.logbook.health import EventHealth
+from dischargelab.logbook.results import (
+    DRIFT_SHARE,
+    REFERENCE_KIND,
+    capacity_now,
+    capacity_over_life,
+    estimate_kind,
+)
+
+
+def _event(k, efc, cap, method, kind="charge", half=0.03):
+    return EventHealth(event_id=k, source="log", start=None, kind=kind, cycle=None,
+                       discharged_Ah=1.0, full=method == "coulomb count", capacity_Ah=cap,
+                       capacity_interval95=[cap - half, cap + half], capacity_method=method,
+                       efc=efc)
+
+
+def _life(offset=0.05, n=60, efc_end=200.0):
+    rng = np.random.default_rng(1)
+    truth = lambda x: 3.0 * (1 - 0.0006 * x)  # noqa: E731
+    events = [_event(0, 0.0, truth(0.0) + 0.003, "coulomb count", "discharge", 0.005)]
+    for k, x in enumerate(np.linspace(0.5, efc_end, n), start=1):
+        events.append(_event(k, float(x), (1 + offset) * truth(x) + rng.normal(0, 0.01),
+                             "rests before and after (charge ends full)"))
+    return events, truth
+
+
+def test_kinds_are_labelled_by_how_their_capacity_was_estimated():
+    events, _ = _life()
+    assert estimate_kind(events[0]) == REFERENCE_KIND
+    assert estimate_kind(events[1]) == "charge: rests before and after"
+    fast = _event(9, 1.0, 2.5, "coulomb count at a high rate", "flight")
+    assert estimate_kind(fast) != REFERENCE_KIND
+
+
+def test_the_band_widens_with_the_fade_since_the_last_full_discharge():
+    events, truth = _life()
+    plain = capacity_over_life(events, drift_share=0.0)
+    wide = capacity_over_life(events)
+    x = events[-1].efc
+    assert wide.at(x)[1][0] > 1.5 * plain.at(x)[1][0]
+    # right after the full discharge nothing has drifted yet
+    assert wide.at(0.0)[1][0] == pytest.approx(plain.at(0.0)[1][0], rel=1e-6)
+    now = capacity_now(events)
+    low, high = now.interval95()
+    assert low < truth(x) < high
+    assert now.interval95(0.0)[1] - now.interval95(0.0)[0] < high - low
+    assert DRIFT_SHARE > 0
+
+
+def test_charges_reading_high_are_put_on_the_full_discharges_scale():
+    events, truth = _life(offset=0.05)
+    with_kinds = capacity_now(events)
+    x = events[-1].efc
+    # the charges read 5 % high; their offset is learned at the full discharge
+    assert abs(with_kinds.value_Ah / truth(x) - 1) < 0.02
+
+
+@pytest.mark.slow
+def test_a_routine_charge_to_4_0_v_is_not_full_and_the_band_holds_the_next_test(tmp_path):
+    from dischargelab.logbook import Logbook
+    from synthetic_life import LifeSpec, synthetic_life
+
+    life = synthetic_life(LifeSpec(cycles=6, test_every=5, cv_V=4.0, fade_per_efc=3e-3,
+                                   ocv_wiggle_V=0.008, lli_share=0.3, seed=4))
+    # the log up to the second capacity test: the first test, then five cycles charged
+    # to 4.0 V (the tests charge to 4.2 V)
+    path = tmp_path / "life.csv"
+    life.frame[life.frame["time_s"] < life.tests[1][0]].to_csv(path, index=False)
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.set_pack("cell", chemistry="li-ion")
+        lb.add(path, pack="cell")
+        health = lb.health("cell")
+    charges = [e for e in health.events if e.kind == "charge" and e.capacity_method]
+    full = [e for e in charges if "charge ends full" in e.capacity_method]
+    # the 4.2 V charges: before the first test, after it and before the second
+    assert len(full) <= 3 and len(charges) - len(full) >= 5
+    low, high = health.today["capacity_interval95"]
+    assert low <= life.tests[1][2] <= high
+
+
+def _hover_log(path, tail_s: float):
+    """A 3S 12 Ah pack (the engine's ``ecm`` Li-ion cell) rested full, hovered at 27 A to
+    30 % and logged ``tail_s`` after landing, one sample a second."""
+    import pandas as pd
+
+    import synthetic_life as sl
+    from dischargelab.engine import Step
+
+    spec = sl.LifeSpec(capacity_Ah=12.0, ocv_wiggle_V=0.008, seed=3)
+    p = sl.parameters(spec, 0.0)
+    log = sl._Logger(spec)
+    log.rest(120.0, p, 25.0)
+    log.go([Step("current", 27.0, duration_s=0.7 * 12 * 3600 / 27)], p, 25.0)
+    log.go([Step("rest", duration_s=tail_s)], p, 25.0)
+    s = log.series()
+    t = np.arange(0.0, s["time_s"][-1], 1.0)
+    pd.DataFrame({"time_s": t, "voltage_V": 3 * np.interp(t, s["time_s"], s["voltage_V"]),
+                  "current_A": np.interp(t, s["time_s"], s["current_A"]),
+                  "temperature_C": np.interp(t, s["time_s"], s["temperature_C"])}
+                 ).to_csv(path, index=False)
+    return float(p["C_Ah"])
+
+
+@pytest.mark.parametrize("chemistry", [None, "li-ion"])
+def test_a_hover_to_30_percent_of_a_pack_of_unknown_chemistry_gets_an_honest_band(tmp_path,
+                                                                                 chemistry):
+    from dischargelab.logbook import Logbook
+
+    truth = _hover_log(tmp_path / "hover.csv", 60.0)
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.set_pack("quad", cells=3, chemistry=chemistry)
+        lb.add(tmp_path / "hover.csv", pack="quad")
+        flight = next(e for e in lb.health("quad").events if e.capacity_Ah is not None)
+    low, high = flight.capacity_interval95
+    assert low < truth < high
+    assert flight.capacity_Ah == pytest.approx(truth, rel=0.06)
+    if chemistry is None:   # the hover's loaded voltage tells the Li-ion curve from LiPo's
+        assert "chemistry read from 1 load(s): the li-ion curve fits" in " ".join(flight.notes)
+
+
+def test_a_chemistry_not_known_carries_both_curves_in_the_reading():
+    from dischargelab.logbook.estimates import OcvCurve, soc_reading
+
+    unknown, lipo = OcvCurve.unknown(), OcvCurve.prior("lipo")
+    reading = {"relaxed_V": 3 * 3.64, "current_A": 0.0}     # 30 % on the mean curve
+    soc, sd = soc_reading(unknown, reading, 3)
+    assert soc == pytest.approx(0.3, abs=0.05)
+    assert sd > 3 * soc_reading(lipo, reading, 3)[1]
+    assert unknown.sd_at(1.0) < 0.03 and unknown.sd_at(0.3) > 0.1
