@@ -100,3 +100,30 @@ def test_autopilot_script_from_a_preset_runs_in_lua(tmp_path):
     assert abs(half - 0.5 * total) / total < 0.02
     assert any("90 s" in t[2] or "s of flight left" in t[2] for t in rep.texts)
     assert rep.max_instructions <= 10_000 and rep.heap_kb <= 40.0
+
+
+def test_the_pack_page_offers_the_parameters_and_the_script_without_writing(tmp_path,
+                                                                            shared_data):
+    pytest.importorskip("starlette")
+    from web_helpers import ServerProcess
+
+    db = tmp_path / "lb.sqlite"
+    flights = sorted((shared_data / FLIGHTS).glob("*.csv"))
+    cli("logbook", "add", *flights, "--pack", "fpv", "--chemistry", "lipo", "--db", db)
+    server = ServerProcess(["serve", "--db", str(db), "--port", "0"], cwd=tmp_path)
+    try:
+        server.get_json("/api/packs/fpv")               # the stored figures, as a visit reads
+        before = stored_rows(db)
+        status, lua = server.request("GET", "/api/packs/fpv/autopilot/ardupilot.lua",
+                                     timeout_s=300)
+        assert status == 200 and 'gcs:send_named_float("DL_TREM"' in lua
+        status, param = server.request("GET", "/api/packs/fpv/autopilot/ardupilot.param",
+                                       timeout_s=300)
+        assert status == 200 and "BATT_CAPACITY" in param and "logged flight" in param
+        status, body = server.request("GET", "/api/packs/fpv/autopilot/px4.exe")
+        assert status == 404 and "ardupilot.lua" in str(body)
+        assert stored_rows(db) == before                # nothing fitted or stored
+    finally:
+        server.stop()
+    page = (Path(dl.__file__).parent / "web" / "static" / "pack.html").read_text()
+    assert 'id="dl-lua"' in page and 'id="dl-param"' in page
