@@ -9,7 +9,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck docs min-versions bench browser postgres mdbtools clean
+.PHONY: demo test lint typecheck docs min-versions bench browser lua postgres mdbtools clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,7 +22,7 @@ demo: $(STAMP)
 
 # the sources byte-compiled first: the suite starts many Python processes (commands, servers,
 # Dask workers), and where PYTHONDONTWRITEBYTECODE is set each would compile them again
-test: $(STAMP) browser postgres mdbtools
+test: $(STAMP) browser lua postgres mdbtools
 	$(BIN)/python -m compileall -q src
 	$(BIN)/python -m pytest
 
@@ -61,6 +61,16 @@ browser:
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium \
 	      chromium-driver >/dev/null; \
 	  else echo "note: chromium/chromedriver not found; the browser tests will be skipped"; fi; }
+
+# The on-board script tests run the generated ArduPilot script in Debian's Lua 5.3 (ArduPilot's
+# Lua is 5.3.6) and check it with luacheck: installed when missing and we may.
+lua:
+	@{ command -v lua5.3 >/dev/null 2>&1 && command -v luacheck >/dev/null 2>&1; } || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing lua5.3 and lua-check (the on-board script tests)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq lua5.3 \
+	      lua-check >/dev/null; \
+	  else echo "note: lua5.3/luacheck not found; the on-board script tests will be skipped"; fi; }
 
 # The logbook tests also run against a throwaway PostgreSQL cluster (initdb + pg_ctl as the
 # `postgres` user, on 127.0.0.1): Debian's server package is installed when missing and we may.

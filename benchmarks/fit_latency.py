@@ -5,7 +5,10 @@ The case users wait for: ``dischargelab fit`` of three rates of the bundled Sams
 family fitted, each scored on held-out curves, ends and the rate-capacity check) and the
 default uncertainty (100 bootstrap replicas). Timed three ways:
 
-* **CLI**: ``dischargelab fit C10 1C 4C --columns ... -o cell.json`` run in this process
+* **command**: ``python -m dischargelab fit C10 1C 4C --columns ... -o cell.json`` in a
+  fresh process, as a user runs it: start-up and imports included (its CPU time is the
+  child's user + system time);
+* **CLI**: the same command run in this process, modules already loaded
   (reading the three files, fitting, writing the battery file, printing);
 * **library**: ``dischargelab.fit(runs, bootstrap=100)`` on runs already read;
 * **baseline**: one ``scipy.optimize.least_squares`` fit of eq. 6 (``shepherd``: trf,
@@ -14,8 +17,9 @@ default uncertainty (100 bootstrap replicas). Timed three ways:
   held-out error and no uncertainty.
 
 Each is repeated and the minimum taken (the 2 cores are shared: the minimum is the
-least disturbed run); the load average is printed. Goal: CLI <= 20x the baseline
-(stretch goal 10x).
+least disturbed run); the load average is printed. Ratios are given on wall time and on
+CPU time (the CPU time is what a loaded machine does not inflate). Goal: the command
+<= 20x the baseline (stretch goal 10x).
 
 Usage: python benchmarks/fit_latency.py [--repeats N] [--bootstrap N]
 """
@@ -27,6 +31,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse
 import contextlib
 import io
+import resource
+import subprocess
 import sys
 import tempfile
 import time
@@ -69,6 +75,24 @@ def cli_fit(out: Path, bootstrap: int | None):
         raise RuntimeError(f"dischargelab fit exited with {code}")
 
 
+def command_fit(out: Path, bootstrap: int | None):
+    """The command in a fresh process; returns its CPU time (user + system) [s]."""
+    args = [sys.executable, "-m", "dischargelab", "fit", *map(str, FILES), "--columns",
+            COLUMNS, "-o", str(out), "--force"]
+    if bootstrap is not None:
+        args += ["--bootstrap", str(bootstrap)]
+    env = dict(os.environ)
+    src = str(HERE.parent / "src")
+    env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise RuntimeError(f"dischargelab fit exited with {done.returncode}: "
+                           f"{done.stderr.strip().splitlines()[-1:]}")
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
 def best_of(func, repeats):
     """(minimum wall time [s], minimum process CPU time [s], last value)."""
     walls, cpus, value = [], [], None
@@ -98,23 +122,34 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "cell.json"
         cli_s, cli_cpu, _ = best_of(lambda: cli_fit(out, args.bootstrap), args.repeats)
+        cmd_walls, cmd_cpus = [], []
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            cmd_cpus.append(command_fit(out, args.bootstrap))
+            cmd_walls.append(time.perf_counter() - t0)
+        cmd_s, cmd_cpu = min(cmd_walls), min(cmd_cpus)
 
     print(f"## Whole fit against one plain eq. 6 fit: Samsung 30Q C/10 + 1C + 4C, "
           f"{samples:,} samples (minimum of {args.repeats} runs each)\n")
-    print("| what | wall [s] | CPU [s] | x baseline |")
-    print("|---|---:|---:|---:|")
+    print("| what | wall [s] | CPU [s] | x baseline (wall) | x baseline (CPU) |")
+    print("|---|---:|---:|---:|---:|")
     print(f"| baseline: `least_squares` of eq. 6, numeric Jacobian, all {n_stack:,} samples "
           f"({nfev} evaluations, RMSE {1000 * rmse:.1f} mV) | {base_s:.3f} | {base_cpu:.3f} "
-          f"| 1.0 |")
+          f"| 1.0 | 1.0 |")
     print(f"| library: `dl.fit(runs, bootstrap={boot})` (auto picked `{res.model}`, RMSE "
           f"{1000 * res.rmse_V:.1f} mV) | {lib_s:.3f} | {lib_cpu:.3f} | "
-          f"{lib_s / base_s:.1f} |")
+          f"{lib_s / base_s:.1f} | {lib_cpu / base_cpu:.1f} |")
     print(f"| CLI: `dischargelab fit C10 1C 4C --columns ... -o cell.json` (read, fit, write, "
-          f"print) | {cli_s:.3f} | {cli_cpu:.3f} | {cli_s / base_s:.1f} |")
-    ratio = cli_s / base_s
+          f"print), in this process | {cli_s:.3f} | {cli_cpu:.3f} | {cli_s / base_s:.1f} | "
+          f"{cli_cpu / base_cpu:.1f} |")
+    print(f"| command: `python -m dischargelab fit C10 1C 4C --columns ... -o cell.json`, "
+          f"fresh process, start-up included | {cmd_s:.3f} | {cmd_cpu:.3f} | "
+          f"{cmd_s / base_s:.1f} | {cmd_cpu / base_cpu:.1f} |")
+    ratio = cmd_s / base_s
     verdict = "met" if ratio <= GOAL_RATIO else "NOT met"
     stretch = "met" if ratio <= STRETCH_RATIO else "not met"
-    print(f"\nGoal: CLI <= {GOAL_RATIO:g}x the baseline: {ratio:.1f}x -> {verdict} "
+    print(f"\nGoal: the command <= {GOAL_RATIO:g}x the baseline: {ratio:.1f}x wall, "
+          f"{cmd_cpu / base_cpu:.1f}x CPU -> {verdict} "
           f"(stretch goal {STRETCH_RATIO:g}x: {stretch}).")
     print(f"Machine: {machine_line()}; load average {load_before:.1f} before, "
           f"{os.getloadavg()[0]:.1f} after (shared machine)")

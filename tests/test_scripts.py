@@ -43,6 +43,8 @@ BENCHMARKS = {
     "health_matrix.py": (["--only", "generic curve", "--cycles", "11", "--cache", "{tmp}"],
                          "band holds"),
     "fade_span.py": (["--skip-cmu"], "EFC"),
+    # needs Debian's lua5.3 (make lua), as the on-board script tests do
+    "onboard.py": (["--quick", "--skip-real"], "largest |DL_TREM - time left|"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
     "virtual_cells.py": (["--help"], "usage"),
 }

@@ -15,6 +15,7 @@ from .errors import DataError, DischargelabError, FitError, LogbookError, Simula
 
 if TYPE_CHECKING:
     from .api import endurance, fit, load, predict, read, validate
+    from .autopilot import autopilot_params
     from .discharge import Discharge
     from .logbook import Logbook
     from .model import (
@@ -26,12 +27,14 @@ if TYPE_CHECKING:
         load_battery,
     )
     from .models import FAMILIES
+    from .onboard import autopilot_script
     from .predict import Prediction
 
 __all__ = [
     "read", "fit", "load", "predict", "endurance", "validate", "Discharge", "Battery",
     "Prediction", "CellParameters", "FAMILIES", "PARAMETER_NAMES", "PRESETS", "cell_voltage",
-    "load_battery", "Logbook", "DataError", "DischargelabError", "FitError", "LogbookError",
+    "load_battery", "autopilot_params", "autopilot_script", "Logbook", "DataError",
+    "DischargelabError", "FitError", "LogbookError",
     "SimulationError",
     "__version__",
 ]
@@ -43,7 +46,7 @@ _API = {
     **dict.fromkeys(("Battery", "CellParameters", "PARAMETER_NAMES", "PRESETS", "cell_voltage",
                      "load_battery"), "model"),
     "Discharge": "discharge", "Logbook": "logbook", "FAMILIES": "models",
-    "Prediction": "predict",
+    "Prediction": "predict", "autopilot_params": "api", "autopilot_script": "api",
 }
 
 #: Names of the API that are also submodules' names: the package's attribute is always the

@@ -19,9 +19,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from .autopilot import autopilot_params  # noqa: F401  (public: dl.autopilot_params)
 from .discharge import Discharge
 from .errors import DataError
 from .model import Battery, load_battery
+from .onboard import autopilot_script  # noqa: F401  (public: dl.autopilot_script)
 
 #: Bootstrap refits stored by :func:`fit` (the draws of every later interval).
 DEFAULT_BOOTSTRAP = 100

@@ -39,6 +39,13 @@ FIRMWARES = ("ardupilot", "px4")
 DEFAULT_RESERVE_S = 120.0
 
 
+def wrap_comment(text: str, width: int = 96) -> list[str]:
+    """``text`` cut at spaces into lines of at most ``width`` characters (comment lines)."""
+    import textwrap
+
+    return textwrap.wrap(text, width, break_long_words=False, break_on_hyphens=False) or [""]
+
+
 @dataclass(frozen=True)
 class Setting:
     """One parameter: name, value, unit, firmware type and how it was derived."""
@@ -78,17 +85,23 @@ class AutopilotParams:
                               "derivation": s.comment} for s in self.settings])
 
     def text(self) -> str:
-        """The parameter file's content."""
+        """The parameter file's content (comment lines of at most 100 characters)."""
+        def comment(text: str) -> list[str]:
+            wrapped = wrap_comment(text, 96)
+            return [f"# {wrapped[0]}"] + [f"#   {line}" for line in wrapped[1:]]
+
         lines = [f"# Battery settings for {self.firmware} derived by dischargelab"]
-        lines += [f"# {n}" for n in self.notes]
+        for n in self.notes:
+            lines += comment(n)
         if self.firmware == "px4":
             lines += ["#", "# Vehicle-Id Component-Id Name Value Type"]
             for s in self.settings:
-                lines.append(f"# {s.name}: {s.comment}")
+                lines += comment(f"{s.name}: {s.comment}")
                 lines.append(f"1\t1\t{s.name}\t{s.text()}\t{6 if s.integer else 9}")
         else:
             for s in self.settings:
-                lines.append(f"# {s.name} [{s.unit}]: {s.comment}")
+                unit = f" [{s.unit}]" if s.unit else ""
+                lines += comment(f"{s.name}{unit}: {s.comment}")
                 lines.append(f"{s.name},{s.text()}")
         return "\n".join(lines) + "\n"
 
@@ -100,11 +113,24 @@ class AutopilotParams:
         return write_text(path, self.text())
 
 
+def checked_pack(battery, cells: int | None, reserve_s: float):
+    """The battery (loaded) and the flight pack's cells in series, after the checks every
+    autopilot file shares: at least one cell, a positive reserve time [s]."""
+    battery = load_battery(battery)
+    cells = battery.cells_series if cells is None else int(cells)
+    if cells < 1:
+        raise SimulationError(f"cells must be at least 1, got {cells}")
+    if not reserve_s > 0:
+        raise SimulationError(f"reserve_s must be a positive time [s], got {reserve_s}")
+    return battery, cells
+
+
 def autopilot_params(battery, *, firmware: str, cells: int | None = None,
                      parallel: int | None = None,
                      load_current_A: float | None = None, reserve_s: float = DEFAULT_RESERVE_S,
                      critical_reserve_s: float | None = None, cutoff: float | None = None,
-                     ambient: float | None = None) -> AutopilotParams:
+                     ambient: float | None = None, load_source: str | None = None,
+                     instance: int = 0) -> AutopilotParams:
     """Battery settings for ``firmware`` from the battery model.
 
     Parameters
@@ -129,22 +155,28 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
         Loaded cell voltage [V] at which the pack counts as empty (default by chemistry).
     ambient : float, optional
         Ambient temperature [degC] for thermal models.
+    load_source : str, optional
+        What ``load_current_A`` is (e.g. "the median mean current of the pack's 12 logged
+        flights"), said in the notes.
+    instance : int
+        ArduPilot battery instance of the ``BATT_SOC1_IDX`` setting (0 = the first).
 
     Returns
     -------
     AutopilotParams
+
+    Notes
+    -----
+    For ArduPilot the settings include ``BATT_SOC1_C1..C4`` (with ``BATT_SOC_COUNT``,
+    ``BATT_SOC1_IDX``, ``BATT_SOC1_NCELL``) of ArduPilot's ``BattEstimate.lua`` applet,
+    fitted to the model's open-circuit curve (:func:`battestimate_coefficients`).
     """
     from .predict import default_cutoff
     from .simulate import simulate_current
 
     if firmware not in FIRMWARES:
         raise SimulationError(f"firmware must be one of {', '.join(FIRMWARES)}, got {firmware!r}")
-    battery = load_battery(battery)
-    cells = battery.cells_series if cells is None else int(cells)
-    if cells < 1:
-        raise SimulationError(f"cells must be at least 1, got {cells}")
-    if not reserve_s > 0:
-        raise SimulationError(f"reserve_s must be a positive time [s], got {reserve_s}")
+    battery, cells = checked_pack(battery, cells, reserve_s)
     critical = reserve_s / 3.0 if critical_reserve_s is None else float(critical_reserve_s)
     if not 0 < critical < reserve_s:
         raise SimulationError("critical_reserve_s must be between 0 and reserve_s")
@@ -175,20 +207,28 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
     r_pack = (float(bat.voltage(0.0, q_half, temperature_C=ambient))
               - float(bat.voltage(load, q_half, temperature_C=ambient))) / load
     r_cell = r_pack / cells
-    how = (f"{bat.model} model, {cells}S{bat.strings_parallel}P, at {load:g} A "
+    amps = f"{load:.3g} A"
+    how = (f"{bat.model} model, {cells}S{bat.strings_parallel}P, at {amps} "
            f"({load / bat.rated_capacity_Ah:.2g}C): {total / 60:.1f} min to {cut:g} V/cell")
-    notes = [how, f"reserve {reserve_s:g} s at the low level, {critical:g} s at the critical level"]
-    if bat.extra.get("logbook") and bat.extra.get("note"):  # a logbook pack, today
+    source = load_source or ("1C of the rated capacity" if load_current_A is None
+                             else "the given load")
+    notes = [how, f"load {amps}: {source}",
+             f"reserve {reserve_s:g} s at the low level, {critical:.0f} s at the critical level"]
+    today = bool(bat.extra.get("logbook"))
+    if today and bat.extra.get("note"):  # a logbook pack, today
         notes.append(str(bat.extra["note"]))
     if firmware == "ardupilot":
+        capacity_how = ("today's capacity estimate of the logbook pack" if today
+                        else "rated pack capacity")
+        coefficients, worst = battestimate_coefficients(bat, ambient)
         settings = [
-            Setting("BATT_CAPACITY", capacity_mAh, "mAh", "rated pack capacity", True),
+            Setting("BATT_CAPACITY", capacity_mAh, "mAh", capacity_how, True),
             Setting("BATT_FS_VOLTSRC", 1, "", "compare failsafe voltages with the sag-compensated "
                     "(resting) voltage, so load peaks do not trigger false failsafes", True),
             Setting("BATT_LOW_VOLT", low_rest, "V", f"resting pack voltage when {reserve_s:g} s "
-                    f"of flight at {load:g} A remain"),
-            Setting("BATT_CRT_VOLT", crit_rest, "V", f"resting pack voltage when {critical:g} s "
-                    f"of flight at {load:g} A remain"),
+                    f"of flight at {amps} remain"),
+            Setting("BATT_CRT_VOLT", crit_rest, "V", f"resting pack voltage when {critical:.0f} s "
+                    f"of flight at {amps} remain"),
             Setting("BATT_ARM_VOLT", rest_at(max(total - 3.0 * reserve_s, 0.0)), "V",
                     f"resting pack voltage with three reserves ({3 * reserve_s:g} s) of flight "
                     "left: refuse to arm below it"),
@@ -196,17 +236,28 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
                     "scaling upper limit)"),
             Setting("MOT_BAT_VOLT_MIN", cut * cells, "V", f"loaded pack voltage when empty "
                     f"({cut:g} V/cell x {cells}; thrust scaling lower limit)"),
+            Setting("BATT_SOC_COUNT", 1, "", "one BattEstimate.lua estimator (ArduPilot's "
+                    "applet: state of charge from the resting voltage before take-off)", True),
+            Setting("BATT_SOC1_IDX", instance, "", "battery instance of the estimator", True),
+            Setting("BATT_SOC1_NCELL", cells, "", "cells in series", True),
         ]
+        fit_how = (f"soc = C1*(1 - 1/(1 + (V/C2)^C4)^C3) fitted to the model's open-circuit "
+                   f"curve: worst difference {worst:.1f} % of charge")
+        settings += [Setting(f"BATT_SOC1_C{k + 1}", c, "", fit_how if k == 0 else
+                             f"see BATT_SOC1_C1 (bounds {lo:g} to {hi:g})")
+                     for k, (c, (lo, hi)) in enumerate(zip(coefficients, SOC_BOUNDS))]
     else:
         settings = [
             Setting("BAT1_N_CELLS", cells, "", "cells in series", True),
-            Setting("BAT1_CAPACITY", capacity_mAh, "mAh", "rated pack capacity"),
+            Setting("BAT1_CAPACITY", capacity_mAh, "mAh",
+                    "today's capacity estimate of the logbook pack" if today
+                    else "rated pack capacity"),
             Setting("BAT1_V_CHARGED", full_rest / cells, "V", "resting cell voltage when full"),
             Setting("BAT1_V_EMPTY", empty_rest / cells, "V", f"resting cell voltage when the "
-                    f"pack reaches {cut:g} V/cell under {load:g} A (load-compensated with "
+                    f"pack reaches {cut:g} V/cell under {amps} (load-compensated with "
                     "BAT1_R_INTERNAL)"),
             Setting("BAT1_R_INTERNAL", r_cell, "ohm", f"DC resistance per series cell at half "
-                    f"charge and {load:g} A ({r_pack * 1000:.1f} mOhm for the pack)"),
+                    f"charge and {amps} ({r_pack * 1000:.1f} mOhm for the pack)"),
         ]
         notes.append(f"low/critical thresholds (BAT_LOW_THR/BAT_CRIT_THR) as charge fractions: "
                      f"{reserve_s * load / 3600 / (bat.rated_capacity_Ah):.3f} / "
@@ -214,4 +265,56 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
     return AutopilotParams(firmware, settings, notes)
 
 
-__all__ = ["autopilot_params", "AutopilotParams", "Setting", "FIRMWARES"]
+#: Bounds of BattEstimate.lua's coefficients C1..C4 (ArduPilot's parameter ranges).
+SOC_BOUNDS = ((100.0, 200.0), (2.0, 5.0), (0.01, 0.5), (5.0, 100.0))
+
+
+def _soc_formula(coefficients, cell_V):
+    c1, c2, c3, c4 = coefficients
+    with np.errstate(over="ignore", invalid="ignore"):
+        return c1 * (1.0 - 1.0 / (1.0 + (cell_V / c2) ** c4) ** c3)
+
+
+def battestimate_coefficients(battery: Battery, ambient: float | None = None):
+    """``BATT_SOC1_C1..C4`` of ArduPilot's ``BattEstimate.lua`` for the model's own
+    open-circuit curve, and the worst difference [% of charge] over it.
+
+    The applet's state of charge [%] from the resting cell voltage ``V`` is
+    ``C1*(1 - 1/(1 + (V/C2)^C4)^C3)`` (ArduPilot ``libraries/AP_Scripting/applets/
+    BattEstimate.lua``, coefficients from ``Tools/scripts/battery_fit.py``); it is fitted
+    here by bounded least squares (scipy ``least_squares``, trust-region reflective) to the
+    model's rest voltage per cell against its state of charge ``1 - q / capacity``, from
+    full to 2 % left, within ArduPilot's parameter ranges.
+    """
+    from scipy.optimize import least_squares
+
+    cap = battery.capacity_Ah
+    q = np.linspace(0.0, 0.98 * cap, 60)
+    with np.errstate(invalid="ignore", over="ignore"):
+        cell = np.asarray(battery.voltage(np.zeros_like(q), q, temperature_C=ambient),
+                          dtype=float) / battery.cells_series
+    soc = 100.0 * (1.0 - q / cap)
+    ok = np.isfinite(cell)
+    cell, soc = cell[ok], soc[ok]
+    if cell.size < 5:
+        raise SimulationError("the model's open-circuit curve cannot be evaluated")
+    lower = np.array([b[0] for b in SOC_BOUNDS])
+    upper = np.array([b[1] for b in SOC_BOUNDS])
+
+    def residual(c):
+        r = _soc_formula(c, cell) - soc
+        return np.where(np.isfinite(r), r, 1e3)
+
+    best = None
+    for c2 in (0.85 * float(np.median(cell)), 0.95 * float(np.median(cell))):
+        for c4 in (20.0, 60.0):   # a few starts: the formula has flat directions
+            start = np.clip([105.0, c2, 0.1, c4], lower, upper)
+            sol = least_squares(residual, start, bounds=(lower, upper), max_nfev=2000)
+            if best is None or sol.cost < best.cost:
+                best = sol
+    worst = float(np.max(np.abs(residual(best.x))))
+    return [float(c) for c in best.x], worst
+
+
+__all__ = ["autopilot_params", "AutopilotParams", "Setting", "FIRMWARES",
+           "battestimate_coefficients", "wrap_comment"]

@@ -12,7 +12,7 @@ types, consoles, JSON, error lines) is in :mod:`.common`:
 
 - :mod:`.model`: fit, predict, curves, validate, presets, models
 - :mod:`.missions`: endurance, report, demo
-- :mod:`.flightlogs`: convert, flight, autopilot-params
+- :mod:`.flightlogs`: convert, flight, autopilot-params, autopilot-script
 - :mod:`.testers`: steps (battery testers' files)
 - :mod:`.acquisition`: calibrate, acquire, virtual-device, demo-acquire
 - :mod:`.serve`: serve (the web pages)

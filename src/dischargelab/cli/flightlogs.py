@@ -1,5 +1,5 @@
-"""Flight logs in, autopilot settings out: convert, flight, autopilot-params, and
-the flight-log side of fit."""
+"""Flight logs in, autopilot settings out: convert, flight, autopilot-params,
+autopilot-script, and the flight-log side of fit."""
 
 from __future__ import annotations
 
@@ -67,6 +67,45 @@ def fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, p
 
 
 
+def _battery_or_pack(battery, pack_name, db, cells, output, force, load_current=None):
+    """The model of BATTERY (a battery file or preset) or of the logbook pack --pack NAME at
+    today's capacity and resistance (read without writing to the logbook), after the checks
+    both autopilot commands share; with the load current [A] and what it is: the one given,
+    else with --pack the typical current of the pack's logged flights, else None (1C)."""
+    if battery is not None and pack_name is not None:
+        raise DischargelabError("give a BATTERY or --pack NAME, not both")
+    if battery is None and pack_name is None:
+        raise DischargelabError("give a BATTERY (battery file or preset) or --pack NAME")
+    if battery is not None and cells is None:
+        raise DischargelabError("give the flight pack's cells in series: --cells N")
+    guard_outputs([output], battery_input(battery or ""), force)
+    if pack_name is not None:
+        from ..logbook import Logbook
+
+        with Logbook(db, create=False) as lb:
+            battery = lb.pack(pack_name, store=False).battery()
+            typical = lb.flight_current(pack_name) if load_current is None else None
+        if typical is not None:
+            amps, flights = typical
+            return battery, amps, (f"the median mean current of the pack's {flights} logged "
+                                   f"flight{'s' if flights != 1 else ''}")
+    source = None if load_current is None else "given with --load"
+    return load_battery_arg(battery), load_current, source
+
+
+def _written(result, output, force: bool, as_json: bool) -> bool:
+    """Write an autopilot file when asked (-o) and print its JSON when asked (--json; then
+    True: nothing more to print)."""
+    if output:
+        result.write(output, force=force)
+    if as_json:
+        doc = result.to_dict()
+        if output:
+            doc["file"] = str(output)
+        print_json(doc)
+    return bool(as_json)
+
+
 @click.command("autopilot-params")
 @click.argument("battery", required=False)
 @click.option("--pack", "pack_name", metavar="NAME",
@@ -84,7 +123,8 @@ def fit_flight_logs(paths, flights, battery_index, capacity, chemistry, cells, p
               help="Strings in parallel (default: as in the battery file).")
 @click.option("--load", "load_current", type=float, metavar="A", default=None,
               help="Pack current of normal flight (hover/cruise) at which the reserve is "
-                   "computed [A]; default 1C of the pack.")
+                   "computed [A]; default with --pack the median mean current of its logged "
+                   "flights, else 1C of the pack.")
 @click.option("--reserve-s", default=120.0, show_default=True, type=float, metavar="S",
               help="Flight time left at that load when the low-voltage warning fires [s].")
 @click.option("--critical-reserve-s", type=float, metavar="S", default=None,
@@ -118,29 +158,14 @@ def autopilot_params_cmd(battery, pack_name, db, firmware, cells, parallel, load
     """
     from ..autopilot import autopilot_params
 
-    if battery is not None and pack_name is not None:
-        raise DischargelabError("give a BATTERY or --pack NAME, not both")
-    if battery is None and pack_name is None:
-        raise DischargelabError("give a BATTERY (battery file or preset) or --pack NAME")
-    if battery is not None and cells is None:
-        raise DischargelabError("give the flight pack's cells in series: --cells N")
-    guard_outputs([output], battery_input(battery or ""), force)
-    if pack_name is not None:
-        from ..logbook import Logbook
-
-        with Logbook(db, create=False) as lb:
-            battery = lb.pack(pack_name).battery()
-    result = autopilot_params(load_battery_arg(battery), firmware=firmware, cells=cells,
+    battery, load_current, load_source = _battery_or_pack(battery, pack_name, db, cells,
+                                                          output, force, load_current)
+    result = autopilot_params(battery, firmware=firmware, cells=cells,
                               parallel=parallel, load_current_A=load_current,
+                              load_source=load_source,
                               reserve_s=reserve_s, critical_reserve_s=critical_reserve_s,
                               cutoff=cutoff, ambient=ambient)
-    if output:
-        result.write(output, force=force)
-    if as_json:
-        doc = result.to_dict()
-        if output:
-            doc["file"] = str(output)
-        print_json(doc)
+    if _written(result, output, force, as_json):
         return
     out.print(table(f"{firmware} battery settings", ["parameter", "value", "unit", "derivation"],
                     [[s.name, s.text(), s.unit, s.comment] for s in result.settings]))
@@ -152,6 +177,69 @@ def autopilot_params_cmd(battery, pack_name, db, firmware, cells, parallel, load
         out.print("(not saved: add -o FILE to write the parameter file)")
 
 
+
+
+@click.command("autopilot-script")
+@click.argument("battery", required=False)
+@click.option("--pack", "pack_name", metavar="NAME",
+              help="A logbook pack: its model at today's capacity and resistance (then give "
+                   "no BATTERY).")
+@click.option("--db", metavar="URL|FILE",
+              help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's logbook).")
+@click.option("--firmware", default="ardupilot", show_default=True,
+              type=click.Choice(["ardupilot"]), help="Autopilot firmware of the script.")
+@click.option("--cells", type=click.IntRange(1), default=None,
+              help="Cells in series of the flight pack (required with a BATTERY; default "
+                   "with --pack: the pack's).")
+@click.option("--parallel", type=click.IntRange(1), default=None,
+              help="Strings in parallel (default: as in the battery file).")
+@click.option("--load", "load_current", type=float, metavar="A", default=None,
+              help="Pack current the script assumes without a current sensor [A]; default "
+                   "with --pack the typical current of its logged flights, else 1C.")
+@click.option("--reserve-s", default=120.0, show_default=True, type=float, metavar="S",
+              help="Time left at which the script warns (and again at a third of it) [s].")
+@cutoff_option("at which the loaded pack is empty")
+@click.option("--ambient", type=float, metavar="C", default=None,
+              help="Ambient temperature [degC] of the tables for thermal models.")
+@click.option("--instance", type=click.IntRange(0), default=0, show_default=True,
+              help="ArduPilot battery monitor instance (0 = the first).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Lua script to write (copy it to APM/scripts/ on the SD card).")
+@force_option
+@json_option
+def autopilot_script_cmd(battery, pack_name, db, firmware, cells, parallel, load_current,
+                         reserve_s, cutoff, ambient, instance, output, force, as_json):
+    """An ArduPilot Lua script that sends the model's flight time left in flight.
+
+    The model is flown on the ground into small tables (charge left to the
+    cutoff against charge taken out and current, loaded voltage, open-circuit
+    curve); the script reads the state of charge from the rest voltage before
+    take-off, counts charge in flight and sends DL_TREM (seconds to the cutoff at
+    the last 30 s mean current) and DL_SOC (%) once a second, and warns at the
+    reserve and at a third of it. Install: copy to APM/scripts/, SCR_ENABLE = 1.
+
+    \b
+    Examples:
+      dischargelab autopilot-script cell.json --cells 4 --cutoff 3.3 -o battery.lua
+      dischargelab autopilot-script --pack zippy-a --reserve-s 90 -o zippy-a.lua
+    """
+    from ..onboard import autopilot_script
+
+    battery, load_current, _ = _battery_or_pack(battery, pack_name, db, cells, output, force,
+                                                load_current)
+    result = autopilot_script(battery, firmware=firmware, cells=cells, parallel=parallel,
+                              cutoff=cutoff, reserve_s=reserve_s, load_current_A=load_current,
+                              ambient=ambient, instance=instance)
+    if _written(result, output, force, as_json):
+        return
+    for line in result.header:
+        out.print(line, markup=False)
+    for note in result.notes[1:]:
+        out.print(f"note: {note}", markup=False)
+    if output:
+        out.print(f"script written to {output}", markup=False)
+    else:
+        out.print("(not saved: add -o FILE.lua to write the script)")
 
 
 @click.command("convert")
@@ -340,4 +428,4 @@ def _mid_flight_text(summary) -> str:
     return ", ".join(parts) or "-"
 
 
-COMMANDS = [autopilot_params_cmd, convert_cmd, flight_cmd]
+COMMANDS = [autopilot_params_cmd, autopilot_script_cmd, convert_cmd, flight_cmd]

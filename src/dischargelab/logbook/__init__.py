@@ -289,9 +289,10 @@ class Logbook:
             raise failure
         return out
 
-    def _stored(self, names, columns: tuple, recompute: bool = True) -> dict:
+    def _stored(self, names, columns: tuple, recompute: bool = True,
+                store: bool = True) -> dict:
         """``{name: figures.Stored}`` of the packs named (all for None), stale ones computed
-        first when ``recompute`` (stored when the logbook can be written)."""
+        first when ``recompute`` (stored when the logbook can be written and ``store``)."""
         from . import figures, store
 
         with self._errors(), self._read() as conn:
@@ -302,15 +303,15 @@ class Logbook:
                         store.pack_row(conn, name)     # raises: no such pack
         stale = [n for n, s in found.items() if not s.current]
         if recompute and stale:
-            for name, value in self._recompute(stale, store=None).items():
+            for name, value in self._recompute(stale, store=None if store else False).items():
                 error = value if isinstance(value, str) else None
                 found[name] = figures.Stored(
                     name=name, pack_id=found[name].pack_id, current=True, error=error,
                     figures=None if error else {c: value[c] for c in columns})
         return found
 
-    def _stored_one(self, name: str, columns: tuple) -> dict:
-        stored = self._stored([name], columns)[name]
+    def _stored_one(self, name: str, columns: tuple, store: bool = True) -> dict:
+        stored = self._stored([name], columns, store=store)[name]
         if stored.error:
             raise LogbookError(f"pack {name!r}: its figures cannot be computed: {stored.error}")
         return stored.figures
@@ -459,20 +460,42 @@ class Logbook:
         return FleetReport(rows=sorted(rows, key=retire_order), eol=eol,
                            failed=sorted(failed))
 
-    def pack(self, name: str) -> Pack:
+    def pack(self, name: str, *, store: bool = True) -> Pack:
         """A pack with its health today; ``.battery()`` is its model at that health (its
-        fitted model scaled to today, else the chemistry's prior at today's figures)."""
-        from . import store
-        from .figures import make_pack
+        fitted model scaled to today, else the chemistry's prior at today's figures).
 
-        stored = self._stored_one(name, ("pack", "health"))
+        ``store=False`` reads without writing anything: stale figures and a model fitted
+        for ``.battery()`` are computed in memory only (what ``autopilot-params --pack``
+        and ``autopilot-script --pack`` use)."""
+        from . import store as stored_rows
+        from .figures import make_pack
+        from .refit import fit_job
+
+        stored = self._stored_one(name, ("pack", "health"), store=store)
         health = Health.from_dict(stored["health"])
         with self._errors(), self._read() as conn:
-            row = store.pack_row(conn, name)
-            model = store.latest_model(conn, row["id"])
-        return make_pack(row, stored["pack"]["events"], health, model,
-                         fit=lambda: self._fit(name, health),
+            row = stored_rows.pack_row(conn, name)
+            model = stored_rows.latest_model(conn, row["id"])
+        fit = (lambda: self._fit(name, health)) if store else \
+            (lambda: fit_job(self._job(name, health, {})))
+        return make_pack(row, stored["pack"]["events"], health, model, fit=fit,
                          seen=stored["pack"].get("seen") or {})
+
+    def flight_current(self, name: str) -> tuple[float, int] | None:
+        """The typical pack current [A] of a pack's logged flights: the median of their mean
+        currents, with the number of flights (None without flights)."""
+        import statistics
+
+        from . import store
+
+        with self._errors(), self._read() as conn:
+            row = store.pack_row(conn, name)
+            events = store.pack_events(conn, row["id"], curves=False)
+        means = [abs(float(e["mean_current_A"])) for e in events
+                 if e.get("kind") == "flight" and e.get("mean_current_A")]
+        if not means:
+            return None
+        return float(statistics.median(means)), len(means)
 
     def raw(self, sha256: str) -> bytes:
         """The stored bytes of a source file, by its SHA-256."""

@@ -1,0 +1,129 @@
+"""Journeys: the autopilot files a user writes from a logbook pack or a preset.
+
+The command line runs as a user runs it (a subprocess, the shared data): reading a pack's
+model for its autopilot settings changes nothing stored in the logbook, the settings say
+which load they were computed at, and the on-board script from a preset runs in Lua 5.3.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import dischargelab as dl
+
+CELL_C = "samsung30q_ageing_cellC"
+FLIGHTS = "flight_logs/ina3221_fpv_4s"
+
+
+def cli(*args, timeout=900) -> subprocess.CompletedProcess:
+    """``python -m dischargelab ARGS`` as a user runs it; fails on a non-zero exit."""
+    done = subprocess.run([sys.executable, "-m", "dischargelab", *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout,
+                          env={**os.environ, "COLUMNS": "200",
+                               "PYTHONPATH": str(Path(dl.__file__).parents[1])})
+    assert done.returncode == 0, done.stderr[-3000:] + done.stdout[-3000:]
+    return done
+
+
+def stored_rows(db: Path) -> dict:
+    """Every row of every table of a SQLite logbook, in a fixed order."""
+    with sqlite3.connect(db) as conn:
+        tables = [r[0] for r in conn.execute(
+            "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
+        return {t: sorted(map(repr, conn.execute(f'SELECT * FROM "{t}"'))) for t in tables}
+
+
+def test_autopilot_params_from_a_pack_leaves_the_logbook_unchanged(tmp_path, shared_data):
+    db = tmp_path / "lb.sqlite"
+    files = [shared_data / CELL_C / f"DischargeCycle{n:03d}.txt" for n in (1, 660, 664)]
+    cli("logbook", "add", *files, "--pack", "C", "--chemistry", "li-ion", "--cells", "1",
+        "--db", db)
+    before = stored_rows(db)
+    out = json.loads(cli("autopilot-params", "--pack", "C", "--db", db, "--firmware",
+                         "ardupilot", "--cutoff", "2.5", "--json").stdout)
+    assert stored_rows(db) == before                    # no model, no figure stored
+    derivation = out["derivation"]
+    assert derivation["BATT_CAPACITY"].startswith("today's capacity estimate")
+    assert "1C of the rated capacity" in " ".join(out["notes"])       # no flights logged
+    assert 0 < out["parameters"]["BATT_SOC1_C3"] <= 0.5
+    assert "worst difference" in derivation["BATT_SOC1_C1"]
+
+
+def test_a_flying_pack_reserves_at_its_flights_current(tmp_path, shared_data):
+    db = tmp_path / "lb.sqlite"
+    flights = sorted((shared_data / FLIGHTS).glob("*.csv"))
+    cli("logbook", "add", *flights, "--pack", "fpv", "--db", db)
+    before = stored_rows(db)
+    with dl.Logbook(db) as lb:
+        typical, count = lb.flight_current("fpv")
+    target = tmp_path / "fpv.param"
+    cli("autopilot-params", "--pack", "fpv", "--db", db, "--firmware", "ardupilot",
+        "-o", target)
+    assert stored_rows(db) == before
+    text = target.read_text()
+    amps = f"{typical:.3g} A"
+    assert f"load {amps}: the median mean current of the pack's {count} logged flight" in text
+    assert f"when 120 s of flight at {amps} remain" in text
+    assert all(len(line) <= 100 for line in text.splitlines())
+    assert "BATT_CAPACITY [mAh]: today's capacity estimate" in text
+
+
+def test_autopilot_script_from_a_preset_runs_in_lua(tmp_path):
+    lua = shutil.which("lua5.3")
+    if lua is None:
+        if os.environ.get("CI"):
+            pytest.fail("lua5.3 not found (make lua installs it)")
+        pytest.skip("lua5.3 not found (make lua installs it)")
+    from ardupilot_replay import replay
+    from dischargelab.onboard import flight_samples
+    from dischargelab.simulate import simulate_current
+
+    target = tmp_path / "battery.lua"
+    cli("autopilot-script", "nanotech-1700-2s", "--cells", "4", "--cutoff", "3.3",
+        "--reserve-s", "90", "-o", target)
+    text = target.read_text()
+    assert "SCR_ENABLE = 1" in text and "4S1P" in text
+    pack = dl.load_battery("nanotech-1700-2s").with_pack(4)
+    sim = simulate_current(pack, 5.1, cutoff_cell_V=3.3)     # 3C to the cutoff
+    rep = replay(text, flight_samples(sim, rest_s=5.0))
+    total = sim.time_to_cutoff_s
+    times, trem = rep.series("DL_TREM")
+    half = trem[abs(times - 5.0 - 0.5 * total).argmin()]
+    assert abs(half - 0.5 * total) / total < 0.02
+    assert any("90 s" in t[2] or "s of flight left" in t[2] for t in rep.texts)
+    assert rep.max_instructions <= 10_000 and rep.heap_kb <= 40.0
+
+
+def test_the_pack_page_offers_the_parameters_and_the_script_without_writing(tmp_path,
+                                                                            shared_data):
+    pytest.importorskip("starlette")
+    from web_helpers import ServerProcess
+
+    db = tmp_path / "lb.sqlite"
+    flights = sorted((shared_data / FLIGHTS).glob("*.csv"))
+    cli("logbook", "add", *flights, "--pack", "fpv", "--chemistry", "lipo", "--db", db)
+    server = ServerProcess(["serve", "--db", str(db), "--port", "0"], cwd=tmp_path)
+    try:
+        server.get_json("/api/packs/fpv")               # the stored figures, as a visit reads
+        before = stored_rows(db)
+        status, lua = server.request("GET", "/api/packs/fpv/autopilot/ardupilot.lua",
+                                     timeout_s=300)
+        assert status == 200 and 'gcs:send_named_float("DL_TREM"' in lua
+        status, param = server.request("GET", "/api/packs/fpv/autopilot/ardupilot.param",
+                                       timeout_s=300)
+        assert status == 200 and "BATT_CAPACITY" in param and "logged flight" in param
+        status, body = server.request("GET", "/api/packs/fpv/autopilot/px4.exe")
+        assert status == 404 and "ardupilot.lua" in str(body)
+        assert stored_rows(db) == before                # nothing fitted or stored
+    finally:
+        server.stop()
+    page = (Path(dl.__file__).parent / "web" / "static" / "pack.html").read_text()
+    assert 'id="dl-lua"' in page and 'id="dl-param"' in page
