@@ -164,3 +164,28 @@ def test_segments_are_the_load_blocks(blocks):
         return
     search = find_segments(frame(t, v, i))
     assert [(s.start, s.stop) for s in search.segments] == expected
+
+
+@pytest.mark.parametrize("amps", [50e-6, 0.5e-3, 5.0])
+def test_a_small_cells_discharge_is_found_at_its_own_scale(amps):
+    """A rest, a constant-current discharge and a rest: found at 50 uA as at 5 A (the 1 mA
+    floor gives way when the current stands above its noise)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 3000.0, 10.0)
+    on = (t >= 500) & (t < 2500)
+    i = np.where(on, amps, 0.0) + rng.normal(0.0, amps * 1e-3, t.size)
+    v = 4.1 - 0.5 * np.cumsum(on) / on.sum() - 0.05 * on
+    search = find_segments(frame(t, v, i))
+    assert len(search.segments) == 1
+    seg = search.segments[0]
+    assert seg.rows == int(on.sum())
+
+
+def test_noise_alone_is_no_discharge():
+    """A logger's noise around zero with no load is not a small cell's discharge."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 3000.0, 10.0)
+    i = rng.normal(0.0, 2e-4, t.size)
+    v = 3.9 + rng.normal(0.0, 1e-4, t.size)
+    with pytest.raises(DataError):
+        find_segments(frame(t, v, i))
