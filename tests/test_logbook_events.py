@@ -23,7 +23,7 @@ from dischargelab.logbook.estimates import (
     systematic_share,
     widen,
 )
-from dischargelab.logbook.events import charge_figures, split_log
+from dischargelab.logbook.events import MIN_IDLE_A, charge_figures, idle_threshold, split_log
 from dischargelab.logbook.health import order_events
 from dischargelab.ocv import ocv_from_soc
 
@@ -338,3 +338,27 @@ def test_equivalent_full_cycles_count_discharges_or_else_the_charges():
     np.testing.assert_allclose(equivalent_full_cycles(log, 3.0), [0.5, 0.5, 0.5, 1.0])
     charger_only = [e for e in log if e["kind"] != "discharge"]
     np.testing.assert_allclose(equivalent_full_cycles(charger_only, 3.0), [0.0, 1.6 / 3])
+
+
+@pytest.mark.parametrize("amps", [20e-6, 2e-3, 2.0])
+def test_split_log_without_steps_at_every_scale(amps):
+    """Rest, discharge, rest, charge, rest of a cell at 20 uA, 2 mA and 2 A, recorded every
+    10 s, then every 300 s inside the loads: the same five events, no gap."""
+    rng = np.random.default_rng(5)
+    t, i = [], []
+    clock = 0.0
+    for level, duration in ((0.0, 600), (amps, 7200), (0.0, 600), (-amps, 7200), (0.0, 600)):
+        times = [*np.arange(0.0, 60.0, 10.0), *np.arange(60.0, duration, 300.0)] if level \
+            else np.arange(0.0, duration, 10.0)
+        t += [clock + s for s in times]
+        i += [level + rng.normal(0.0, amps * 1e-3) for _ in times]
+        clock += duration
+    spans = split_log(np.array(t), np.array(i))
+    assert [sp.kind for sp in spans] == ["rest", "discharge", "rest", "charge", "rest"]
+
+
+def test_idle_threshold_of_noise_alone_keeps_its_floor():
+    """A logger's noise with no load stays idle (the small-cell scaling needs a current
+    above the noise)."""
+    rng = np.random.default_rng(6)
+    assert idle_threshold(rng.normal(0.0, 1e-3, 500)) >= MIN_IDLE_A
