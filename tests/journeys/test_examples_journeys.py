@@ -161,6 +161,10 @@ def test_the_tester_file_and_the_ageing_cell(folder):
     assert run.charge_Ah == pytest.approx(
         steps["steps"][steps["fit_steps"][0] - 1]["tester_Ah"], rel=0.01)
 
+    # a fit of the tester file answers (a model or one line), never a crash
+    fitted = cli("fit", "tester/arbin_example.csv", "-o", "lfp.json", cwd=folder, ok=False)
+    assert fitted.returncode in (0, 2) and "Traceback" not in fitted.stderr, fitted.stderr
+
     cli("logbook", "add", "ageing", "--pack", "cell-C", "--db", "packs.db", cwd=folder)
     health = json.loads(cli("logbook", "health", "cell-C", "--db", "packs.db", "--json",
                             cwd=folder).stdout)
