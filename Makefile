@@ -1,6 +1,6 @@
 # Two entry points on a fresh machine (only Python >= 3.11 needed):
 #   make demo   -> builds .venv, installs dischargelab, runs the demo into ./demo-out/
-#   make test   -> same .venv, runs the whole test suite
+#   make test   -> same .venv (with the docs extra), runs the whole test suite
 # Checks CI runs too: make docs (the documentation site), make lint (ruff), make typecheck
 # (mypy on the public API), make min-versions (the suite with every dependency at its
 # declared lower bound).
@@ -17,12 +17,21 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[all,test]"
 	touch $(STAMP)
 
+# The docs extra (Sphinx and its extensions): `make docs` builds the site with it, and the
+# suite's site test (tests/test_docs.py) builds it too, so `make test` installs it as well.
+DOCS_STAMP := $(VENV)/.docs-installed
+
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
 demo: $(STAMP)
 	$(BIN)/dischargelab demo --out demo-out --force
 
 # the sources byte-compiled first: the suite starts many Python processes (commands, servers,
 # Dask workers), and where PYTHONDONTWRITEBYTECODE is set each would compile them again
-test: $(STAMP) browser lua postgres mdbtools
+# (the docs extra too: the site test builds the documentation; no test is skipped for want of it)
+test: $(DOCS_STAMP) browser lua postgres mdbtools
 	$(BIN)/python -m compileall -q src
 	$(BIN)/python -m pytest
 
@@ -34,13 +43,8 @@ typecheck: $(STAMP)
 	$(BIN)/mypy src/dischargelab/__init__.py $(wildcard src/dischargelab/api.py)
 
 # The documentation site (Sphinx: docs/*.md, the API reference from the numpydoc docstrings,
-# the gallery made by running examples/) into docs/_build/html, offline, warnings as errors.
-DOCS_STAMP := $(VENV)/.docs-installed
-
-$(DOCS_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e ".[docs]"
-	touch $(DOCS_STAMP)
-
+# the gallery made by running examples/, the guides' example commands run on the example set)
+# into docs/_build/html, offline, warnings as errors.
 docs: $(DOCS_STAMP)
 	rm -rf docs/_build docs/generated docs/gallery docs/sg_execution_times.rst
 	$(BIN)/python -m sphinx -W --keep-going -q -b html -j 1 docs docs/_build/html

@@ -8,7 +8,6 @@ are errors (``-W`` in the Makefile).
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
 import sys
@@ -17,6 +16,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(HERE / "_ext"))
 
 import dischargelab  # noqa: E402
 
@@ -32,6 +32,7 @@ extensions = [
     "sphinx.ext.autosummary",
     "numpydoc",
     "sphinx_gallery.gen_gallery",
+    "guide_commands",          # the guides' {example-commands} blocks run on the example set
 ]
 
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
@@ -58,29 +59,13 @@ add_module_names = False
 GALLERY_OUT = HERE / "_build" / "gallery-out"
 
 
-def _shared_data() -> Path:
-    """The measured runs beside the checkout (as in CI), or $DISCHARGELAB_SHARED_DATA."""
-    if os.environ.get("DISCHARGELAB_SHARED_DATA"):
-        return Path(os.environ["DISCHARGELAB_SHARED_DATA"])
-    for parent in ROOT.parents:
-        if (parent / "shared" / "data" / "samsung30q_S001").is_dir():
-            return parent / "shared" / "data"
-    return ROOT.parent / "shared" / "data"
-
-
-SHARED_DATA = _shared_data()
-
-
 def _example_argv(gallery_conf, script_vars):
     """Each example writes its files into its own folder under _build (never the checkout)."""
     name = Path(script_vars["src_file"]).stem
     out = GALLERY_OUT / name
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
-    argv = ["--out", str(out)]
-    if name == "endurance_report":
-        argv += ["--more", str(SHARED_DATA / "samsung30q_S001")]
-    return argv
+    return ["--out", str(out)]
 
 
 class WrittenFiles:

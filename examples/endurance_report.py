@@ -3,24 +3,22 @@
 
 Fit a battery, check it on rates it did not see, fly a mission and write one HTML page.
 
-Uses the Samsung 30Q discharges bundled with dischargelab (1C and 4C to fit, C/10 to
-validate) and, when the shared data folder is beside the checkout (or given with
-``--more``), the 2C and 3C runs too. The mission is the bundled fixed-wing survey on a
-4S2P pack of the fitted cells.
+Uses the Samsung 30Q discharges of the example set shipped with dischargelab (1C and 4C
+to fit, C/10 to validate; ``dischargelab examples DIR`` copies them). The mission is the
+bundled fixed-wing survey on a 4S2P pack of the fitted cells.
 
-Usage: python examples/endurance_report.py [--out DIR] [--more DIR]
+Usage: python examples/endurance_report.py [--out DIR]
 """
 
 import argparse
 from pathlib import Path
 
 import dischargelab as dl
-from dischargelab.demo import demo_data_dir
+from dischargelab.examples import EXAMPLE_COLUMNS as COLUMNS
+from dischargelab.examples import example_files
 from dischargelab.report import write_report
 
-#: The other Samsung 30Q runs, relative to where the script runs (the checkout)
-SHARED = Path("..") / "shared" / "data" / "samsung30q_S001"
-COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
+EXAMPLES = example_files()          # {"bench/Q30_S001_1C.csv": path, ...}
 CUTOFF_CELL_V = 3.0
 
 
@@ -28,22 +26,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="report-out", help="folder for the battery and report")
-    parser.add_argument("--more", default=str(SHARED),
-                        help="folder with Q30_S001_2C.csv and Q30_S001_3C.csv to validate on "
-                             "too, if it exists (default: %(default)s)")
-    args = parser.parse_args()
-    out, more = Path(args.out), Path(args.more)
+    out = Path(parser.parse_args().out)
     out.mkdir(parents=True, exist_ok=True)
 
-    runs = [dl.read(demo_data_dir() / f"Q30_S001_{rate}.csv", columns=COLUMNS)
+    runs = [dl.read(EXAMPLES[f"bench/Q30_S001_{rate}.csv"], columns=COLUMNS)
             for rate in ("1C", "4C")]
     fit = dl.fit(runs)                                     # model picked by evidence
     print(fit.report())
     cell = fit.save(out / "samsung30q.json", chemistry="li-ion")
 
-    unseen = [demo_data_dir() / "Q30_S001_C10.csv"]
-    unseen += [more / f"Q30_S001_{rate}.csv" for rate in ("2C", "3C")
-               if (more / f"Q30_S001_{rate}.csv").exists()]
+    unseen = [EXAMPLES["bench/Q30_S001_C10.csv"]]
     cases = dl.validate(cell, [dl.read(path, columns=COLUMNS) for path in unseen],
                         cutoff=CUTOFF_CELL_V)
     for case in cases:

@@ -4,7 +4,8 @@
 Fit a cell from one measured discharge and predict other currents and a constant power,
 with the building blocks under ``dl.fit`` (readers, the fit, simulations, plots).
 
-Uses the Samsung 30Q 1C discharge bundled with dischargelab; change DATA and the
+Uses the Samsung 30Q 1C discharge of the example set shipped with dischargelab
+(``dischargelab examples DIR`` copies it); change DATA and the
 column mapping for your own file.
 
 Usage: python examples/fit_and_predict.py [--out DIR]
@@ -13,13 +14,13 @@ Usage: python examples/fit_and_predict.py [--out DIR]
 import argparse
 from pathlib import Path
 
-from dischargelab.demo import DEMO_COLUMNS, demo_data_dir
+from dischargelab.examples import EXAMPLE_COLUMNS, example_files
 from dischargelab.fit import Curve, fit_battery
 from dischargelab.io import read_discharge
 from dischargelab.plot import plot_family, save
 from dischargelab.simulate import curve_family, simulate_power
 
-DATA = demo_data_dir() / "Q30_S001_1C.csv"
+DATA = example_files()["bench/Q30_S001_1C.csv"]
 CUTOFF_CELL_V = 2.5
 
 
@@ -29,7 +30,7 @@ def main() -> None:
     parser.add_argument("--out", default="fit-out", help="folder for the plots and battery file")
     out = Path(parser.parse_args().out)
 
-    data, meta = read_discharge(DATA, columns=DEMO_COLUMNS)
+    data, meta = read_discharge(DATA, columns=EXAMPLE_COLUMNS)
     print(meta["summary"])
     # one rate with its logged temperature: the thermal family (what dl.fit picks here)
     result = fit_battery(Curve.from_frame(data, meta, name="1C"), model="shepherd-thermal",

@@ -14,11 +14,11 @@ import argparse
 from pathlib import Path
 
 import dischargelab as dl
-from dischargelab.demo import demo_data_dir
+from dischargelab.examples import example_files
 from dischargelab.mission import load_mission, run_mission
 from dischargelab.plot import save
 
-BUNDLED = demo_data_dir()
+EXAMPLES = example_files()          # the example set (dischargelab examples DIR)
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 
@@ -45,7 +45,8 @@ def main() -> None:
         save(result.plot(), out / f"{name}.png")
 
     # a fitted battery carries a covariance: the endurance gets a 95 % interval
-    runs = [dl.read(BUNDLED / f"Q30_S001_{rate}.csv", columns=COLUMNS) for rate in ("1C", "4C")]
+    runs = [dl.read(EXAMPLES[f"bench/Q30_S001_{rate}.csv"], columns=COLUMNS)
+            for rate in ("1C", "4C")]
     battery = dl.fit(runs).battery                     # model picked by evidence
     mission = load_mission("fixed-wing-survey", battery=battery, cutoff_cell_V=3.0)
     mission = mission.with_battery(battery.with_pack(4, 2))

@@ -3,7 +3,7 @@
 
 The demo's fit, predictions and missions in a short script with the public API.
 
-Reads the bundled Samsung 30Q discharges (C/10, 1C, 4C), fits a model picked by
+Reads the Samsung 30Q discharges of the example set (C/10, 1C, 4C), fits a model picked by
 evidence, predicts 2C and 4C, and flies the paper's Table 5 and a survey on a
 4S2P pack of the fitted cells: the numbers `make demo` prints.
 
@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 
 import dischargelab as dl
-from dischargelab.demo import demo_data_dir
+from dischargelab.examples import example_files
 
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
@@ -25,7 +25,7 @@ def main() -> None:
     parser.add_argument("--out", default="api-out", help="folder for the battery file and plot")
     out = Path(parser.parse_args().out)
     out.mkdir(parents=True, exist_ok=True)
-    runs = [dl.read(demo_data_dir() / f"Q30_S001_{r}.csv", columns=COLUMNS)
+    runs = [dl.read(example_files()[f"bench/Q30_S001_{r}.csv"], columns=COLUMNS)
             for r in ("C10", "1C", "4C")]
     fit = dl.fit(runs, bootstrap=100)                      # model picked by evidence
     print(fit.report())

@@ -46,8 +46,8 @@ def public_names(page: str) -> tuple[set[str], set[str], set[str]]:
 
 @pytest.fixture(scope="module")
 def built_site(tmp_path_factory) -> Path:
-    """The documentation site built from a copy of docs/ (the gallery not run), warnings as
-    errors: its objects.inv."""
+    """The documentation site built from a copy of docs/ (the gallery and the guides' example
+    commands not run: `make docs` runs them), warnings as errors: its objects.inv."""
     try:
         import myst_parser  # noqa: F401
         import numpydoc  # noqa: F401
@@ -67,7 +67,8 @@ def built_site(tmp_path_factory) -> Path:
     # a page just added, that no toctree names yet, joins the user guide
     (root / "docs" / "new-page.md").write_text("# A new page\n\nJust added.\n")
     done = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b",
-                           "html", "-D", "plot_gallery=0", str(root / "docs"),
+                           "html", "-D", "plot_gallery=0", "-D", "guide_commands_run=0",
+                           str(root / "docs"),
                            str(root / "html")], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     return root / "html"

@@ -113,6 +113,18 @@ class AutopilotParams:
         return write_text(path, self.text())
 
 
+def checked_pack(battery, cells: int | None, reserve_s: float):
+    """The battery (loaded) and the flight pack's cells in series, after the checks every
+    autopilot file shares: at least one cell, a positive reserve time [s]."""
+    battery = load_battery(battery)
+    cells = battery.cells_series if cells is None else int(cells)
+    if cells < 1:
+        raise SimulationError(f"cells must be at least 1, got {cells}")
+    if not reserve_s > 0:
+        raise SimulationError(f"reserve_s must be a positive time [s], got {reserve_s}")
+    return battery, cells
+
+
 def autopilot_params(battery, *, firmware: str, cells: int | None = None,
                      parallel: int | None = None,
                      load_current_A: float | None = None, reserve_s: float = DEFAULT_RESERVE_S,
@@ -165,12 +177,7 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
 
     if firmware not in FIRMWARES:
         raise SimulationError(f"firmware must be one of {', '.join(FIRMWARES)}, got {firmware!r}")
-    battery = load_battery(battery)
-    cells = battery.cells_series if cells is None else int(cells)
-    if cells < 1:
-        raise SimulationError(f"cells must be at least 1, got {cells}")
-    if not reserve_s > 0:
-        raise SimulationError(f"reserve_s must be a positive time [s], got {reserve_s}")
+    battery, cells = checked_pack(battery, cells, reserve_s)
     critical = reserve_s / 3.0 if critical_reserve_s is None else float(critical_reserve_s)
     if not 0 < critical < reserve_s:
         raise SimulationError("critical_reserve_s must be between 0 and reserve_s")

@@ -50,9 +50,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .autopilot import DEFAULT_RESERVE_S
+from .autopilot import DEFAULT_RESERVE_S, checked_pack
 from .errors import SimulationError
-from .model import Battery, load_battery
+from .model import Battery
 
 #: Charge grid points of the tables (charge taken out, full to the lowest-rate cutoff).
 CHARGE_POINTS = 21
@@ -189,12 +189,7 @@ def autopilot_script(battery, *, firmware: str = "ardupilot", cells: int | None 
 
     if firmware != "ardupilot":
         raise SimulationError(f"autopilot scripts are written for ardupilot, got {firmware!r}")
-    battery = load_battery(battery)
-    cells = battery.cells_series if cells is None else int(cells)
-    if cells < 1:
-        raise SimulationError(f"cells must be at least 1, got {cells}")
-    if not reserve_s > 0:
-        raise SimulationError(f"reserve_s must be a positive time [s], got {reserve_s}")
+    battery, cells = checked_pack(battery, cells, reserve_s)
     if int(instance) < 0:
         raise SimulationError(f"the battery instance counts from 0, got {instance}")
     bat = battery.with_pack(cells, parallel)

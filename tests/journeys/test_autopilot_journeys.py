@@ -149,3 +149,30 @@ def test_autopilot_script_from_a_pack_leaves_the_logbook_unchanged(tmp_path, sha
     header = target.read_text().split("\nlocal ", 1)[0]
     assert "health today" in header and "4S1P" in header
     assert all(len(line) <= 100 for line in header.splitlines())
+
+
+def test_the_pack_page_offers_the_parameters_and_the_script_without_writing(tmp_path,
+                                                                            shared_data):
+    pytest.importorskip("starlette")
+    from web_helpers import ServerProcess
+
+    db = tmp_path / "lb.sqlite"
+    flights = sorted((shared_data / FLIGHTS).glob("*.csv"))
+    cli("logbook", "add", *flights, "--pack", "fpv", "--chemistry", "lipo", "--db", db)
+    server = ServerProcess(["serve", "--db", str(db), "--port", "0"], cwd=tmp_path)
+    try:
+        server.get_json("/api/packs/fpv")               # the stored figures, as a visit reads
+        before = stored_rows(db)
+        status, lua = server.request("GET", "/api/packs/fpv/autopilot/ardupilot.lua",
+                                     timeout_s=300)
+        assert status == 200 and 'gcs:send_named_float("DL_TREM"' in lua
+        status, param = server.request("GET", "/api/packs/fpv/autopilot/ardupilot.param",
+                                       timeout_s=300)
+        assert status == 200 and "BATT_CAPACITY" in param and "logged flight" in param
+        status, body = server.request("GET", "/api/packs/fpv/autopilot/px4.exe")
+        assert status == 404 and "ardupilot.lua" in str(body)
+        assert stored_rows(db) == before                # nothing fitted or stored
+    finally:
+        server.stop()
+    page = (Path(dl.__file__).parent / "web" / "static" / "pack.html").read_text()
+    assert 'id="dl-lua"' in page and 'id="dl-param"' in page

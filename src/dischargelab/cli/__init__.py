@@ -12,6 +12,7 @@ types, consoles, JSON, error lines) is in :mod:`.common`:
 
 - :mod:`.model`: fit, predict, curves, validate, presets, models
 - :mod:`.missions`: endurance, report, demo
+- :mod:`.examples`: examples (the example set into a folder)
 - :mod:`.flightlogs`: convert, flight, autopilot-params, autopilot-script
 - :mod:`.testers`: steps (battery testers' files)
 - :mod:`.acquisition`: calibrate, acquire, virtual-device, demo-acquire
@@ -28,7 +29,7 @@ import traceback
 import click
 
 from ..errors import DischargelabError
-from . import acquisition, flightlogs, logbook, missions, model, serve, testers
+from . import acquisition, examples, flightlogs, logbook, missions, model, serve, testers
 from .common import BUG_LINE, CONTEXT, cli_message, err, usage_line
 
 __all__ = ["BUG_LINE", "app", "main"]
@@ -48,7 +49,7 @@ def app() -> None:
     """
 
 
-for _group in (model, missions, flightlogs, testers, acquisition, serve, logbook):
+for _group in (model, missions, examples, flightlogs, testers, acquisition, serve, logbook):
     for _command in _group.COMMANDS:
         app.add_command(_command)
 

@@ -93,6 +93,19 @@ def _battery_or_pack(battery, pack_name, db, cells, output, force, load_current=
     return load_battery_arg(battery), load_current, source
 
 
+def _written(result, output, force: bool, as_json: bool) -> bool:
+    """Write an autopilot file when asked (-o) and print its JSON when asked (--json; then
+    True: nothing more to print)."""
+    if output:
+        result.write(output, force=force)
+    if as_json:
+        doc = result.to_dict()
+        if output:
+            doc["file"] = str(output)
+        print_json(doc)
+    return bool(as_json)
+
+
 @click.command("autopilot-params")
 @click.argument("battery", required=False)
 @click.option("--pack", "pack_name", metavar="NAME",
@@ -152,13 +165,7 @@ def autopilot_params_cmd(battery, pack_name, db, firmware, cells, parallel, load
                               load_source=load_source,
                               reserve_s=reserve_s, critical_reserve_s=critical_reserve_s,
                               cutoff=cutoff, ambient=ambient)
-    if output:
-        result.write(output, force=force)
-    if as_json:
-        doc = result.to_dict()
-        if output:
-            doc["file"] = str(output)
-        print_json(doc)
+    if _written(result, output, force, as_json):
         return
     out.print(table(f"{firmware} battery settings", ["parameter", "value", "unit", "derivation"],
                     [[s.name, s.text(), s.unit, s.comment] for s in result.settings]))
@@ -223,13 +230,7 @@ def autopilot_script_cmd(battery, pack_name, db, firmware, cells, parallel, load
     result = autopilot_script(battery, firmware=firmware, cells=cells, parallel=parallel,
                               cutoff=cutoff, reserve_s=reserve_s, load_current_A=load_current,
                               ambient=ambient, instance=instance)
-    if output:
-        result.write(output, force=force)
-    if as_json:
-        doc = result.to_dict()
-        if output:
-            doc["file"] = str(output)
-        print_json(doc)
+    if _written(result, output, force, as_json):
         return
     for line in result.header:
         out.print(line, markup=False)

@@ -167,7 +167,13 @@ class ShepherdDynamic(ShepherdThermal):
             notes.append(f"Rp_ohm = {1000 * step[1]:.4g} mOhm from the polarisation building "
                          "over the first minutes of the load (no rest sample before it: the "
                          "series resistance cannot be told from E0)")
-        elif step is not None and fixed.get("R_ohm") == step[0]:
+        elif step is not None and step[0] is not None and step[1] is None \
+                and fixed.get("R_ohm") == step[0]:
+            notes.append(f"R_ohm = {1000 * step[0]:.4g} mOhm from the load step (the voltage "
+                         "drop over the current at the step): the one thing in one constant "
+                         "current that tells the resistance from E0")
+        elif step is not None and step[0] is not None and step[1] is not None \
+                and fixed.get("R_ohm") == step[0]:
             notes.append(f"R_ohm = {1000 * step[0]:.4g} mOhm and Rp_ohm = {1000 * step[1]:.4g} "
                          "mOhm from the load step (the voltage drop over the current in the "
                          "first minutes, read as R + Rp (1 - exp(-t/tau)) plus the open-circuit "

@@ -20,7 +20,7 @@ import tempfile
 import threading
 
 from starlette.requests import Request
-from starlette.responses import JSONResponse, Response
+from starlette.responses import JSONResponse, PlainTextResponse, Response
 from starlette.routing import Route
 
 from ..errors import DischargelabError, MissingExtraError
@@ -36,6 +36,10 @@ from .work import Workers
 _PACK_NAME = re.compile(r"^[^\x00-\x1f\x7f/\\]{1,100}$")
 #: What a pack page says when no model is stored.
 NO_MODEL = "no model fitted yet — Refit"
+
+
+#: Files the pack page offers for the autopilot (GET /api/packs/NAME/autopilot/FILE).
+AUTOPILOT_FILES = ("ardupilot.param", "ardupilot.lua")
 
 
 def check_pack_name(name: str) -> str:
@@ -191,6 +195,7 @@ class PackPages:
             Route("/api/packs/{name}", self.one_pack, methods=["GET"]),
             Route("/api/packs/{name}/endurance", self.endurance, methods=["POST"]),
             Route("/api/packs/{name}/fit", self.refit, methods=["POST"]),
+            Route("/api/packs/{name}/autopilot/{file}", self.autopilot_file, methods=["GET"]),
             Route("/api/missions", self.missions, methods=["GET"]),
             Route("/api/upload", self.upload, methods=["POST"]),
         ]
@@ -277,6 +282,33 @@ class PackPages:
         data = await self._call(self.workers.work, request, self._refit,
                                 request.path_params["name"])
         return JSONResponse(_clean(data))
+
+    def _autopilot_file(self, name: str, file: str) -> str:
+        """The pack's ArduPilot parameter file or Lua script, made from its model today and
+        its flights' typical current, without writing to the logbook."""
+        from ..autopilot import autopilot_params
+        from ..onboard import autopilot_script
+
+        name = self._known(name)
+        if file not in AUTOPILOT_FILES:
+            raise RequestRefused(404, f"no file {file!r}; choose one of "
+                                      f"{', '.join(AUTOPILOT_FILES)}")
+        lb = self.logbook()
+        battery = lb.pack(name, store=False).battery()
+        typical = lb.flight_current(name)
+        amps = typical[0] if typical else None
+        if file == "ardupilot.lua":
+            return autopilot_script(battery, load_current_A=amps).text
+        source = (f"the median mean current of the pack's {typical[1]} logged flight(s)"
+                  if typical else None)
+        return autopilot_params(battery, firmware="ardupilot", load_current_A=amps,
+                                load_source=source).text()
+
+    async def autopilot_file(self, request: Request) -> Response:
+        name, file = request.path_params["name"], request.path_params["file"]
+        text = await self._call(self.workers.work, request, self._autopilot_file, name, file)
+        return PlainTextResponse(text, headers={
+            "Content-Disposition": f'attachment; filename="{check_pack_name(name)}-{file}"'})
 
     async def _json(self, request: Request) -> dict:
         return await read_json(request)

@@ -6,6 +6,8 @@
   const $ = id => document.getElementById(id);
   const name = decodeURIComponent(location.pathname.replace(/^\/packs\//, ""));
   const api = "/api/packs/" + encodeURIComponent(name);
+  $("dl-param").href = api + "/autopilot/ardupilot.param";
+  $("dl-lua").href = api + "/autopilot/ardupilot.lua";
   const COLORS = ["#2563eb", "#059669", "#d97706", "#7c3aed"];
   // marker colour of each event kind on the capacity and resistance plots
   const KIND_COLORS = {full: "#1d4ed8", partial: "#059669", flight: "#7c3aed", charge: "#0891b2"};
