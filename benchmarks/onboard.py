@@ -178,15 +178,47 @@ def logged_flights():
             yield f"{flown} flight {flight.number} (model of {fitted})", worst, rep
 
 
+#: Logs whose autopilot recorded its own consumed-charge counter (ArduPilot DataFlash,
+#: MAVLink telemetry), flown with packs of the Zippy 1100 mAh cells sized to about 3C.
+COUNTER_LOGS = ("flight_logs/ardupilot_loganalyzer/mechanical_fail.log",
+                "flight_logs/mavlink_tlog/olivieri_20211202-132614.tlog",
+                "flight_logs/mavlink_tlog/thayer_rural.tlog")
+
+
+def counter_flights():
+    """The script fed the log's own charge counter, against the Python replay."""
+    from ardupilot_replay import against_python_replay
+    from dischargelab.flight import analyse_flight
+
+    cell = load_battery("zippy-1100-2s")
+    for rel in COUNTER_LOGS:
+        path = shared_data() / rel
+        for flight in analyse_flight(path, cell).flights:
+            if flight.summary["load_start_s"] is None or flight.summary["mean_current_A"] < 1:
+                continue
+            parallel = max(1, round(flight.summary["mean_current_A"] / (3 * 1.1)))
+            report = analyse_flight(path, cell, parallel=parallel, flights=flight.number)
+            bat = cell.with_pack(report.cells_series, parallel)
+            script = autopilot_script(bat, cutoff=report.cutoff_cell_V)
+            worst, rep = against_python_replay(script.text, report.flights[0], counter=True)
+            yield (f"{path.name} flight {flight.number} ({report.cells_series}S{parallel}P)",
+                   worst, rep)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one hover rate only")
+    parser.add_argument("--counter-logs-only", action="store_true",
+                        help="only the logs with the autopilot's own charge counter")
     parser.add_argument("--skip-real", action="store_true",
                         help="leave out the held-out real drains (Samsung 30Q)")
     args = parser.parse_args(argv)
     if lua() is None:
         print("lua5.3 not found (make lua)")
         return 1
+    if args.counter_logs_only:
+        print_counter_logs()
+        return 0
     head = (f"{'pack':<24} {'case':<12} {'min':>6} "
             + " ".join(f"{int(100 * f):>3}%: dl/label/px4" for f in FRACTIONS)
             + f" {'instr':>6} {'heap KB':>7}")
@@ -220,7 +252,16 @@ def main(argv=None) -> int:
     for name, worst, rep in logged_flights():
         print(f"  {name:<40} {worst:5.2f} %  {rep.max_instructions:6d} instr "
               f"{rep.heap_kb:5.1f} KB")
+    print_counter_logs()
     return 0
+
+
+def print_counter_logs() -> None:
+    print("logged flights with the autopilot's charge counter (as logged): largest "
+          "|DL_TREM - Python replay at the recent load|, % of the flight")
+    for name, worst, rep in counter_flights():
+        print(f"  {name:<48} {worst:5.2f} %  {rep.max_instructions:6d} instr "
+              f"{rep.heap_kb:5.1f} KB")
 
 
 if __name__ == "__main__":

@@ -81,25 +81,30 @@ def replay(script_text: str, rows, timeout_s: float = 600.0, params: dict | None
     return out
 
 
-def flight_rows(samples) -> list[tuple]:
+def flight_rows(samples, counter: bool = False) -> list[tuple]:
     """Battery-monitor readings of a logged flight (a ``FlightAnalysis.samples`` frame):
-    armed while in flight, consumed charge integrated from the current."""
+    armed while in flight, consumed charge integrated from the current, or with ``counter``
+    the log's own consumed-charge counter as it was logged (from its first value)."""
     t = samples["time_s"].to_numpy(dtype=float)
     v = samples["voltage_V"].to_numpy(dtype=float)
     i = samples["current_A"].to_numpy(dtype=float)
     armed = samples["in_flight"].to_numpy(dtype=bool)
     used = np.concatenate([[0.0], np.cumsum(0.5 * (i[1:] + i[:-1]) * np.diff(t))]) / 3.6
+    if counter:
+        logged = samples["log_discharged_mAh"].ffill().bfill().to_numpy(dtype=float)
+        used = logged - logged[0]
     return [(int(round(tk * 1000)), bool(a), float(vk), float(ik), float(qk))
             for tk, a, vk, ik, qk in zip(t - t[0], armed, v, i, used)]
 
 
-def against_python_replay(script_text: str, analysis) -> tuple[float, Replay]:
+def against_python_replay(script_text: str, analysis,
+                          counter: bool = False) -> tuple[float, Replay]:
     """Largest |DL_TREM - the Python replay's time left at the recent load| over a logged
     flight's replay moments, in % of the flight's time to cutoff as the Python replay sees
     it at its first moment."""
     samples = analysis.samples
     t0 = float(samples["time_s"].iloc[0])
-    rep = replay(script_text, flight_rows(samples))
+    rep = replay(script_text, flight_rows(samples, counter))
     ts, trem = rep.series("DL_TREM")
     rows = analysis.replay.dropna(subset=["model_s"])
     if rows.empty or ts.size == 0:

@@ -211,6 +211,10 @@ def test_battestimate_coefficients_follow_the_model_curve():
     for c, (lo, hi) in zip(coefficients, SOC_BOUNDS):
         assert lo <= c <= hi
     assert values["BATT_SOC1_NCELL"] == 3 and values["BATT_SOC_COUNT"] == 1
+    # the applet counts battery monitors from 1 (0 switches it off)
+    assert values["BATT_SOC1_IDX"] == 1
+    second = autopilot_params(pack, firmware="ardupilot", cells=3, instance=1)
+    assert second.to_dict()["parameters"]["BATT_SOC1_IDX"] == 2
     # the applet's formula on the model's own rest curve: the stated worst difference
     q = np.linspace(0.0, 0.98 * pack.capacity_Ah, 200)
     cell = pack.voltage(np.zeros_like(q), q) / 3
@@ -273,3 +277,23 @@ def test_a_logged_flight_matches_the_python_replay(capsys, tmp_path, shared_data
         assert rep.max_instructions <= 10_000 and rep.heap_kb <= 40.0
         checked += 1
     assert checked >= 1
+
+
+def test_a_slowly_updated_charge_counter_does_not_jolt_the_time_left(pack, script):
+    """A battery monitor whose mAh counter moves in whole mAh every 3 s (as telemetry
+    carries it): the recent load comes from the integrated current, so the time left stays
+    within 2 % of the flight at every send."""
+    need("lua5.3")
+    sim = simulate_current(pack, 2.2, cutoff_cell_V=CUT)
+    rows, held, next_update = [], 0.0, 0
+    for t, armed, v, c, q in flight_samples(sim, rest_s=REST_S):
+        if t >= next_update:
+            held, next_update = float(np.floor(q)), t + 3000
+        rows.append((t, armed, v, c, held))
+    rep = replay(script.text, rows)
+    total = sim.time_to_cutoff_s
+    _, flight, values = trem_at(rep, [0.0])
+    inside = (flight > 35.0) & (flight < 0.95 * total)
+    truth = total - flight[inside]
+    assert inside.sum() > 100
+    assert np.max(np.abs(values[inside] - truth)) / total < 0.02

@@ -159,7 +159,8 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
         What ``load_current_A`` is (e.g. "the median mean current of the pack's 12 logged
         flights"), said in the notes.
     instance : int
-        ArduPilot battery instance of the ``BATT_SOC1_IDX`` setting (0 = the first).
+        ArduPilot battery instance (0 = the first monitor); ``BATT_SOC1_IDX`` is
+        ``instance + 1``, as the applet counts monitors from 1 (0 switches it off).
 
     Returns
     -------
@@ -238,7 +239,8 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
                     f"({cut:g} V/cell x {cells}; thrust scaling lower limit)"),
             Setting("BATT_SOC_COUNT", 1, "", "one BattEstimate.lua estimator (ArduPilot's "
                     "applet: state of charge from the resting voltage before take-off)", True),
-            Setting("BATT_SOC1_IDX", instance, "", "battery instance of the estimator", True),
+            Setting("BATT_SOC1_IDX", instance + 1, "", "battery monitor of the estimator, "
+                    "counted from 1 (1 = the first; 0 switches it off)", True),
             Setting("BATT_SOC1_NCELL", cells, "", "cells in series", True),
         ]
         fit_how = (f"soc = C1*(1 - 1/(1 + (V/C2)^C4)^C3) fitted to the model's open-circuit "

@@ -102,6 +102,55 @@ def test_autopilot_script_from_a_preset_runs_in_lua(tmp_path):
     assert rep.max_instructions <= 10_000 and rep.heap_kb <= 40.0
 
 
+def need_lua() -> None:
+    if shutil.which("lua5.3") is None:
+        if os.environ.get("CI"):
+            pytest.fail("lua5.3 not found (make lua installs it)")
+        pytest.skip("lua5.3 not found (make lua installs it)")
+
+
+@pytest.mark.slow
+def test_autopilot_script_from_a_fitted_battery_file_runs_in_lua(tmp_path):
+    """Fit a cell from the bundled 1C discharge, write its script for a 4S2P pack, fly it."""
+    need_lua()
+    from ardupilot_replay import replay
+    from dischargelab.onboard import flight_samples
+    from dischargelab.simulate import simulate_current
+
+    data = Path(dl.__file__).parent / "data" / "samsung30q"
+    cell = tmp_path / "cell.json"
+    cli("fit", data / "Q30_S001_1C.csv", "--columns",
+        "time_s=0,current_A=1,voltage_V=2,temperature_C=4", "-o", cell)
+    target = tmp_path / "q30.lua"
+    shown = cli("autopilot-script", cell, "--cells", "4", "--parallel", "2", "--cutoff", "3.0",
+                "-o", target).stdout
+    assert "4S2P" in shown and "script written to" in shown
+    pack = dl.load_battery(cell).with_pack(4, 2)
+    sim = simulate_current(pack, 2.0 * pack.rated_capacity_Ah, cutoff_cell_V=3.0)
+    rep = replay(target.read_text(), flight_samples(sim, rest_s=5.0))
+    total = sim.time_to_cutoff_s
+    times, trem = rep.series("DL_TREM")
+    for f in (0.25, 0.5, 0.75, 0.9):
+        sent = trem[abs(times - 5.0 - f * total).argmin()]
+        assert abs(sent - (1 - f) * total) / total < 0.02, (f, sent, total)
+    assert rep.max_instructions <= 10_000 and rep.heap_kb <= 40.0
+
+
+def test_autopilot_script_from_a_pack_leaves_the_logbook_unchanged(tmp_path, shared_data):
+    db = tmp_path / "lb.sqlite"
+    files = [shared_data / CELL_C / f"DischargeCycle{n:03d}.txt" for n in (1, 660, 664)]
+    cli("logbook", "add", *files, "--pack", "C", "--chemistry", "li-ion", "--cells", "1",
+        "--db", db)
+    before = stored_rows(db)
+    target = tmp_path / "C.lua"
+    cli("autopilot-script", "--pack", "C", "--db", db, "--cells", "4", "--cutoff", "3.0",
+        "-o", target)
+    assert stored_rows(db) == before
+    header = target.read_text().split("\nlocal ", 1)[0]
+    assert "health today" in header and "4S1P" in header
+    assert all(len(line) <= 100 for line in header.splitlines())
+
+
 def test_the_pack_page_offers_the_parameters_and_the_script_without_writing(tmp_path,
                                                                             shared_data):
     pytest.importorskip("starlette")

@@ -233,17 +233,18 @@ local function update()
     if qv > q then q = qv end
     load = REF_A
   else
+    counted = counted + amps * dt / 3600
     if mah ~= nil and base_mah ~= nil then
       q = q_rest + (mah - base_mah) * 0.001
     else
-      counted = counted + amps * dt / 3600
       q = q_rest + counted
     end
-    load = recent_current(t, q) or amps
+    -- the recent load from the integrated current: a charge counter may update slowly
+    load = recent_current(t, counted) or amps
     if t >= next_ring then
       next_ring = t + 1
-      ring_push(t, q, v)
-      load = recent_current(t, q) or amps
+      ring_push(t, counted, v)
+      load = recent_current(t, counted) or amps
       follow_load(load)
     end
   end
