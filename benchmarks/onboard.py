@@ -63,12 +63,16 @@ def cases(bat, quick: bool):
     return out
 
 
-def errors_at(sim, rep, label_Ah, cells):
-    """Per fraction: (DL_TREM, label count, PX4) minus the time left, % of the flight."""
-    total = sim.time_to_cutoff_s
-    t, i, v, q = sim.time_s, sim.current_A, sim.voltage_V, sim.charge_Ah
-    grid = np.arange(0.0, total, 0.2)
-    amps = np.interp(grid, t, i)
+def errors_at(t, i, v_cell, used_Ah, total, rep, label_Ah, step_s=None):
+    """Per fraction of the flight ``total`` [s]: (DL_TREM, label count, PX4) minus the time
+    left, % of the flight. ``t``, ``i``, ``v_cell``, ``used_Ah``: the flight's time [s],
+    pack current [A], cell voltage [V] and charge used [Ah]; the recent load is averaged on
+    a grid of ``step_s`` (None: at the samples themselves)."""
+    if step_s is None:
+        grid, amps, volts = t, i, v_cell
+    else:
+        grid = np.arange(0.0, total, step_s)
+        amps, volts = np.interp(grid, t, i), np.interp(grid, t, v_cell)
     ts, trem = rep.series("DL_TREM")
     rows = []
     for f in FRACTIONS:
@@ -77,11 +81,9 @@ def errors_at(sim, rep, label_Ah, cells):
         k = int(np.argmin(np.abs(ts - REST_S - now)))
         window = (grid > now - RECENT_LOAD_S) & (grid <= now)
         load = float(np.mean(amps[window]))
-        used = float(np.interp(now, t, q))
-        label = max(label_Ah - used, 0.0) * 3600.0 / load
+        label = max(label_Ah - float(np.interp(now, t, used_Ah)), 0.0) * 3600.0 / load
         recent = (grid > now - 1.0) & (grid <= now)
-        cell = float(np.mean(np.interp(grid[recent], t, v))) / cells \
-            + PX4_R_INTERNAL_OHM * float(np.mean(amps[recent]))
+        cell = float(np.mean(volts[recent])) + PX4_R_INTERNAL_OHM * float(np.mean(amps[recent]))
         px4 = float(np.clip((cell - PX4_V_EMPTY) / (PX4_V_CHARGED - PX4_V_EMPTY), 0, 1)) \
             * label_Ah * 3600.0 / load
         rows.append(tuple(100.0 * (x - left) / total for x in (float(trem[k]), label, px4)))
@@ -128,20 +130,7 @@ def real_drains(label_Ah: float = 3.0):
         d = dl.read(data / f"Q30_S001_{rate}.csv", columns=SAMSUNG_COLUMNS)
         rows, total, t, v, i, used = real_rows(d)
         rep = replay(script.text, rows)
-        ts, trem = rep.series("DL_TREM")
-        errs = []
-        for f in FRACTIONS:
-            now = f * total
-            left = total - now
-            k = int(np.argmin(np.abs(ts - REST_S - now)))
-            window = (t > now - RECENT_LOAD_S) & (t <= now)
-            load = float(np.mean(i[window]))
-            label = max(label_Ah - float(np.interp(now, t, used)), 0.0) * 3600.0 / load
-            recent = (t > now - 1.0) & (t <= now)
-            cell = float(np.mean(v[recent])) + PX4_R_INTERNAL_OHM * float(np.mean(i[recent]))
-            px4 = float(np.clip((cell - PX4_V_EMPTY) / (PX4_V_CHARGED - PX4_V_EMPTY), 0, 1)) \
-                * label_Ah * 3600.0 / load
-            errs.append(tuple(100.0 * (x - left) / total for x in (float(trem[k]), label, px4)))
+        errs = errors_at(t, i, v, used, total, rep, label_Ah)
         yield "Samsung 30Q, C/10 model", f"real {rate}", total, errs, rep
 
 
@@ -231,7 +220,8 @@ def main(argv=None) -> int:
         for name, steps in cases(bat, args.quick):
             sim = simulate(bat, steps, cutoff_cell_V=cut)
             rep = replay(script.text, flight_samples(sim, rest_s=REST_S))
-            errs = errors_at(sim, rep, bat.rated_capacity_Ah, cells)
+            errs = errors_at(sim.time_s, sim.current_A, sim.voltage_V / cells, sim.charge_Ah,
+                             sim.time_to_cutoff_s, rep, bat.rated_capacity_Ah, step_s=0.2)
             worst = max(worst, max(abs(e[0]) for e in errs))
             cols = " ".join(f"{e[0]:+6.1f}/{e[1]:+5.1f}/{e[2]:+6.1f}" for e in errs)
             print(f"{bat.name[:24]:<24} {name:<12} {sim.time_to_cutoff_s / 60:6.1f} {cols} "

@@ -9,16 +9,9 @@ import re
 import pytest
 
 from cli_run import run
+from shared_files import TESTER_FILES, TESTER_IDS
 
 pytest.importorskip("sqlalchemy")
-
-#: Every shared tester file (a pack each, as a new user would add it).
-TESTER_FILES = ["cyclers/maccor/maccor_001.txt",
-                "cyclers/biologic/jdb11-1_c3_gcpl_5cycles_2V-3p8V_C-24_data_C09.mpr",
-                "cyclers/neware/test_2.ndax", "cyclers/neware/TestFile.nda",
-                "cyclers/arbin/20160805_test001_45_cc_01.res",
-                "cyclers/arbin/arbin_example.res", "cyclers/arbin/arbin_example.csv",
-                "cyclers/arbin/bs542_004_gr_li_50ua_50mv_1v_191020_Channel_11.xlsx"]
 
 
 def fresh_pack(capsys, tmp_path, path):
@@ -59,7 +52,7 @@ def check_no_end_of_life_soon(health, text, row):
     assert max(fc["band"]["efc"]) <= fc["last_efc"] + 1e-9
 
 
-@pytest.mark.parametrize("name", TESTER_FILES, ids=[n.split("/")[-1] for n in TESTER_FILES])
+@pytest.mark.parametrize("name", TESTER_FILES, ids=TESTER_IDS)
 def test_a_fresh_tester_file_gets_no_end_of_life_without_a_measured_fade(
         capsys, tmp_path, shared_data, name):
     health, text, row = fresh_pack(capsys, tmp_path, shared_data / name)

@@ -10,18 +10,11 @@ import numpy as np
 import pytest
 
 from cli_run import run
+from shared_files import TESTER_FILES, TESTER_IDS
 
 pytest.importorskip("sqlalchemy")
 
 DJI = "dji_m100_flights"
-
-#: Every shared tester file.
-TESTER_FILES = ["cyclers/maccor/maccor_001.txt",
-                "cyclers/biologic/jdb11-1_c3_gcpl_5cycles_2V-3p8V_C-24_data_C09.mpr",
-                "cyclers/neware/test_2.ndax", "cyclers/neware/TestFile.nda",
-                "cyclers/arbin/20160805_test001_45_cc_01.res",
-                "cyclers/arbin/arbin_example.res", "cyclers/arbin/arbin_example.csv",
-                "cyclers/arbin/bs542_004_gr_li_50ua_50mv_1v_191020_Channel_11.xlsx"]
 
 
 def add(capsys, db, *paths, extra=()):
@@ -145,7 +138,7 @@ def check_events_are_the_steps(capsys, db, runs):
             assert e["discharged_Ah"] == pytest.approx(moved, rel=0.01)
 
 
-@pytest.mark.parametrize("name", TESTER_FILES, ids=[n.split("/")[-1] for n in TESTER_FILES])
+@pytest.mark.parametrize("name", TESTER_FILES, ids=TESTER_IDS)
 def test_a_tester_file_gets_the_testers_own_steps_as_events(capsys, tmp_path, shared_data,
                                                             name):
     db = tmp_path / "tester.sqlite"

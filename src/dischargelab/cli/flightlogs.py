@@ -93,6 +93,26 @@ def _battery_or_pack(battery, pack_name, db, cells, output, force, load_current=
     return load_battery_arg(battery), load_current, source
 
 
+def pack_model_options(func):
+    """BATTERY or --pack NAME (with --db), --cells and --parallel: the flight pack an
+    autopilot file is made for (the same in every autopilot command)."""
+    for option in reversed((
+            click.argument("battery", required=False),
+            click.option("--pack", "pack_name", metavar="NAME",
+                         help="A logbook pack: its model at today's capacity and resistance "
+                              "(then give no BATTERY)."),
+            click.option("--db", metavar="URL|FILE",
+                         help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's "
+                              "logbook)."),
+            click.option("--cells", type=click.IntRange(1), default=None,
+                         help="Cells in series of the flight pack (required with a BATTERY; "
+                              "default with --pack: the pack's)."),
+            click.option("--parallel", type=click.IntRange(1), default=None,
+                         help="Strings in parallel (default: as in the battery file)."))):
+        func = option(func)
+    return func
+
+
 def _written(result, output, force: bool, as_json: bool) -> bool:
     """Write an autopilot file when asked (-o) and print its JSON when asked (--json; then
     True: nothing more to print)."""
@@ -107,20 +127,10 @@ def _written(result, output, force: bool, as_json: bool) -> bool:
 
 
 @click.command("autopilot-params")
-@click.argument("battery", required=False)
-@click.option("--pack", "pack_name", metavar="NAME",
-              help="A logbook pack: its model at today's capacity and resistance (then give "
-                   "no BATTERY).")
-@click.option("--db", metavar="URL|FILE",
-              help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's logbook).")
+@pack_model_options
 @click.option("--firmware", required=True, type=click.Choice(["ardupilot", "px4"]),
               help="Autopilot firmware: ardupilot writes a .param file, px4 a QGroundControl "
                    ".params file.")
-@click.option("--cells", type=click.IntRange(1), default=None,
-              help="Cells in series of the flight pack (required with a BATTERY; default "
-                   "with --pack: the pack's).")
-@click.option("--parallel", type=click.IntRange(1), default=None,
-              help="Strings in parallel (default: as in the battery file).")
 @click.option("--load", "load_current", type=float, metavar="A", default=None,
               help="Pack current of normal flight (hover/cruise) at which the reserve is "
                    "computed [A]; default with --pack the median mean current of its logged "
@@ -180,19 +190,9 @@ def autopilot_params_cmd(battery, pack_name, db, firmware, cells, parallel, load
 
 
 @click.command("autopilot-script")
-@click.argument("battery", required=False)
-@click.option("--pack", "pack_name", metavar="NAME",
-              help="A logbook pack: its model at today's capacity and resistance (then give "
-                   "no BATTERY).")
-@click.option("--db", metavar="URL|FILE",
-              help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's logbook).")
+@pack_model_options
 @click.option("--firmware", default="ardupilot", show_default=True,
               type=click.Choice(["ardupilot"]), help="Autopilot firmware of the script.")
-@click.option("--cells", type=click.IntRange(1), default=None,
-              help="Cells in series of the flight pack (required with a BATTERY; default "
-                   "with --pack: the pack's).")
-@click.option("--parallel", type=click.IntRange(1), default=None,
-              help="Strings in parallel (default: as in the battery file).")
 @click.option("--load", "load_current", type=float, metavar="A", default=None,
               help="Pack current the script assumes without a current sensor [A]; default "
                    "with --pack the typical current of its logged flights, else 1C.")
