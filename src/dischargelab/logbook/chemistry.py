@@ -63,7 +63,7 @@ def chemistry_from_loads(loads: list[tuple[dict, int]]) -> tuple[str | None, str
             continue
         keep = q >= SETTLE_SHARE * q[-1]
         v = np.asarray(curve["voltage_V"], dtype=float)[keep] / cells
-        i = np.asarray(curve["current_A"], dtype=float)[keep] / 1.0
+        i = np.asarray(curve["current_A"], dtype=float)[keep]
         for chem in CANDIDATES:
             table, _ = generic_ocv(chem)
             soc, volts = OCV_SOC[::-1], np.maximum.accumulate(table[::-1])

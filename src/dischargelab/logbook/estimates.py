@@ -382,14 +382,13 @@ def soc_reading(curve: OcvCurve, reading: dict, cells: int, *,
     r = float(resistance_ohm or 0.0)
     idle = float(reading.get("current_A") or 0.0)
     cell_v = (float(reading["relaxed_V"]) + r * idle) / cells
-    soc0 = curve.soc_at(cell_v)
-    var = (curve.sd_at(soc0) ** 2 + READING_SD_CELL_V ** 2
+    soc = curve.soc_at(cell_v)
+    var = (curve.sd_at(soc) ** 2 + READING_SD_CELL_V ** 2
            + (float(reading.get("half95_V") or 0.0) / Z95 / cells) ** 2
            + (0.5 * r * abs(idle) / cells) ** 2)
     temp = reading.get("temperature_C")
     if temp is not None and curve.temperature_C is not None:
         var += (ENTROPIC_V_PER_K * (float(temp) - curve.temperature_C)) ** 2
-    soc = curve.soc_at(cell_v)
     slope = curve.slope(soc)
     sd = float(np.sqrt(var)) / slope if slope > 0 else MAX_SOC_SD
     return soc, float(min(sd, MAX_SOC_SD))

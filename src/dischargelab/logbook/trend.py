@@ -147,7 +147,6 @@ class Smoothed:
     quantile: float = Z95
     systematic: float = 0.0
     offsets: dict = field(default_factory=dict)
-    offsets_at_last: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     def band(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper 95 % band at :attr:`efc`."""
@@ -372,7 +371,7 @@ def _mixture(ll, last):
     return mean, second - np.outer(mean, mean)
 
 
-def _codes(kinds, offset_sd, n, y) -> tuple[np.ndarray | None, np.ndarray, list]:
+def _codes(kinds, offset_sd) -> tuple[np.ndarray | None, np.ndarray, list]:
     """Each estimate's offset code (0: the reference scale), the offsets' prior variances
     [unit^2] and their labels."""
     if kinds is None or not offset_sd:
@@ -432,15 +431,15 @@ def smooth(efc, values, low95=None, high95=None, *, robust: bool = True,
         np.nan_to_num(np.asarray(systematic, dtype=float), nan=0.0)
     shared = shared[order]
     codes, offset_var, labels = _codes(None if kinds is None else [kinds[k] for k in order],
-                                       offset_sd, x.size, y)
+                                       offset_sd)
     h = _design(codes, x.size)
     n = x.size
     level_scale = float(np.median(np.abs(y))) or 1.0
     if n < MIN_FOR_NUGGET or np.ptp(x) <= 0:
-        out = _few(x, y, sd, nugget_share * level_scale, n, h, offset_var)
+        out, offsets = _few(x, y, sd, nugget_share * level_scale, n, h, offset_var), ()
     else:
-        out = _smooth_many(x, y, sd, level_scale, robust, grid_points, h, offset_var)
-    out.offsets = {label: float(v) for label, v in zip(labels, out.offsets_at_last)}
+        out, offsets = _smooth_many(x, y, sd, level_scale, robust, grid_points, h, offset_var)
+    out.offsets = {label: float(v) for label, v in zip(labels, offsets)}
 
     def per_given(values):  # back to the order given
         full = np.full(ok.size, np.nan)
@@ -470,8 +469,10 @@ def _add_systematic(out: Smoothed, x: np.ndarray, shared: np.ndarray) -> None:
     out.systematic = last
 
 
-def _smooth_many(x, y, sd, level_scale, robust, grid_points, h, offset_var) -> Smoothed:
-    """:func:`smooth` of at least :data:`MIN_FOR_NUGGET` estimates."""
+def _smooth_many(x, y, sd, level_scale, robust, grid_points, h, offset_var
+                 ) -> tuple[Smoothed, np.ndarray]:
+    """:func:`smooth` of at least :data:`MIN_FOR_NUGGET` estimates, with the kinds' offsets
+    at the last point."""
     n = x.size
     r0 = sd ** 2
     span = float(np.ptp(x))
@@ -506,8 +507,7 @@ def _smooth_many(x, y, sd, level_scale, robust, grid_points, h, offset_var) -> S
                     rate=rate, rate_sd=np.sqrt(np.clip(ps[:, 1, 1], 0, None)),
                     last_cov=cov, drift=float(drift), nugget=float(np.sqrt(nugget2)),
                     weights=weights, influence=influence, n=n,
-                    quantile=float(stats.t.ppf(0.975, n - 2)),
-                    offsets_at_last=ms[-1, 2:].copy())
+                    quantile=float(stats.t.ppf(0.975, n - 2))), ms[-1, 2:]
 
 
 def _few(x, y, sd, nugget, n, h, offset_var) -> Smoothed:
