@@ -217,7 +217,11 @@ def fit_cmd(data, columns, current, sign, units, segment, steps, cells, parallel
         cells = cells or 1
         pack = {"cells_series": cells, "strings_parallel": parallel, "chemistry": chemistry,
                 "e0_V": e0}
-        with err.status("reading", spinner="dots") as status:
+        from ..fit.workers import fold_workers
+
+        # the held-out folds' workers start before the spinner's thread
+        with fold_workers(), \
+                err.status("reading", spinner="dots") as status:
             curves, metas, data_warnings = load_curves(paths, columns, current, sign, segment,
                                                        units, pack, strict, status=status,
                                                        steps=steps)

@@ -11,6 +11,7 @@ from ..errors import FitError
 from .family import fit_family, several_rates
 from .heldout import held_out_error
 from .result import FitResult
+from .workers import fold_workers
 
 AUTO = "auto"
 
@@ -169,18 +170,19 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
     # the linearised bootstrap costs little: every candidate gets it, no refit of the best
     linear = kw.get("bootstrap_method", "linearised") == "linearised"
     forms = candidate_forms(names, kw.get("fixed"), kw.get("bounds"))
-    for label, (name, held) in forms.items():
-        args = _holding(kw if linear else dict(kw, bootstrap=0, progress=None), held)
-        if held and name in fits and args.get("start") is None:
-            # a simpler form starts from its family's fit (the same data)
-            args["start"] = fits[name].parameters.as_dict()
-        try:
-            fits[label] = fit_with_model_error(curves, model=name, **args)
-        except FitError:
-            continue
-        err = fits[label].model_error or {}
-        scores[label] = selection_score(err.get("held_out_rms"), err.get("end_rms"),
-                                        err.get("rate_rms"), len(curves))
+    with fold_workers():  # one set of workers for every candidate's held-out folds
+        for label, (name, held) in forms.items():
+            args = _holding(kw if linear else dict(kw, bootstrap=0, progress=None), held)
+            if held and name in fits and args.get("start") is None:
+                # a simpler form starts from its family's fit (the same data)
+                args["start"] = fits[name].parameters.as_dict()
+            try:
+                fits[label] = fit_with_model_error(curves, model=name, **args)
+            except FitError:
+                continue
+            err = fits[label].model_error or {}
+            scores[label] = selection_score(err.get("held_out_rms"), err.get("end_rms"),
+                                            err.get("rate_rms"), len(curves))
     if not fits:
         raise FitError("no model family could be fitted to these data")
     order = sorted(fits, key=lambda n: (scores[n], list(fits).index(n)))

@@ -14,6 +14,7 @@ import numpy as np
 from ..discharge import measured_time_to_cutoff
 from ..errors import DataError, FitError, SimulationError
 from .family import fit_family, several_rates
+from .workers import fold_workers, submit
 
 #: Fraction of a curve's duration left out at its end by :func:`held_out_error`.
 HELD_OUT_TAIL = 0.2
@@ -87,33 +88,41 @@ def held_out_error(curves, *, model, battery=None, cells_series=1, strings_paral
                   warm_ftol=FOLD_FTOL)
     if battery is not None:  # warm start from the full fit
         common["start"] = battery.parameters.as_dict()
-    errors, ratios, names, ends, end_ratios, pooled = [], [], [], [], [], []
-    for k, left in enumerate(curves):
-        rest = [c for j, c in enumerate(curves) if j != k]
-        ratio = current_ratio(left, rest)
-        error = _held_out_fold(rest, left, common)
-        if error is not None:
-            errors.append(100.0 * error)
-            ratios.append(ratio)
-            names.append(left.name)
-            if several_rates(rest):
-                pooled.append(error / (1.0 + EXTRAPOLATION_GROWTH * np.log(ratio)))
-        t = left.time_s
-        keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
-        cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
-               "current_A": left.current_A[keep]}
-        if left.temperature_C is not None:
-            cut["temperature_C"] = left.temperature_C[keep]
-        try:
-            shortened = _replace(left, **cut)
-        except DataError:
-            continue
-        error = _held_out_fold([shortened if j == k else c for j, c in enumerate(curves)],
-                               left, common)
-        if error is not None:
-            ends.append(error)
-            end_ratios.append(ratio)
-    rate = None if battery is None else rate_capacity_error(battery, curves)
+    folds = []  # (k, ratio, whole-curve fold, curve-end fold or None), in curve order
+    with fold_workers():
+        for k, left in enumerate(curves):
+            rest = [c for j, c in enumerate(curves) if j != k]
+            whole = submit(_held_out_fold, rest, left, common)
+            t = left.time_s
+            keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
+            cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
+                   "current_A": left.current_A[keep]}
+            if left.temperature_C is not None:
+                cut["temperature_C"] = left.temperature_C[keep]
+            try:
+                shortened = _replace(left, **cut)
+            except DataError:
+                end = None
+            else:
+                end = submit(_held_out_fold,
+                             [shortened if j == k else c for j, c in enumerate(curves)],
+                             left, common)
+            folds.append((k, current_ratio(left, rest), whole, end))
+        # the full fit's own check runs here while the folds run in the workers
+        rate = None if battery is None else rate_capacity_error(battery, curves)
+        errors, ratios, names, ends, end_ratios, pooled = [], [], [], [], [], []
+        for k, ratio, whole, end in folds:
+            error = whole.result()
+            if error is not None:
+                errors.append(100.0 * error)
+                ratios.append(ratio)
+                names.append(curves[k].name)
+                if several_rates([c for j, c in enumerate(curves) if j != k]):
+                    pooled.append(error / (1.0 + EXTRAPOLATION_GROWTH * np.log(ratio)))
+            error = None if end is None else end.result()
+            if error is not None:
+                ends.append(error)
+                end_ratios.append(ratio)
     between = [] if rate is None else [e / 100.0 for e in rate["between_pct"]
                                        if np.isfinite(e)]
     if not errors and not ends and not between:
