@@ -229,3 +229,19 @@ def test_a_small_full_cell_without_step_numbers_gives_its_loads_as_events(capsys
     assert not [e for e in events if e["kind"] == "gap"]
     for e in (e for e in events if e["kind"] == "discharge"):
         assert e["discharged_Ah"] == pytest.approx(capacity_Ah, rel=0.02)
+
+
+def test_one_efc_rendering_in_every_view(capsys, tmp_path, shared_data):
+    """Two telemetry logs of a pack: the EFC of `logbook packs` is the one the health
+    lines give for capacity today (it read "EFC 0" beside "0.5" in the list)."""
+    db = tmp_path / "lb.sqlite"
+    tlogs = shared_data / "flight_logs" / "mavlink_tlog"
+    add(capsys, db, tlogs / "thayer_rural.tlog", tlogs / "olivieri_20211202-132614.tlog")
+    code, out, err = run(capsys, "logbook", "packs", "--db", db, "--json")
+    assert code == 0, err
+    row = json.loads(out)["rows"][0]
+    code, text, err = run(capsys, "logbook", "health", "P", "--db", db)
+    assert code == 0, err
+    shown = row["text"]["efc"]
+    assert 0 < row["efc"] < 5
+    assert f"capacity today (EFC {shown})" in text

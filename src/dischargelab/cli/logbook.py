@@ -8,7 +8,7 @@ from __future__ import annotations
 import click
 
 from ..errors import DischargelabError
-from ..formatting import interval, number, pack_text
+from ..formatting import interval, number, pack_text, quantity
 from .common import (
     CONTEXT,
     err,
@@ -286,8 +286,9 @@ def health_lines(health, name: str) -> list[str]:
         lines.append(f"  give its label capacity to count cycles: dischargelab logbook add FILE "
                      f"--pack {name!r} --capacity AH (a file already there is skipped)")
     if t.get("capacity_Ah") is not None:
-        lines.append(f"capacity today (EFC {_num(t.get('efc'), 0)}): {_num(t['capacity_Ah'])} "
-                     f"Ah (95 %: {_interval(t.get('capacity_interval95'), 3)})"
+        lines.append(f"capacity today (EFC {quantity('efc', t.get('efc'))}): "
+                     f"{_num(t['capacity_Ah'])} Ah "
+                     f"(95 %: {_interval(t.get('capacity_interval95'), 3)})"
                      f"{_from(t.get('capacity_from'))}")
     if t.get("resistance_ohm") is not None:
         lines.append(f"resistance today ({t.get('resistance_basis')}): "
@@ -311,7 +312,7 @@ def health_lines(health, name: str) -> list[str]:
         lines.append(head + fc.message)
     elif fc.reached:
         lines.append(head + f"reached: the capacity trend is below it today (EFC "
-                            f"{_num(fc.last_efc, 0)})")
+                            f"{quantity('efc', fc.last_efc)})")
     else:
         how, span = ("observed at", "between events") if fc.observed else ("forecast at",
                                                                            "95 %")

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import LogbookError
+from ..formatting import quantity, quantity_interval
 
 #: Pack resistance per cell assumed when no event measured one [ohm]: the ``ecm``
 #: family's default start.
@@ -85,19 +86,15 @@ def prior_battery(name: str, chemistry: str, cells: int, capacity_Ah: float,
 def figures_note(health, name: str) -> str:
     """One line: the pack's capacity and resistance today and the events they come from."""
     t = health.today
-    parts = [f"logbook pack {name!r} at EFC {_num(t.get('efc'), 0)}"]
+    parts = [f"logbook pack {name!r} at EFC {quantity('efc', t.get('efc'))}"]
     if t.get("capacity_Ah") is not None:
-        lo, hi = t.get("capacity_interval95") or (None, None)
-        parts.append(f"capacity today {t['capacity_Ah']:.3g} Ah (95 %: {_num(lo, 3)}-"
-                     f"{_num(hi, 3)}) from {_events(t.get('capacity_from'))}")
+        parts.append(f"capacity today {quantity('capacity_Ah', t['capacity_Ah'], unit=True)} "
+                     f"(95 %: {quantity_interval('capacity_Ah', t.get('capacity_interval95'))})"
+                     f" from {_events(t.get('capacity_from'))}")
     if t.get("resistance_ohm") is not None:
-        parts.append(f"resistance {1000 * t['resistance_ohm']:.1f} mOhm "
+        parts.append(f"resistance {quantity('resistance_ohm', t['resistance_ohm'], unit=True)} "
                      f"({t.get('resistance_basis')}) from {_events(t.get('resistance_from'))}")
     return ", ".join(parts)
-
-
-def _num(value, digits: int) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
 
 
 def _events(sources) -> str:
