@@ -176,3 +176,20 @@ def test_the_pack_page_offers_the_parameters_and_the_script_without_writing(tmp_
         server.stop()
     page = (Path(dl.__file__).parent / "web" / "static" / "pack.html").read_text()
     assert 'id="dl-lua"' in page and 'id="dl-param"' in page
+
+
+def test_endurance_from_a_pack_leaves_the_logbook_unchanged(tmp_path):
+    """`endurance --pack` on a pack with capacity tests and no model yet: nothing stored,
+    and the second run answers as the first (the first fitted and stored a model, and
+    the second, flying the stored model with figures redone around it, differed by 2 %)."""
+    from dischargelab.examples import copy_examples
+
+    copy_examples(tmp_path / "ex")
+    db = tmp_path / "lb.sqlite"
+    cli("logbook", "add", tmp_path / "ex" / "ageing", "--pack", "C", "--db", db)
+    before = stored_rows(db)
+    runs = [json.loads(cli("endurance", "--pack", "C", "multirotor-hover", "--cells", "4",
+                           "--db", db, "--json").stdout) for _ in range(2)]
+    assert stored_rows(db) == before
+    assert runs[0]["flight_time_s"] == runs[1]["flight_time_s"]
+    assert runs[0]["uncertainty"]["endurance_s"] == runs[1]["uncertainty"]["endurance_s"]

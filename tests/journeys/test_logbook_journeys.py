@@ -245,3 +245,43 @@ def test_one_efc_rendering_in_every_view(capsys, tmp_path, shared_data):
     shown = row["text"]["efc"]
     assert 0 < row["efc"] < 5
     assert f"capacity today (EFC {shown})" in text
+
+
+def test_flight_time_carries_the_capacity_band(capsys, tmp_path, shared_data):
+    """A pack known only from two telemetry logs: its capacity today is known to about
+    +-50 %, and the flight time's band says so (it gave +-3 % from the model error
+    alone, as if the capacity were certain)."""
+    db = tmp_path / "lb.sqlite"
+    tlogs = shared_data / "flight_logs" / "mavlink_tlog"
+    add(capsys, db, tlogs / "thayer_rural.tlog", tlogs / "olivieri_20211202-132614.tlog")
+    code, out, err = run(capsys, "logbook", "packs", "--db", db, "--json")
+    assert code == 0, err
+    row = json.loads(out)["rows"][0]
+    lo_c, hi_c = row["capacity_interval95"]
+    code, out, err = run(capsys, "endurance", "--pack", "P", "multirotor-hover", "--db", db,
+                         "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    band = doc["uncertainty"]["endurance_s"]
+    lo_t, hi_t = band["low"], band["high"]
+    # the flight runs to the reserve: its time scales with the capacity
+    assert hi_t / lo_t >= 0.7 * hi_c / lo_c
+    assert lo_t < doc["flight_time_s"] < hi_t
+    assert "parameters" in doc["uncertainty"]["interval_includes"]
+
+
+def test_capacity_today_holds_the_latest_test(capsys, tmp_path):
+    """The example set's three capacity tests of one ageing cell (1, 330 and 664 cycles,
+    all at 3 A): the last one, 33 % below the first, is a capacity test like the others
+    (it was taken for a mission at a high rate), and capacity today's band holds it."""
+    from dischargelab.examples import copy_examples
+
+    copy_examples(tmp_path / "ex")
+    db = tmp_path / "lb.sqlite"
+    add(capsys, db, tmp_path / "ex" / "ageing")
+    h = health(capsys, db)
+    last = max((e for e in h["events"] if e.get("capacity_Ah")), key=lambda e: e["efc"])
+    assert last["source"] in [s["source"] for s in h["capacity_from"]]
+    lo, hi = h["capacity_now_interval95"]
+    assert lo <= last["capacity_Ah"] <= hi
+    assert abs(h["capacity_now_Ah"] / last["capacity_Ah"] - 1) < 0.05

@@ -183,7 +183,7 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
         from ..logbook import Logbook
 
         with Logbook(db, create=False) as lb:
-            loaded = lb.pack(pack_name).battery()
+            loaded = lb.pack(pack_name, store=False).battery()  # a read: nothing stored
     else:
         loaded = None if battery is None else load_battery_arg(battery)
     plan = load_mission(mission, battery=loaded, cutoff_cell_V=cutoff,

@@ -765,11 +765,14 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
 def _rate_kinds(ordered: list[dict], out: list[EventHealth]) -> None:
     """Full discharges much faster than the pack's slowest ones (a mission run to its
     cutoff beside C/5 capacity tests) deliver less by the rate-capacity effect: their
-    coulomb count is a kind of estimate of its own."""
-    rates = {k: float(ordered[k].get("mean_current_A") or 0.0) / h.capacity_Ah
-             for k, h in enumerate(out) if h.full and h.capacity_Ah}
-    if not rates:
+    coulomb count is a kind of estimate of its own. Rates are compared on one scale, the
+    pack's largest full discharge (a test at the same current on an aged pack is the
+    same test, however much less it delivers)."""
+    fulls = {k: h for k, h in enumerate(out) if h.full and h.capacity_Ah}
+    if not fulls:
         return
+    scale = max(h.capacity_Ah for h in fulls.values())
+    rates = {k: float(ordered[k].get("mean_current_A") or 0.0) / scale for k in fulls}
     slowest = min(rates.values())
     for k, rate in rates.items():
         if rate > (1.0 + SAME_RATE_SHARE) * slowest:

@@ -308,6 +308,18 @@ class EventTable:
 SERIES_RESISTANCE = ("R_ohm", "R0_ohm")
 
 
+#: Relative standard deviation of a pack's capacity when only its label gives it [-]
+#: (packs are sold within about +-10 % of their label, and age from it).
+LABEL_CAPACITY_SD = 0.05
+
+
+def capacity_draws(n: int, relative_sd: float, seed: int = 0) -> np.ndarray:
+    """``n`` seeded factors around 1 with ``relative_sd`` (normal, kept within 4 sd and
+    above 0.05): the capacity today's uncertainty handed to a model's parameter draws."""
+    z = np.clip(np.random.default_rng(seed).standard_normal(n), -4.0, 4.0)
+    return np.maximum(1.0 + relative_sd * z, 0.05)
+
+
 def scale_parameters(values: dict, units: dict, factor: float, shift_cell_ohm: float) -> dict:
     """Parameters of a cell whose capacity is ``factor`` times and series resistance
     ``shift_cell_ohm`` more: charges [Ah] times ``factor``, per-charge quantities
@@ -383,6 +395,14 @@ class Pack:
             return self._prior()
         return self._scaled(model)
 
+    def _capacity_sd(self) -> float | None:
+        """Relative standard deviation of the capacity today [-], from its 95 % band
+        (None without a band)."""
+        band = self.capacity_interval95
+        if not self.capacity_Ah or not band or any(b is None for b in band):
+            return None
+        return max(0.0, (float(band[1]) - float(band[0])) / (2.0 * 1.96 * self.capacity_Ah))
+
     def _note(self) -> str:
         from .today import figures_note
 
@@ -408,9 +428,13 @@ class Pack:
         elif self.chemistry is None:
             note += f"; chemistry taken as {chemistry} from its full rest voltage"
         cells = self.cells or self._seen.get("cells") or 1
+        today = {} if self.health is None else self.health.today
         return prior_battery(self.name, chemistry, int(cells), float(capacity),
                              self.resistance_ohm, note,
-                             rest_cell_V=self._seen.get("rest_cell_V"))
+                             rest_cell_V=self._seen.get("rest_cell_V"),
+                             capacity_sd=self._capacity_sd() if capacity == self.capacity_Ah
+                             else LABEL_CAPACITY_SD,
+                             resistance_interval95=today.get("resistance_interval95"))
 
     def _scaled(self, model: dict):
         from ..cell import CellParameters
@@ -429,17 +453,24 @@ class Pack:
         params = scale_parameters({n: float(bat.parameters[n]) for n in fam.names}, units,
                                   factor, shift)
         extra = dict(bat.extra)
+        sd = self._capacity_sd() or 0.0
         boot = extra.get("bootstrap")
         if isinstance(boot, dict) and boot.get("samples"):
+            # each refit also draws its own capacity today from the band around it
             names = list(boot["names"])
-            scaled = [[scale_parameters(dict(zip(names, row)), units, factor, shift)[n]
-                       for n in names] for row in boot["samples"]]
+            draws = capacity_draws(len(boot["samples"]), sd)
+            scaled = [[scale_parameters(dict(zip(names, row)), units, factor * d, shift)[n]
+                       for n in names] for row, d in zip(boot["samples"], draws)]
             extra["bootstrap"] = dict(boot, samples=scaled)
-        jac = np.array([factor if units.get(n) in ("Ah", "Ah/K") else
-                        1.0 / factor if units.get(n, "").endswith("/Ah") else 1.0
-                        for n in fam.names])
+        power = np.array([1.0 if units.get(n) in ("Ah", "Ah/K") else
+                          -1.0 if units.get(n, "").endswith("/Ah") else 0.0
+                          for n in fam.names])
+        jac = factor ** power
         cov = None if bat.covariance is None else \
             np.asarray(bat.covariance) * np.outer(jac, jac)
+        if cov is not None and sd > 0:  # plus the capacity today's own uncertainty
+            slope = power * np.array([float(params[n]) for n in fam.names])
+            cov = cov + sd ** 2 * np.outer(slope, slope)
         note = (f"{self._note()}; its fitted model scaled to its health today: capacity "
                 f"x{factor:.3f}, "
                 f"series resistance {shift * 1000:+.1f} mOhm per cell")

@@ -30,7 +30,8 @@ DEFAULT_CELL_OHM = 0.02
 
 
 def prior_battery(name: str, chemistry: str, cells: int, capacity_Ah: float,
-                  resistance_ohm: float | None, note: str, rest_cell_V: float | None = None):
+                  resistance_ohm: float | None, note: str, rest_cell_V: float | None = None,
+                  capacity_sd: float | None = None, resistance_interval95=None):
     """The chemistry's prior (module docstring) as a Battery of ``cells`` in series.
 
     Parameters
@@ -49,6 +50,10 @@ def prior_battery(name: str, chemistry: str, cells: int, capacity_Ah: float,
     rest_cell_V : float, optional
         The pack's highest rest voltage per cell [V]: a LiPo pack resting above 4.25 V
         gets the high-voltage (LiHV) curve (:func:`dischargelab.ocv.generic_ocv`).
+    capacity_sd : float, optional
+        Relative standard deviation of ``capacity_Ah`` [-]; with
+        ``resistance_interval95`` (pack [ohm]) it becomes the Battery's covariance, so
+        that flight times drawn from it carry how well today's figures are known.
     """
     from ..cell import CellParameters
     from ..model import Battery
@@ -75,7 +80,14 @@ def prior_battery(name: str, chemistry: str, cells: int, capacity_Ah: float,
     text = (f"{note}; no fitted model (no full discharge): the {chemistry} prior "
             f"({source}) scaled to its capacity today {capacity_Ah:.3g} Ah and "
             f"{resistance} - a prior, not a fit: expect a few per cent of error in time")
+    variance = np.zeros(len(fam.names))
+    if capacity_sd:
+        variance[fam.names.index("C_Ah")] = (capacity_sd * capacity_Ah) ** 2
+    band = resistance_interval95
+    if resistance_ohm is not None and band and None not in band:
+        variance[fam.names.index("R0_ohm")] = ((band[1] - band[0]) / (2 * 1.96 * cells)) ** 2
     return Battery(parameters=CellParameters.from_dict(values, fam.names), cells_series=cells,
+                   covariance=np.diag(variance) if np.any(variance) else None,
                    name=f"{name} (today, {chemistry} prior)", chemistry=chemistry,
                    extra={"nominal_capacity_Ah": float(capacity_Ah), "note": text,
                           "logbook": {"pack": name, "prior": chemistry},

@@ -529,6 +529,9 @@ def _few(x, y, sd, nugget, n, h, offset_var) -> Smoothed:
     design = np.vstack([np.ones_like(x), x - x[-1]]).T
     cov = np.linalg.inv(design.T @ (design * w[:, None]))
     coef = cov @ design.T @ (w * y)
+    if n > 2:  # estimates further off the line than their errors: the line is less sure
+        # (the reduced chi-square scales the covariance when above 1, the Birge ratio)
+        cov = cov * max(1.0, float(np.sum(w * (y - design @ coef) ** 2)) / (n - 2))
     pts = np.union1d(np.linspace(x[0], x[-1], GRID_POINTS), x)
     d = pts - x[-1]
     level = coef[0] + coef[1] * d

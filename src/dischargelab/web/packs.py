@@ -256,8 +256,8 @@ class PackPages:
         if mission not in bundled_missions():
             raise RequestRefused(400, f"unknown mission {mission!r}; choose one of "
                                       f"{', '.join(sorted(bundled_missions()))}")
-        pack = self.logbook().pack(name)
-        if not pack.fitted and pack.has_full_discharge:  # flying would fit and store one
+        pack = self.logbook().pack(name, store=False)  # a read: nothing stored
+        if not pack.fitted and pack.has_full_discharge:  # flying would fit one first
             raise RequestRefused(409, f"pack {name!r} has no fitted model yet; refit it first "
                                       f"(Refit, or POST /api/packs/{name}/fit)")
         return dl.endurance(pack, mission).to_dict()
