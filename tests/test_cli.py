@@ -26,6 +26,16 @@ def battery_file(tmp_path_factory, bundled_data):
     return path
 
 
+@pytest.fixture(scope="module")
+def untested_battery(battery_file, tmp_path_factory):
+    """The battery file without the cutoff its fitted run stopped at (a hand-written one)."""
+    doc = json.loads(battery_file.read_text())
+    assert doc.pop("tested_cutoff_cell_V") == pytest.approx(2.5, abs=0.02)
+    path = tmp_path_factory.mktemp("cli") / "untested.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
 def test_fit_json_contract(capsys, bundled_data, tmp_path):
     code, out, err = run(capsys, "fit", bundled_data / "Q30_S001_1C.csv", "--columns",
                          SAMSUNG_COLUMNS, "--json", "-o", tmp_path / "b.json",
@@ -110,14 +120,16 @@ def test_paper_mode_prints_degeneracy(capsys, shared_data):
 @pytest.mark.parametrize("args, message", [
     (["fit", "missing.csv"], "not found"),
     (["predict", "{battery}", "--current", "3", "--cutoff", "4.6"], "not below the starting"),
-    (["predict", "{battery}", "--current", "3"], "give a cutoff"),
+    (["predict", "{untested}", "--current", "3"], "give a cutoff"),
     (["predict", "{battery}", "--current", "3", "--power", "5", "--cutoff", "3"],
      "exactly one load"),
     (["curves", "{battery}", "--currents", "1,x", "--cutoff", "3"], "numbers separated"),
     (["fit", "{battery}", "--fix", "R_ohm"], "NAME=VALUE"),
 ])
-def test_errors_are_one_line(capsys, battery_file, args, message):
-    args = [a.replace("{battery}", str(battery_file)) for a in args]
+def test_errors_are_one_line(capsys, battery_file, untested_battery, args, message):
+    args = [a.replace("{battery}", str(battery_file)).replace("{untested}",
+                                                               str(untested_battery))
+            for a in args]
     code, out, err = run(capsys, *args)
     assert code == 2
     assert message in err
@@ -169,8 +181,8 @@ def test_cutoff_defaults_to_the_chemistry_and_says_so(capsys):
     assert "cutoff 2.5 V/cell, the usual one for lifepo4" in err
 
 
-def test_validate_without_cutoff_needs_a_chemistry(capsys, battery_file, bundled_data):
-    code, _, err = run(capsys, "validate", battery_file, bundled_data / "Q30_S001_2C.csv",
+def test_validate_without_cutoff_needs_a_chemistry(capsys, untested_battery, bundled_data):
+    code, _, err = run(capsys, "validate", untested_battery, bundled_data / "Q30_S001_2C.csv",
                        "--columns", SAMSUNG_COLUMNS)
     assert code == 2 and "give a cutoff" in err and "names no chemistry" in err
     assert len(err.strip().splitlines()) == 1

@@ -127,5 +127,24 @@ def pack_text(row: dict) -> dict:
     return out
 
 
+
+def runs_label(names) -> str:
+    """The runs a battery was fitted on, in one label: ``"a.csv, b.csv"``, with the steps of
+    one tester file together (``"maccor_001 steps 7, 12, 17"`` for ``"maccor_001 step 7"``...)."""
+    groups: dict[str, list[str]] = {}
+    for name in names:
+        head, sep, step = str(name).rpartition(" step ")
+        key, item = (head, step) if sep and step.isdigit() else (str(name), "")
+        groups.setdefault(key, []).append(item)
+    parts = []
+    for key, items in groups.items():
+        steps = [i for i in items if i]
+        if not steps:
+            parts.append(key)
+        else:
+            parts.append(f"{key} step{'s' if len(steps) > 1 else ''} {', '.join(steps)}")
+    return ", ".join(parts)
+
+
 __all__ = ["MISSING", "OPEN", "SEPARATOR", "QUANTITIES", "number", "quantity", "interval",
-           "quantity_interval", "ratio", "percent", "duration", "pack_text"]
+           "quantity_interval", "ratio", "percent", "duration", "pack_text", "runs_label"]

@@ -22,6 +22,12 @@ if TYPE_CHECKING:
     from .flight import FlightReport
 
 
+
+def _wrapped(title: str, width: int = 80) -> str:
+    """A title broken into lines of at most ``width`` characters (a long battery name, such
+    as the list of the runs it was fitted on, would run off the figure)."""
+    return "\n".join(textwrap.wrap(title, width)) or title
+
 def pyplot():
     """matplotlib.pyplot, with the Agg backend when there is no display."""
     require("matplotlib", "plot")
@@ -172,8 +178,8 @@ def plot_family(results, ax=None, x: str = "charge", labels=None):
     if results:
         ax.axhline(results[0].cutoff_pack_V, color="0.4", ls="--", lw=0.8, label="cutoff")
         bat = results[0].battery
-        ax.set_title(f"{bat.name or 'battery'} ({bat.cells_series}S{bat.strings_parallel}P): "
-                     f"simulated discharges", fontsize=10)
+        ax.set_title(_wrapped(f"{bat.name or 'battery'} ({bat.cells_series}S"
+                              f"{bat.strings_parallel}P): simulated discharges"), fontsize=10)
     ax.legend(fontsize=8)
     return ax
 
@@ -208,8 +214,8 @@ def plot_ocv(battery, ax=None, reference=None, points: int = 201):
     ax.set_xlim(100, 0)
     ax.set_xlabel("state of charge [%]")
     ax.set_ylabel("open-circuit voltage per cell [V]")
-    ax.set_title(f"{battery.name + ': ' if battery.name else ''}open-circuit voltage per cell",
-                 fontsize=10)
+    ax.set_title(_wrapped(f"{battery.name + ': ' if battery.name else ''}open-circuit voltage "
+                          "per cell"), fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return ax

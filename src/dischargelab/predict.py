@@ -227,5 +227,19 @@ def default_cutoff(battery: Battery, cutoff=None, cutoff_pack=None) -> dict:
         return {"cutoff_cell_V": float(cutoff)}
     if battery.chemistry in CUTOFF_CELL_VOLTAGE_V:
         return {"cutoff_cell_V": CUTOFF_CELL_VOLTAGE_V[battery.chemistry]}
+    tested = tested_cutoff(battery)
+    if tested is not None:
+        return {"cutoff_cell_V": tested}
     raise SimulationError("give a cutoff voltage (per cell, e.g. 3.0 for LiPo, 2.5 for Li-ion); "
-                          "the battery's chemistry is not known")
+                          "the battery's chemistry is not known and its fitted runs did not "
+                          "all stop at one voltage")
+
+
+def tested_cutoff(battery: Battery) -> float | None:
+    """The voltage per cell [V] every fitted run stopped at, as its battery file records it
+    (``tested_cutoff_cell_V``), or None."""
+    value = (battery.extra or {}).get("tested_cutoff_cell_V")
+    try:
+        return float(value) if value is not None and float(value) > 0 else None
+    except (TypeError, ValueError):
+        return None

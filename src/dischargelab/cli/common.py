@@ -348,9 +348,11 @@ def cell_cutoff(battery, cutoff, cutoff_pack=None):
     except SimulationError:
         raise DischargelabError("give a cutoff: --cutoff V per cell (e.g. 3.0 LiPo, 2.5 "
                                 "Li-ion) or --cutoff-pack V (the battery file names no "
-                                "chemistry)") from None
-    err.print(f"cutoff {value:g} V/cell, the usual one for {battery.chemistry} "
-              f"(--cutoff to change it)", markup=False)
+                                "chemistry, and its fitted runs stopped at different "
+                                "voltages)") from None
+    why = (f"the usual one for {battery.chemistry}" if battery.chemistry else
+           "where every fitted run stopped (the battery file names no chemistry)")
+    err.print(f"cutoff {value:g} V/cell, {why} (--cutoff to change it)", markup=False)
     return value
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from ..errors import DischargelabError
+from ..formatting import runs_label
 from .common import (
     OPTION_OF_ARGUMENT,
     PARAMETER_HELP,
@@ -233,7 +234,7 @@ def fit_cmd(data, columns, current, sign, units, segment, steps, cells, parallel
                                  cooling=None if cooling == "none" else cooling,
                                  chemistry=chemistry)
     battery = result.battery
-    label = name or ", ".join(c.name for c in curves)
+    label = name or runs_label([c.name for c in curves])
     from dataclasses import replace as _replace
 
     extra = dict(battery.extra)

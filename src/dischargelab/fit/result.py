@@ -18,6 +18,11 @@ from .problem import CURRENT_SCALE, _stack
 #: constant-current discharge for :func:`plateau_ratio`.
 CONSTANT_CURRENT_CV = 0.25
 
+#: Fitted runs whose last voltages per cell lie within this [V] stopped at one cutoff (a
+#: tester's or logger's lower voltage limit): the battery file records it as
+#: ``tested_cutoff_cell_V``, the cutoff used when none is given and the chemistry is unknown.
+TESTED_CUTOFF_SPREAD_V = 0.02
+
 
 def plateau_ratio(curve: Curve) -> float | None:
     """How flat a constant-current discharge is [-]: the voltage drop over the middle
@@ -132,6 +137,10 @@ class FitResult:
             extra["fit_temperature_rise_K"] = max(rises)
         if self.thermal_prior is not None:
             extra["thermal_prior"] = dict(self.thermal_prior)
+        ends = [float(c.voltage_V[-1]) / self.cells_series for c in self.curves]
+        flown = any("flight" in (c.meta or {}) for c in self.curves)  # a flight ends landed
+        if not flown and max(ends) - min(ends) <= TESTED_CUTOFF_SPREAD_V:  # one stop voltage
+            extra["tested_cutoff_cell_V"] = round(float(np.median(ends)), 3)
         plateau = plateau_ratio(self.curves[lowest])
         if plateau is not None:
             extra["fit_plateau_ratio"] = plateau
