@@ -142,7 +142,9 @@ def read_flight_log(path, *, battery: int | None = None, flight: int | None = No
     if kind is None:
         raise DataError(f"{path.name} is not a flight log this version reads (ArduPilot .bin/.log, "
                         "PX4 .ulg, Betaflight/INAV blackbox, MAVLink telemetry .tlog, in-flight "
-                        "logger CSV with per-cell columns); for other data use read_discharge")
+                        "logger CSV with per-cell columns); a bench discharge, a tester's file or "
+                        "a DJI app log is read as a discharge (dl.read, as `dischargelab fit` "
+                        "and `logbook add` do)")
     if (topic is not None or fields is not None) and kind not in ("ulog", "ardupilot-bin",
                                                                  "ardupilot-text"):
         raise DataError(f"{path.name}: topic= and fields= apply to ULog and DataFlash logs only "
