@@ -387,14 +387,6 @@ def usage_line(exc: click.ClickException) -> str:
 
 
 
-def duration_text(seconds) -> str:
-    if seconds is None or not math.isfinite(seconds):
-        return "-"
-    sign = "-" if seconds < 0 else ""
-    minutes, secs = divmod(abs(float(seconds)), 60.0)
-    return f"{sign}{int(minutes)} min {secs:04.1f} s"
-
-
 def progress_callback(status, what: str):
     def update(done, total):
         status.update(f"{what}: {done}/{total}")

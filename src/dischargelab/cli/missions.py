@@ -7,11 +7,11 @@ from pathlib import Path
 import click
 
 from ..errors import DischargelabError
+from ..formatting import duration
 from .common import (
     battery_input,
     cutoff_option,
     data_options,
-    duration_text,
     err,
     expand_paths,
     force_option,
@@ -67,10 +67,10 @@ def print_mission(result) -> None:
     m = result.mission
     unc = result.uncertainty
     st = result.stretch
-    head = duration_text(result.endurance_s)
+    text = result.to_dict()["text"]       # the durations as the JSON and the report write them
+    head = text["endurance_s"]
     if unc and unc.get("available"):
-        e = unc["endurance_s"]
-        head += (f"  (95 % interval {duration_text(e['low'])} to {duration_text(e['high'])}: "
+        head += (f"  (95 % interval {text['endurance_interval95']}: "
                  + " + ".join(unc.get("interval_includes", ["parameters"]))
                  + (f", {unc['accepted']} draws)" if unc.get("accepted") else ")"))
     else:
@@ -87,12 +87,12 @@ def print_mission(result) -> None:
              else "none"],
             ["cutoff / reserve", f"{m.cutoff_cell_V:g} V/cell ({m.cutoff_pack_V:.2f} V pack) / "
                                  f"{m.reserve_pct:g} %"],
-            ["flight as planned", f"{duration_text(result.flight_time_s)}"
+            ["flight as planned", text["flight_time_s"]
                                   + ("" if result.completed else
                                      f" (NOT completed: {result.ended_by})")],
             ["state of charge at landing", f"{result.soc_end_pct:.1f} %"],
-            ["reserve reached at", duration_text(result.reserve_time_s)],
-            ["cutoff reached at", duration_text(result.cutoff_time_s)],
+            ["reserve reached at", text["reserve_time_s"]],
+            ["cutoff reached at", text["cutoff_time_s"]],
             ["lowest pack voltage", f"{result.min_voltage_V:.3f} V "
                                     f"(margin {result.voltage_margin_V:.3f} V)"],
             ["charge / energy used", f"{result.simulation.capacity_Ah:.3f} Ah / "
@@ -100,17 +100,17 @@ def print_mission(result) -> None:
     if st:
         limit = ("the mission cannot complete even without it"
                  if st["binding"] == "infeasible" else f"limited by the {st['binding']}")
-        rows.append([f"max {st['phase']}", f"{duration_text(st['max_s'])} ({limit})"])
+        rows.append([f"max {st['phase']}", f"{text['stretch_max_s']} ({limit})"])
         if st["margin_s"] is not None:
-            rows.append([f"margin on {st['phase']}", duration_text(st["margin_s"])])
+            rows.append([f"margin on {st['phase']}", text["stretch_margin_s"]])
     out.print(table("Endurance", ["quantity", "value"], rows))
     phase_rows = [[r["phase"] + (f" #{r['repetition']}" if r["repetition"] else ""), r["load"],
-                   f"{r['start_s']:.0f}", f"{r['duration_s']:.1f}", f"{r['mean_current_A']:.2f}",
+                   duration(r["start_s"]), duration(r["duration_s"]), f"{r['mean_current_A']:.2f}",
                    f"{r['charge_Ah']:.3f}", f"{r['end_voltage_V']:.3f}",
                    f"{r['end_soc_pct']:.1f}"] for r in result.phases]
     if len(phase_rows) > 30:
         phase_rows = phase_rows[:12] + [["...", "", "", "", "", "", "", ""]] + phase_rows[-12:]
-    out.print(table("Phases", ["phase", "load", "start [s]", "duration [s]", "current [A]",
+    out.print(table("Phases", ["phase", "load", "start", "duration", "current [A]",
                                "charge [Ah]", "end V", "end SOC [%]"], phase_rows))
     for w in result.warnings:
         if not (result.cannot_deliver and w == result.cannot_deliver["message"]):

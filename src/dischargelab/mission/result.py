@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationError
+from ..formatting import mission_text
 from ..model import Battery
 from ..simulate import SimulationResult
 from ..uncertainty import (
@@ -144,6 +145,7 @@ class MissionResult:
             "cannot_deliver": None if self.cannot_deliver is None else
             dict(self.cannot_deliver),
         }
+        out["text"] = mission_text(out)    # the durations as every view writes them
         return out
 
     def plot(self, ax=None, **kwargs):
