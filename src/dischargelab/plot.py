@@ -289,8 +289,11 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
         if row["phase"] not in names:
             names.append(row["phase"])
     color_of = {n: PHASE_COLORS[k % len(PHASE_COLORS)] for k, n in enumerate(names)}
-    v_lo = min(float(np.min(sim.voltage_V)), mission.cutoff_pack_V)
-    v_hi = float(np.max(sim.voltage_V))
+    # a pack that cannot deliver the first phase has no finite voltage: the cutoff frames it
+    volts = np.asarray(sim.voltage_V, dtype=float)
+    volts = volts[np.isfinite(volts)]
+    v_lo = min(float(np.min(volts)) if volts.size else np.inf, mission.cutoff_pack_V)
+    v_hi = max(float(np.max(volts)) if volts.size else -np.inf, mission.cutoff_pack_V)
     pad = 0.08 * max(v_hi - v_lo, 0.05 * v_hi)
     spans = []
     for row in result.phases:
@@ -340,7 +343,9 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
                  label="pack current")
         cur.set_ylabel("pack current [A]", color="tab:blue")
         cur.tick_params(axis="y", colors="tab:blue")
-        cur.set_ylim(0, 1.6 * max(float(np.max(sim.current_A)), 1e-6))
+        amps = np.asarray(sim.current_A, dtype=float)
+        amps = amps[np.isfinite(amps)]
+        cur.set_ylim(0, 1.6 * max(float(np.max(amps)) if amps.size else 0.0, 1e-6))
         h2, l2 = cur.get_legend_handles_labels()
         handles, labels = handles + h2, labels + l2
     ax.legend(handles, labels, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.11),

@@ -20,6 +20,7 @@ from .common import (
     load_battery_arg,
     number_list,
     out,
+    pack_options,
     print_json,
     table,
 )
@@ -99,12 +100,8 @@ def pack_model_options(func):
     autopilot file is made for (the same in every autopilot command)."""
     for option in reversed((
             click.argument("battery", required=False),
-            click.option("--pack", "pack_name", metavar="NAME",
-                         help="A logbook pack: its model at today's capacity and resistance "
-                              "(then give no BATTERY)."),
-            click.option("--db", metavar="URL|FILE",
-                         help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's "
-                              "logbook)."),
+            pack_options("A logbook pack: its model at today's capacity and resistance "
+                         "(then give no BATTERY)."),
             click.option("--cells", type=click.IntRange(1), default=None,
                          help="Cells in series of the flight pack (required with a BATTERY; "
                               "default with --pack: the pack's)."),

@@ -19,6 +19,7 @@ from .common import (
     json_option,
     load_battery_arg,
     out,
+    pack_options,
     print_json,
     progress_callback,
     table,
@@ -122,11 +123,8 @@ def print_mission(result) -> None:
 @click.command("endurance")
 @click.argument("battery", required=False)
 @click.argument("mission", required=False, type=click.Path(dir_okay=False))
-@click.option("--pack", "pack_name", metavar="NAME",
-              help="Fly a logbook pack: its model scaled to today's capacity and resistance "
-                   "(then give MISSION alone).")
-@click.option("--db", metavar="URL|FILE",
-              help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's logbook).")
+@pack_options("Fly a logbook pack: its model scaled to today's capacity and resistance "
+              "(then give MISSION alone).")
 @cutoff_option(default="the mission file's")
 @click.option("--reserve", type=click.FloatRange(0, 100, max_open=True), metavar="PCT",
               help="State of charge to land with [%] (overrides the mission file).")
@@ -209,9 +207,13 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
 
 
 @click.command("report")
-@click.argument("battery")
+@click.argument("battery", required=False)
+@pack_options("Report a logbook pack: its model as of today (fitted, or fitted in memory "
+              "to its latest full discharge, scaled to today's capacity and resistance), "
+              "read without writing to the logbook (then give no BATTERY).")
 @click.option("--mission", "mission_path", type=click.Path(dir_okay=False),
-              help="Mission TOML to fly and report.")
+              help="Mission TOML or bundled mission name to fly and report (a --pack "
+                   "keeps its cells, strings, chemistry and cutoff).")
 @click.option("--validate", "validate_paths", multiple=True, metavar="DATA",
               help="Measured discharge to validate against (repeat, or a quoted pattern "
                    "such as 'runs/*.csv').")
@@ -229,9 +231,13 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
               help="HTML file to write (one self-contained page).")
 @force_option
 @json_option
-def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment,
-               units, steps, cells, parallel, draws, seed, title, output, force, as_json):
+def report_cmd(battery, pack_name, db, mission_path, validate_paths, cutoff, columns, current,
+               sign, segment, units, steps, cells, parallel, draws, seed, title, output, force,
+               as_json):
     """Write one self-contained HTML report for the pilot: model, fit, mission, validation.
+
+    BATTERY is a battery file or a preset name; or, with --pack NAME, a logbook
+    pack's model as of today (nothing is written to the logbook).
 
     \b
     Examples:
@@ -240,7 +246,9 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
           --cutoff 3.0 --columns time_s=0,current_A=1,voltage_V=2 -o report.html
       dischargelab report hacker-4100-4s-lifepo4 \\
           --mission paper-table5 -o table5.html
+      dischargelab report --pack zippy-a --mission multirotor-hover -o zippy-a.html
     """
+    from ..identity import battery_identity
     from ..mission import load_mission, run_mission
     from ..model import CUTOFF_CELL_VOLTAGE_V
     from ..report import write_report
@@ -248,12 +256,22 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
 
     if not output.lower().endswith((".html", ".htm")):
         raise DischargelabError(f"-o must name an .html file, got {output!r}")
+    if (battery is None) == (pack_name is None):
+        raise DischargelabError("give a BATTERY (battery file or preset) or --pack NAME"
+                                + (", not both" if battery is not None else ""))
     validate_paths = expand_paths(validate_paths)
-    guard_outputs([output], battery_input(battery) + [mission_path] + validate_paths, force)
+    guard_outputs([output], battery_input(battery or "") + [mission_path] + validate_paths,
+                  force)
     from ..errors import require
 
     require("matplotlib", "plot")  # the report's figures; checked before any work
-    bat = load_battery_arg(battery)
+    if pack_name is not None:
+        from ..report import pack_battery
+
+        with err.status(f"reading pack {pack_name}", spinner="dots"):
+            bat = pack_battery(pack_name, db)
+    else:
+        bat = load_battery_arg(battery)
     result = None
     cases = []
     with err.status("building the report", spinner="dots") as status:
@@ -267,8 +285,9 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
             cut = cutoff
             if cut is None and result is not None:
                 cut = result.mission.cutoff_cell_V
-            if cut is None:
-                cut = CUTOFF_CELL_VOLTAGE_V.get(bat.chemistry or "")
+            if cut is None:   # the battery's own cutoff, else its chemistry's
+                cut = battery_identity(bat).cutoff_cell_V or \
+                    CUTOFF_CELL_VOLTAGE_V.get(bat.chemistry or "")
             if cut is None:
                 raise DischargelabError("give --cutoff V (per cell) for the validation: the "
                                         "battery's chemistry is unknown")
@@ -284,7 +303,7 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
         path = Path(output)
     from ..report import model_statement
 
-    summary = {"report": str(path), "bytes": path.stat().st_size,
+    summary = {"report": str(path), "bytes": path.stat().st_size, "pack": pack_name,
                "model_statement": model_statement(bat),
                "mission": None if result is None else result.to_dict(),
                "validation": [c.summary for c in cases],
@@ -296,6 +315,8 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
         return
     out.print(f"report written: {path} ({summary['bytes'] / 1024:.0f} KiB)", markup=False)
     out.print(summary["model_statement"], markup=False)
+    if pack_name is not None and bat.extra.get("note"):
+        out.print(f"pack: {bat.extra['note']}", markup=False)
     if result is not None:
         print_mission(result)
 
