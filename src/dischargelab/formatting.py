@@ -1,10 +1,11 @@
 """How a number is written: one rounding per quantity, one mark for "no value", one open
-interval, one unit text.
+interval, one unit text, one way to write a duration.
 
-The terminal, the text fields of the JSON answers, the HTML report and the pages all
-write numbers through here, so a figure reads the same wherever it is shown (the pages
-show the ``text`` the JSON API carries, and ``web/static/common.js`` holds the twin of
-:func:`number` and :func:`interval` for the numbers they draw).
+The terminal, the text fields of the JSON answers, the HTML report, the figures and the
+pages all write numbers through here, so a figure reads the same wherever it is shown (the
+pages show the ``text`` the JSON API carries, and ``web/static/common.js`` holds the twins
+of :func:`number`, :func:`interval` and :func:`duration` for the numbers they draw, such
+as the live page's elapsed time).
 
 Plain functions of values, no imports from the rest of the package (bottom layer).
 """

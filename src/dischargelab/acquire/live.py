@@ -172,7 +172,7 @@ class LiveDisplay:
             return
         text = fields.get("message") or fields.get("reason") or ""
         if kind == "gap":
-            text = f"{fields.get('duration_s', 0):.1f} s without data"
+            text = f"{duration(fields.get('duration_s', 0))} without data"
         self.events.append(f"{kind}: {text}" if text else kind)
 
     def close(self) -> None:
