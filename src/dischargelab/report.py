@@ -712,70 +712,6 @@ def _footer(battery: Battery, mission_result=None) -> str:
     return " ".join(parts)
 
 
-#: Pack names a "no such pack" error lists.
-SHOWN_PACK_NAMES = 8
-
-
-def pack_battery(name: str, logbook=None) -> Battery:
-    """The model of a logbook pack as of today, as ``dischargelab report --pack`` reports
-    it: :meth:`dischargelab.logbook.Pack.battery` read with ``store=False``, so nothing
-    is written to the logbook (a pack with a full discharge but no stored model has its
-    model fitted in memory, not stored).
-
-    A pack that only flies (no full discharge) gets its chemistry's model built to its
-    figures today, as ``endurance --pack`` flies it. The Battery keeps the pack's identity
-    (cells, strings, chemistry, cutoff) and its ``extra["note"]`` (which model, scaled to
-    which figures of which events); a mission flown with it keeps them too
-    (:mod:`dischargelab.identity`).
-
-    Parameters
-    ----------
-    name : str
-        The pack's name.
-    logbook : Logbook, str or path-like, optional
-        An open :class:`dischargelab.Logbook`, or where one is (default: the user's
-        logbook); never created.
-
-    Raises
-    ------
-    LogbookError
-        No logbook there; no pack of that name (some names listed); a pack with no model
-        yet: no fitted model, no full discharge to fit one to and no capacity to build its
-        chemistry's model at (what to add is said).
-    """
-    from .logbook import Logbook
-
-    if isinstance(logbook, Logbook):
-        return _pack_battery(logbook, name)
-    with Logbook(logbook, create=False) as lb:
-        return _pack_battery(lb, name)
-
-
-def _pack_battery(lb, name: str) -> Battery:
-    from .errors import LogbookError
-
-    names = lb.pack_names()
-    if name not in names:
-        if not names:
-            raise LogbookError(f"no pack named {name!r}: the logbook has no packs yet; add a "
-                               f"pack's files with `dischargelab logbook add FILES --pack "
-                               f"{name}`")
-        shown = ", ".join(repr(n) for n in names[:SHOWN_PACK_NAMES])
-        more = len(names) - SHOWN_PACK_NAMES
-        raise LogbookError(f"no pack named {name!r} in the logbook; its packs: {shown}"
-                           + (f" and {more} more" if more > 0 else "")
-                           + " (`dischargelab logbook packs` lists them)")
-    pack = lb.pack(name, store=False)
-    if not pack.fitted and not pack.has_full_discharge and pack.capacity_Ah is None \
-            and not pack.label_capacity_Ah:
-        raise LogbookError(f"pack {name!r} has no model yet: no full discharge to fit one to and "
-                           f"no capacity to build its chemistry's model at; add a full "
-                           f"discharge (`dischargelab logbook add FILE --pack {name}`) or its "
-                           f"label capacity (`dischargelab logbook add FILES --pack {name} "
-                           f"--capacity AH`)")
-    return pack.battery()
-
-
 def write_report(path, battery, **kwargs) -> Path:
     """Write :func:`build_report` to ``path`` (UTF-8, atomically); returns the path."""
     from .atomic import write_text
@@ -788,5 +724,5 @@ def write_report(path, battery, **kwargs) -> Path:
     return write_text(path, text)
 
 
-__all__ = ["build_report", "write_report", "pack_battery", "model_statement",
-           "interval_methods", "fitted_data", "split_by_fit"]
+__all__ = ["build_report", "write_report", "model_statement", "interval_methods",
+           "fitted_data", "split_by_fit"]

@@ -208,8 +208,9 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
 
 @click.command("report")
 @click.argument("battery", required=False)
-@pack_options("Report a logbook pack: its model as of today (fitted, or fitted in memory "
-              "to its latest full discharge, scaled to today's capacity and resistance), "
+@pack_options("Report a logbook pack: its model as of today (its fitted model, or one fitted "
+              "in memory to its latest full discharge, scaled to today's capacity and "
+              "resistance; a pack that only flies: its chemistry's model at today's figures), "
               "read without writing to the logbook (then give no BATTERY).")
 @click.option("--mission", "mission_path", type=click.Path(dir_okay=False),
               help="Mission TOML or bundled mission name to fly and report (a --pack "
@@ -217,7 +218,8 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
 @click.option("--validate", "validate_paths", multiple=True, metavar="DATA",
               help="Measured discharge to validate against (repeat, or a quoted pattern "
                    "such as 'runs/*.csv').")
-@cutoff_option("for validation and curves", "the mission's, else the chemistry's")
+@cutoff_option("for validation and curves",
+               "the mission's, else the battery's own, else its chemistry's")
 @data_options
 @click.option("--cells", type=click.IntRange(1), default=None,
               help="Cells in series of the mission pack (overrides the mission file).")
@@ -266,10 +268,11 @@ def report_cmd(battery, pack_name, db, mission_path, validate_paths, cutoff, col
 
     require("matplotlib", "plot")  # the report's figures; checked before any work
     if pack_name is not None:
-        from ..report import pack_battery
+        from ..logbook import Logbook
 
-        with err.status(f"reading pack {pack_name}", spinner="dots"):
-            bat = pack_battery(pack_name, db)
+        with err.status(f"reading pack {pack_name}", spinner="dots"), \
+                Logbook(db, create=False) as lb:
+            bat = lb.model_today(pack_name)
     else:
         bat = load_battery_arg(battery)
     result = None
