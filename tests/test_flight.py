@@ -217,7 +217,7 @@ def test_fit_needs_a_capacity_when_the_log_has_none(logs):
 def test_every_bundled_log_runs_through_flight_without_flags(logs, capsys, name):
     code, out, err = run(capsys, "flight", logs / name)
     assert code == 0, err
-    assert "flight 1" in out and "duration [s]" in out
+    assert "flight 1" in out and "duration" in out
 
 
 @pytest.mark.parametrize("content", [b"ULog\x01\x12\x35\x01garbage", bytes(range(256)) * 40,

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SimulationError
+from .formatting import duration
 from .model import Battery, load_battery
 
 FIRMWARES = ("ardupilot", "px4")
@@ -210,7 +211,7 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
     r_cell = r_pack / cells
     amps = f"{load:.3g} A"
     how = (f"{bat.model} model, {cells}S{bat.strings_parallel}P, at {amps} "
-           f"({load / bat.rated_capacity_Ah:.2g}C): {total / 60:.1f} min to {cut:g} V/cell")
+           f"({load / bat.rated_capacity_Ah:.2g}C): {duration(total)} to {cut:g} V/cell")
     source = load_source or ("1C of the rated capacity" if load_current_A is None
                              else "the given load")
     notes = [how, f"load {amps}: {source}",

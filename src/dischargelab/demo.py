@@ -10,6 +10,8 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
+from .formatting import duration
+
 #: Bundled files and their nominal rates.
 DEMO_FILES = {"C/10": "Q30_S001_C10.csv", "1C": "Q30_S001_1C.csv", "4C": "Q30_S001_4C.csv"}
 DEMO_RATES = tuple(DEMO_FILES)
@@ -204,7 +206,7 @@ def _flight_text(report) -> str:
     out = []
     for a in report.flights:
         s = a.summary
-        items = [part("", s.get("duration_s"), unit=" s"),
+        items = [None if s.get("duration_s") is None else duration(s["duration_s"]),
                  part("", s.get("charge_Ah"), 1000, unit=" mAh"),
                  part("peak ", s.get("peak_current_A"), unit=" A"),
                  part("sag ", s.get("sag_V"), spec=".2f", unit=" V"),
@@ -223,15 +225,15 @@ def _print_summary(console, models, rows, files):
     t = Table(title=f"\nTime to {DEMO_CUTOFF_V} V: measured vs predicted", title_justify="left")
     t.add_column("rate")
     t.add_column(Text("current [A]"), justify="right")
-    t.add_column(Text("measured [min]"), justify="right")
+    t.add_column(Text("measured"), justify="right")
     for label in models:
-        t.add_column(Text(f"{label} [min]"), justify="right")
+        t.add_column(Text(label), justify="right")
         t.add_column("error", justify="right")
     for r in rows:
-        cells = [r["rate"], f"{r['current_A']:.2f}", f"{r['measured_s'] / 60:.1f}"]
+        cells = [r["rate"], f"{r['current_A']:.2f}", duration(r["measured_s"])]
         for label in models:
             v = r[label]
-            cells += [f"{v['endurance_predicted_s'] / 60:.1f}",
+            cells += [duration(v["endurance_predicted_s"]),
                       f"{v['endurance_error_pct']:+.1f} %"]
         t.add_row(*cells)
     console.print(t)

@@ -1,10 +1,11 @@
 """How a number is written: one rounding per quantity, one mark for "no value", one open
-interval, one unit text.
+interval, one unit text, one way to write a duration.
 
-The terminal, the text fields of the JSON answers, the HTML report and the pages all
-write numbers through here, so a figure reads the same wherever it is shown (the pages
-show the ``text`` the JSON API carries, and ``web/static/common.js`` holds the twin of
-:func:`number` and :func:`interval` for the numbers they draw).
+The terminal, the text fields of the JSON answers, the HTML report, the figures and the
+pages all write numbers through here, so a figure reads the same wherever it is shown (the
+pages show the ``text`` the JSON API carries, and ``web/static/common.js`` holds the twins
+of :func:`number`, :func:`interval` and :func:`duration` for the numbers they draw, such
+as the live page's elapsed time).
 
 Plain functions of values, no imports from the rest of the package (bottom layer).
 """
@@ -97,15 +98,70 @@ def percent(value, digits: int = 1, signed: bool = False) -> str:
     return f"{text} %"
 
 
-def duration(seconds) -> str:
-    """A duration: ``12 min 03 s`` (``1 h 02 min 03 s`` from an hour)."""
+def _whole(value: float) -> int:
+    """``value`` (>= 0) rounded to a whole number half up, on its exact binary value (what
+    JavaScript's ``toFixed(0)`` does)."""
+    return int(Decimal(value).quantize(Decimal(1), rounding=ROUND_HALF_UP))
+
+
+def duration(seconds, signed: bool = False) -> str:
+    """A duration as every view writes it (terminal, JSON texts, report, pages).
+
+    * under a minute: whole seconds, ``42 s``;
+    * under two hours: minutes and seconds, ``69 min 29 s`` (a pilot's timer and a
+      flight's endurance read in minutes; the seconds always two digits);
+    * from two hours: hours and minutes, ``2 h 05 min`` (seconds no longer matter).
+
+    Rounded to the last unit shown, half away from zero on the exact value (so
+    ``DL.duration`` in ``web/static/common.js``, its twin, writes the same). A negative
+    duration (a margin that is short) starts with ``-``; ``signed`` writes ``+`` before a
+    positive one (an error, a difference). :data:`MISSING` for None, NaN or inf.
+    """
     if not _finite(seconds):
         return MISSING
-    sign = "-" if seconds < 0 else ""
-    total = int(round(abs(float(seconds))))
-    h, rest = divmod(total, 3600)
-    m, s = divmod(rest, 60)
-    return f"{sign}{h} h {m:02d} min {s:02d} s" if h else f"{sign}{m} min {s:02d} s"
+    value = float(seconds)
+    total = _whole(abs(value))
+    if total < 60:
+        body = f"{total} s"
+    elif total < 7200:
+        body = f"{total // 60} min {total % 60:02d} s"
+    else:
+        minutes = _whole(abs(value) / 60.0)
+        body = f"{minutes // 60} h {minutes % 60:02d} min"
+    if total == 0:
+        return body
+    return ("-" if value < 0 else "+" if signed else "") + body
+
+
+def duration_interval(pair) -> str:
+    """An interval of durations, ``67 min 10 s - 71 min 40 s``: :func:`interval`'s
+    separator and open ends, each end a :func:`duration`."""
+    if not pair:
+        return MISSING
+    lo, hi = pair
+    if lo is None and hi is None:
+        return MISSING
+    return SEPARATOR.join(OPEN if end is None else duration(end) for end in (lo, hi))
+
+
+#: The durations of a mission result (``MissionResult.to_dict()``) that carry a text.
+MISSION_DURATIONS = ("flight_time_s", "endurance_s", "cutoff_time_s", "reserve_time_s")
+
+
+def mission_text(row: dict) -> dict:
+    """The texts of a mission result's durations as every view shows them: the keys of
+    :data:`MISSION_DURATIONS`, ``endurance_interval95`` (the 95 % interval, when flown),
+    ``stretch_max_s`` and ``stretch_margin_s`` (with a stretched phase)."""
+    out = {key: duration(row.get(key)) for key in MISSION_DURATIONS if key in row}
+    unc = row.get("uncertainty") or {}
+    if unc.get("available") and unc.get("endurance_s"):
+        e = unc["endurance_s"]
+        out["endurance_interval95"] = duration_interval([e.get("low"), e.get("high")])
+    st = row.get("stretch")
+    if st:
+        out["stretch_max_s"] = duration(st.get("max_s"))
+        out["stretch_margin_s"] = duration(st.get("margin_s"))
+    return out
 
 
 def pack_text(row: dict) -> dict:
@@ -147,4 +203,5 @@ def runs_label(names) -> str:
 
 
 __all__ = ["MISSING", "OPEN", "SEPARATOR", "QUANTITIES", "number", "quantity", "interval",
-           "quantity_interval", "ratio", "percent", "duration", "pack_text", "runs_label"]
+           "quantity_interval", "ratio", "percent", "duration", "duration_interval",
+           "MISSION_DURATIONS", "mission_text", "pack_text", "runs_label"]

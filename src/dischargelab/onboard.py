@@ -52,6 +52,7 @@ import numpy as np
 
 from .autopilot import DEFAULT_RESERVE_S, checked_pack
 from .errors import SimulationError
+from .formatting import duration
 from .model import Battery
 
 #: Charge grid points of the tables (charge taken out, full to the lowest-rate cutoff).
@@ -211,7 +212,7 @@ def autopilot_script(battery, *, firmware: str = "ardupilot", cells: int | None 
     header = _header(bat, cells, cut, ref, t_ref, reserve_s, stamp, ambient)
     text = _render(tables, header, reserve_s, int(instance), bat)
     notes = [f"{bat.model} model, {cells}S{bat.strings_parallel}P, cutoff {cut:g} V/cell: "
-             f"{t_ref / 60:.1f} min at {ref:.3g} A"]
+             f"{duration(t_ref)} at {ref:.3g} A"]
     if bat.extra.get("logbook") and bat.extra.get("note"):
         notes.append(str(bat.extra["note"]))
     return AutopilotScript(text=text, tables=tables, header=header, notes=notes)
@@ -235,7 +236,7 @@ def _header(bat: Battery, cells: int, cut: float, ref: float, t_ref: float, rese
              f"cutoff {cut:g} V/cell ({cut * cells:.2f} V pack) at load",
              f"generated {stamp} from the {bat.model} model{amb}",
              health,
-             f"at {ref:.3g} A the model reaches the cutoff after {t_ref / 60:.1f} min",
+             f"at {ref:.3g} A the model reaches the cutoff after {duration(t_ref)}",
              "sends DL_TREM (s to the cutoff at the last 30 s load) and DL_SOC (%)",
              f"warns at {reserve_s:g} s and at {reserve_s / 3:.0f} s left",
              "settings: DL_BATT_IDX (battery instance) and DL_RESERVE (s), after a reboot",

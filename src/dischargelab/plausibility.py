@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import DataError
+from .formatting import duration as fmt_duration
 
 #: Rest voltage range of one lithium cell [V] (fully discharged .. fully charged, with margin).
 REST_RANGE_V = {"lipo": (2.0, 4.4), "li-ion": (2.0, 4.4), "lifepo4": (2.0, 4.4)}
@@ -306,10 +307,6 @@ def _given_charge(frame, meta):
     return name, amps, duration, amps * duration / 3600.0
 
 
-def _hours(seconds: float) -> str:
-    return f"{seconds / 3600:.3g} h" if seconds >= 5400 else f"{seconds / 60:.3g} min"
-
-
 def check_given_current(loaded, *, capacity_Ah: float | None = None,
                         cutoff_pack_V: float | None = None) -> list[Finding]:
     """A current given for files without one (``--current``) against each file's duration.
@@ -350,7 +347,7 @@ def check_given_current(loaded, *, capacity_Ah: float | None = None,
             right = reference * 3600.0 / duration
             found.append(Finding(
                 "warning", "given_current", name,
-                f"{amps:.4g} A for its {_hours(duration)} would take {charge:.3g} Ah, "
+                f"{amps:.4g} A for its {fmt_duration(duration)} would take {charge:.3g} Ah, "
                 f"x{ratio:.2g} {what} ({reference:.3g} Ah): that current is not this file's "
                 f"(its duration suggests about {right:.3g} A)",
                 "give each file its own current ({current})",

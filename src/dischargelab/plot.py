@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import DataError, require
+from .formatting import duration, duration_interval
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -172,7 +173,7 @@ def plot_family(results, ax=None, x: str = "charge", labels=None):
         else:
             step = res.steps[0]
             unit = "A" if step.kind == "current" else "W"
-            label = (f"{step.value:g} {unit}: {res.time_to_cutoff_s / 60:.1f} min, "
+            label = (f"{step.value:g} {unit}: {duration(res.time_to_cutoff_s)}, "
                      f"{res.capacity_Ah:.3g} Ah, {res.energy_Wh_total:.3g} Wh")
         plot_simulation(res, ax=ax, x=x, label=label, color=color)
     if results:
@@ -294,8 +295,11 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
         if row["phase"] not in names:
             names.append(row["phase"])
     color_of = {n: PHASE_COLORS[k % len(PHASE_COLORS)] for k, n in enumerate(names)}
-    v_lo = min(float(np.min(sim.voltage_V)), mission.cutoff_pack_V)
-    v_hi = float(np.max(sim.voltage_V))
+    # a pack that cannot deliver the first phase has no finite voltage: the cutoff frames it
+    volts = np.asarray(sim.voltage_V, dtype=float)
+    volts = volts[np.isfinite(volts)]
+    v_lo = min(float(np.min(volts)) if volts.size else np.inf, mission.cutoff_pack_V)
+    v_hi = max(float(np.max(volts)) if volts.size else -np.inf, mission.cutoff_pack_V)
     pad = 0.08 * max(v_hi - v_lo, 0.05 * v_hi)
     spans = []
     for row in result.phases:
@@ -309,16 +313,17 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
     if np.isfinite(result.reserve_time_s):
         ax.axvline(result.reserve_time_s / 60.0, color="tab:orange", ls="-.", lw=1.2,
                    label=f"reserve {mission.reserve_pct:g} % reached "
-                         f"({result.reserve_time_s / 60:.1f} min)")
+                         f"({duration(result.reserve_time_s)})")
     if np.isfinite(result.cutoff_time_s):
         ax.axvline(result.cutoff_time_s / 60.0, color="tab:red", ls=":", lw=1.2,
-                   label=f"cutoff reached ({result.cutoff_time_s / 60:.1f} min)")
+                   label=f"cutoff reached ({duration(result.cutoff_time_s)})")
     st = result.stretch
     latest = None
     if st is not None and st["binding"] != "infeasible" and \
             abs(result.endurance_s - result.flight_time_s) > 1.0:
         latest = result.endurance_s / 60.0
-        text = f"latest landing with the longest {st['phase']} ({latest:.1f} min, " \
+        text = f"latest landing with the longest {st['phase']} " \
+               f"({duration(result.endurance_s)}, " \
                f"{st['binding']})"
         if latest <= total:
             ax.axvline(latest, color="tab:purple", ls="--", lw=1.2, label=text)
@@ -344,25 +349,27 @@ def plot_mission(result, ax=None, show_current: bool = True, label_phases: bool 
                  label="pack current")
         cur.set_ylabel("pack current [A]", color="tab:blue")
         cur.tick_params(axis="y", colors="tab:blue")
-        cur.set_ylim(0, 1.6 * max(float(np.max(sim.current_A)), 1e-6))
+        amps = np.asarray(sim.current_A, dtype=float)
+        amps = amps[np.isfinite(amps)]
+        cur.set_ylim(0, 1.6 * max(float(np.max(amps)) if amps.size else 0.0, 1e-6))
         h2, l2 = cur.get_legend_handles_labels()
         handles, labels = handles + h2, labels + l2
     ax.legend(handles, labels, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.11),
               ncol=min(len(labels), 3), frameon=False)
-    lines = [f"flight {result.flight_time_s / 60:.1f} min, lands at {result.soc_end_pct:.0f} % "
+    lines = [f"flight {duration(result.flight_time_s)}, lands at {result.soc_end_pct:.0f} % "
              f"(reserve {mission.reserve_pct:g} %)"]
     if result.stretch is not None and result.stretch["binding"] != "infeasible":
         st = result.stretch
-        lines.append(f"max {st['phase']} {st['max_s'] / 60:.1f} min -> endurance "
-                     f"{result.endurance_s / 60:.1f} min")
+        lines.append(f"max {st['phase']} {duration(st['max_s'])} -> endurance "
+                     f"{duration(result.endurance_s)}")
         if st["margin_s"] is not None:
-            lines.append(f"margin {st['margin_s'] / 60:+.1f} min of {st['phase']}")
+            lines.append(f"margin {duration(st['margin_s'], signed=True)} of {st['phase']}")
     unc = result.uncertainty or {}
     if unc.get("available"):
         e = unc["endurance_s"]
-        lines.append(f"95 % interval {e['low'] / 60:.1f}-{e['high'] / 60:.1f} min")
+        lines.append(f"95 % interval {duration_interval([e['low'], e['high']])}")
     if not result.completed:
-        lines.append(f"NOT COMPLETED: {result.ended_by} at {result.flight_time_s / 60:.1f} min")
+        lines.append(f"NOT COMPLETED: {result.ended_by} at {duration(result.flight_time_s)}")
     # two short lines rather than one long one, so narrow figures do not clip the title
     half = (len(lines) + 1) // 2
     ax.set_title(f"{mission.name}: {mission.battery.name or 'battery'}\n"

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from .cell import CUTOFF_CELL_VOLTAGE_V
 from .errors import SimulationError
+from .formatting import duration
 from .simulate import require_battery
 
 if TYPE_CHECKING:
@@ -68,7 +69,7 @@ class Prediction:
         ax = self.simulation.plot(ax=ax, **kwargs)
         sim = self.simulation
         ax.axhline(sim.cutoff_pack_V, color="0.4", ls="--", lw=0.8)
-        ax.set_title(f"{sim.steps[0].describe()}: {sim.time_to_cutoff_s / 60:.1f} min to "
+        ax.set_title(f"{sim.steps[0].describe()}: {duration(sim.time_to_cutoff_s)} to "
                      f"{sim.cutoff_pack_V:.2f} V", fontsize=10)
         if sim.peak_temperature_C is not None:
             self._plot_temperature(ax, kwargs.get("x", "time"))

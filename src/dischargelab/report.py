@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import DataError, DischargelabError
+from .formatting import duration, duration_interval
+from .identity import battery_identity
 from .model import CUTOFF_CELL_VOLTAGE_V, Battery, load_battery
 from .nexttest import fit_next_test
 from .uncertainty import held_out_summary
@@ -84,15 +86,6 @@ def _fmt(value, spec=".4g", none="-") -> str:
     except TypeError:
         return _e(value)
     return format(value, spec)
-
-
-def _minutes(seconds) -> str:
-    if seconds is None or not np.isfinite(seconds):
-        return "-"
-    sign = "-" if seconds < 0 else ""
-    seconds = abs(float(seconds))
-    m, s = divmod(int(round(seconds)), 60)
-    return f"{sign}{m} min {s:02d} s"
 
 
 def _table(headers, rows, text_columns=()) -> str:
@@ -274,6 +267,8 @@ def _battery_facts(battery: Battery) -> list[tuple[str, str]]:
     src = extra.get("source")
     if isinstance(src, dict) and src.get("reference"):
         facts.append(("coefficients from", str(src["reference"])))
+    if isinstance(extra.get("logbook"), dict) and extra.get("note"):
+        facts.append(("logbook pack today", str(extra["note"])))
     return facts
 
 
@@ -444,7 +439,7 @@ def _family_section(battery: Battery, cutoff_cell_V, currents_A) -> str:
         except DischargelabError as exc:
             failed.append(f"{current:g} A: {exc}")
     rows = [[f"{r.steps[0].value:.4g}", f"{r.steps[0].value / battery.strings_parallel:.4g}",
-             _minutes(r.time_to_cutoff_s), f"{r.capacity_Ah:.3f}", f"{r.energy_Wh_total:.2f}"]
+             duration(r.time_to_cutoff_s), f"{r.capacity_Ah:.3f}", f"{r.energy_Wh_total:.2f}"]
             for r in results]
     parts = [head, f'<p class="sub">Constant-current discharges to {cutoff_cell_V:g} V per '
                    f"cell (paper Figs 5, 7, 10). Rates far from the fitted ones are "
@@ -463,7 +458,7 @@ def _interval_text(unc: dict | None, key: str, minutes=True) -> str:
         return "unavailable"
     d = unc[key]
     if minutes:
-        return f"{_minutes(d['low'])} to {_minutes(d['high'])}"
+        return duration_interval([d["low"], d["high"]])
     return f"{d['low']:.1f} to {d['high']:.1f}"
 
 
@@ -478,27 +473,27 @@ def _mission_section(result) -> str:
              f"({m.cutoff_pack_V:.2f} V pack).</p>"]
     if not result.completed:
         parts.append(_messages([f"the mission does NOT complete: the {result.ended_by} is "
-                                f"reached at {_minutes(result.flight_time_s)}"], "bad"))
-    rows = [["flight time as planned", _minutes(result.flight_time_s)],
+                                f"reached at {duration(result.flight_time_s)}"], "bad"))
+    rows = [["flight time as planned", duration(result.flight_time_s)],
             ["endurance (landing at the reserve)" if st else "endurance",
-             _minutes(result.endurance_s)],
+             duration(result.endurance_s)],
             ["95 % interval of the endurance", _interval_text(unc, "endurance_s")],
             ["state of charge at landing", f"{result.soc_end_pct:.1f} %"
              + (f" (95 %: {_interval_text(unc, 'soc_end_pct', False)} %)"
                 if unc and unc.get("available") else "")],
-            ["reserve reached at", _minutes(result.reserve_time_s)
+            ["reserve reached at", duration(result.reserve_time_s)
              if np.isfinite(result.reserve_time_s) else "not during the flight"],
-            ["cutoff reached at", _minutes(result.cutoff_time_s)
+            ["cutoff reached at", duration(result.cutoff_time_s)
              if np.isfinite(result.cutoff_time_s) else "not during the flight"],
             ["lowest pack voltage", f"{result.min_voltage_V:.2f} V (margin "
                                     f"{result.voltage_margin_V:.2f} V to the cutoff)"],
             ["charge / energy used", f"{result.simulation.capacity_Ah:.3f} Ah / "
                                      f"{result.simulation.energy_Wh_total:.1f} Wh"]]
     if st:
-        rows.insert(2, [f"longest '{st['phase']}'", f"{_minutes(st['max_s'])} (limited by the "
+        rows.insert(2, [f"longest '{st['phase']}'", f"{duration(st['max_s'])} (limited by the "
                                                      f"{st['binding']})"])
         if st["margin_s"] is not None:
-            rows.insert(3, [f"margin on '{st['phase']}'", _minutes(st["margin_s"])])
+            rows.insert(3, [f"margin on '{st['phase']}'", duration(st["margin_s"])])
     if unc is not None and not unc.get("available"):
         rows.append(["uncertainty", unc.get("reason", "unavailable")])
     elif unc and not unc.get("accepted"):
@@ -516,7 +511,7 @@ def _mission_section(result) -> str:
                                         "cutoff and reserve marked (paper Fig. 11 style).",
                          "mission voltage profile"))
     phase_rows = [[r["phase"] + (f" #{r['repetition']}" if r["repetition"] else ""), r["load"],
-                   _minutes(r["start_s"]), _minutes(r["duration_s"]),
+                   duration(r["start_s"]), duration(r["duration_s"]),
                    f"{r['mean_current_A']:.2f}", f"{r['mean_power_W']:.1f}",
                    f"{r['charge_Ah']:.3f}", f"{r['end_voltage_V']:.2f}",
                    f"{r['end_soc_pct']:.1f}"] for r in result.phases]
@@ -574,8 +569,9 @@ def _validation_section(cases) -> str:
     for c in cases:
         s = c.summary
         rows.append([Path(s["file"]).name, f"{s['current_A']:.3g}", s["profile"],
-                     _minutes(s["endurance_measured_s"]), _minutes(s["endurance_predicted_s"]),
-                     _fmt(s["endurance_error_s"], "+.0f"), _fmt(s["endurance_error_pct"], "+.2f"),
+                     duration(s["endurance_measured_s"]), duration(s["endurance_predicted_s"]),
+                     duration(s["endurance_error_s"], signed=True),
+                     _fmt(s["endurance_error_pct"], "+.2f"),
                      _fmt(s["voltage_rmse_pct"], ".2f"), _fmt(s["voltage_max_error_pct"], ".2f"),
                      _fmt(s["voltage_max_error_operational_pct"], ".2f"),
                      {True: "yes", False: "no", None: "?"}[s["in_fit"]]])
@@ -596,7 +592,7 @@ def _validation_section(cases) -> str:
              f"{cases[0].summary['cutoff_cell_V']:g} V per cell. Voltage errors in % of the "
              f"measured voltage; 'operational' is the part above 20 % state of charge (paper "
              f"4.4). Mean absolute endurance error {'; '.join(means)}.</p>",
-             _table(["file", "current [A]", "profile", "measured", "predicted", "error [s]",
+             _table(["file", "current [A]", "profile", "measured", "predicted", "error",
                      "error [%]", "V RMS [%]", "V max [%]", "V max >20% SOC [%]", "in fit"],
                     rows),
              _figure(plot_validation(cases), "Measured (solid) and predicted (dashed) pack "
@@ -640,8 +636,9 @@ def build_report(battery, *, mission_result=None, validation=None, title: str | 
             cutoff_cell_V = mission_result.mission.cutoff_cell_V
         elif validation:
             cutoff_cell_V = validation[0].summary["cutoff_cell_V"]
-        else:
-            cutoff_cell_V = CUTOFF_CELL_VOLTAGE_V.get(battery.chemistry or "")
+        else:   # the battery's own cutoff, else its chemistry's
+            cutoff_cell_V = battery_identity(battery).cutoff_cell_V or \
+                CUTOFF_CELL_VOLTAGE_V.get(battery.chemistry or "")
     name = battery.name or label or "battery"
     title = title or f"Battery and endurance report: {name}"
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
@@ -654,13 +651,13 @@ def build_report(battery, *, mission_result=None, validation=None, title: str | 
             f"95 %: {_interval_text(unc, 'endurance_s')}" + \
             ("" if unc.get("accepted") else " (model error only)")
         cards.append(("endurance" + (" (land at reserve)" if mission_result.stretch else ""),
-                      _minutes(mission_result.endurance_s), interval or
+                      duration(mission_result.endurance_s), interval or
                       "interval unavailable (no covariance)"))
         cards.append(("state of charge at landing", f"{mission_result.soc_end_pct:.0f} %",
                       f"reserve {mission_result.mission.reserve_pct:g} %"))
         if mission_result.stretch and mission_result.stretch["margin_s"] is not None:
             cards.append((f"margin on {mission_result.stretch['phase']}",
-                          _minutes(mission_result.stretch["margin_s"]), "beyond the plan"))
+                          duration(mission_result.stretch["margin_s"]), "beyond the plan"))
     if validation:
         cards += _validation_cards(validation)
     methods = interval_methods(battery)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from ..formatting import duration
 from ..model import CUTOFF_CELL_VOLTAGE_V, PARAMETER_NAMES, load_battery
 
 #: Battery used by default: the paper's Zippy 1100 mAh 2S LiPo (Table 2); its exponential zone
@@ -91,7 +92,7 @@ def run_acquire_demo(out_dir, *, battery=DEMO_BATTERY, wall_seconds: float = 45.
         if console is not None and view != "none":
             console.print(f"virtual logger on {port}: {bat.name}, {current:g} A (1C), "
                           f"time x{speed:.0f}; expected cutoff after "
-                          f"{expected.time_to_cutoff_s:.0f} s test time", markup=False)
+                          f"{duration(expected.time_to_cutoff_s)} test time", markup=False)
         result = acquisition.run(view=view, console=console)
     finally:
         device.stop()

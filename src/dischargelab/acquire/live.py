@@ -16,6 +16,7 @@ import time
 from collections import deque
 
 from ..errors import DischargelabError
+from ..formatting import duration
 
 SPARK_CHARS = "▁▂▃▄▅▆▇█"
 
@@ -67,13 +68,6 @@ class Trend:
             self.values = self.values[::2]
             self.step_s = max(self.step_s * 2, (self.times[-1] - self.times[0]) / self.points)
         self._next_t = t + self.step_s
-
-
-def _clock_text(seconds: float) -> str:
-    if not math.isfinite(seconds):
-        return "--:--:--"
-    seconds = int(seconds)
-    return f"{seconds // 3600:02d}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
 
 
 class LiveDisplay:
@@ -178,7 +172,7 @@ class LiveDisplay:
             return
         text = fields.get("message") or fields.get("reason") or ""
         if kind == "gap":
-            text = f"{fields.get('duration_s', 0):.1f} s without data"
+            text = f"{duration(fields.get('duration_s', 0))} without data"
         self.events.append(f"{kind}: {text}" if text else kind)
 
     def close(self) -> None:
@@ -351,7 +345,7 @@ class LiveDisplay:
             grid.add_row("pack", Text(
                 f"{last.voltage_V:8.3f} V   {self.cells_series} x {cell:.3f} V/cell   "
                 f"min {self.min_voltage_V:.3f} V{cut}", style="bold red" if low else "bold green"))
-            grid.add_row("elapsed", f"{_clock_text(last.time_s)}   ({last.time_s:.1f} s test time)")
+            grid.add_row("elapsed", f"{duration(last.time_s)}   (test time)")
             current = self.current_of(last)
             if current is not None:
                 how = "measured" if last.current_A is not None else "given"
@@ -362,7 +356,7 @@ class LiveDisplay:
                                              style="dim"))
             left, how = self.time_to_cutoff()
             if left is not None:
-                grid.add_row("to cutoff", f"{_clock_text(left)}   ({how})")
+                grid.add_row("to cutoff", f"{duration(left)}   ({how})")
             if last.temperature_C is not None:
                 grid.add_row("temperature", f"{last.temperature_C:.1f} °C")
             if len(self.trend.values) > 1:

@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from ..errors import DischargelabError
+from ..formatting import duration
 from .common import (
     battery_input,
     err,
@@ -164,7 +165,7 @@ def _acquire_summary_rows(result) -> list[list]:
 
     rows = [["ended by", result.ended_by], ["message", result.message or "-"],
             ["samples", s.get("samples", 0)], ["rows in file", s.get("rows_written", 0)],
-            ["test time (s)", num("duration_s", ".1f")],
+            ["test time", duration(s.get("duration_s"))],
             ["first voltage (V)", num("first_voltage_V", ".3f")],
             ["last voltage (V)", num("last_voltage_V", ".3f")],
             ["min voltage (V)", num("min_voltage_V", ".3f")],
@@ -468,7 +469,7 @@ def _device_summary_rows(summary: dict) -> list[list]:
     lost = {k: v for k, v in frames.items() if k not in ("produced", "sent") and v}
     rows = [["battery", f"{summary['battery']} ({summary['cells_series']}S), "
                         f"{summary['current_A']:g} A, x{summary['speed']:g}"],
-            ["battery time (s)", f"{summary['battery_time_s']:.1f}"],
+            ["battery time", duration(summary["battery_time_s"])],
             ["charge drawn (Ah)", f"{summary['charge_Ah']:.4f}"],
             ["frames produced", frames.get("produced", 0)],
             ["frames sent intact", frames.get("sent", 0)]]

@@ -151,6 +151,19 @@ def force_option(func):
     return click.option("--force", is_flag=True, help=FORCE_HELP)(func)
 
 
+PACK_DB_HELP = "Logbook of --pack (default: $DISCHARGELAB_DB, else the user's logbook)."
+
+
+def pack_options(pack_help: str):
+    """``--pack NAME`` and ``--db URL|FILE`` of every command that reads a logbook pack's
+    model as of today (endurance, report, autopilot-params, autopilot-script); the
+    command's BATTERY argument is then left out."""
+    def decorate(func):
+        func = click.option("--db", metavar="URL|FILE", help=PACK_DB_HELP)(func)
+        return click.option("--pack", "pack_name", metavar="NAME", help=pack_help)(func)
+    return decorate
+
+
 def guard_outputs(outputs, inputs=(), force=False, figures=()) -> None:
     """Apply the output policy before any work (:func:`dischargelab.atomic.check_outputs`).
 
@@ -387,14 +400,6 @@ def usage_line(exc: click.ClickException) -> str:
         text += f" (see: {ctx.command_path} --help)"
     return text
 
-
-
-def duration_text(seconds) -> str:
-    if seconds is None or not math.isfinite(seconds):
-        return "-"
-    sign = "-" if seconds < 0 else ""
-    minutes, secs = divmod(abs(float(seconds)), 60.0)
-    return f"{sign}{int(minutes)} min {secs:04.1f} s"
 
 
 def progress_callback(status, what: str):

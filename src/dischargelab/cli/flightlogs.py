@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from ..errors import DischargelabError
+from ..formatting import duration
 from .common import (
     battery_input,
     cutoff_option,
@@ -19,6 +20,7 @@ from .common import (
     load_battery_arg,
     number_list,
     out,
+    pack_options,
     print_json,
     table,
 )
@@ -83,7 +85,7 @@ def _battery_or_pack(battery, pack_name, db, cells, output, force, load_current=
         from ..logbook import Logbook
 
         with Logbook(db, create=False) as lb:
-            battery = lb.pack(pack_name, store=False).battery()
+            battery = lb.model_today(pack_name)
             typical = lb.flight_current(pack_name) if load_current is None else None
         if typical is not None:
             amps, flights = typical
@@ -98,12 +100,8 @@ def pack_model_options(func):
     autopilot file is made for (the same in every autopilot command)."""
     for option in reversed((
             click.argument("battery", required=False),
-            click.option("--pack", "pack_name", metavar="NAME",
-                         help="A logbook pack: its model at today's capacity and resistance "
-                              "(then give no BATTERY)."),
-            click.option("--db", metavar="URL|FILE",
-                         help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's "
-                              "logbook)."),
+            pack_options("A logbook pack: its model at today's capacity and resistance "
+                         "(then give no BATTERY)."),
             click.option("--cells", type=click.IntRange(1), default=None,
                          help="Cells in series of the flight pack (required with a BATTERY; "
                               "default with --pack: the pack's)."),
@@ -374,7 +372,7 @@ def _print_flight_report(report) -> None:
     def rest(r):
         return "-" if r is None else f"{r['voltage_V']:.2f} V at {r['current_A']:.2f} A"
 
-    rows = [("duration [s]", lambda s: f(s["duration_s"], ".1f")),
+    rows = [("duration", lambda s: duration(s["duration_s"])),
             ("charge used [mAh]", lambda s: f(s["charge_Ah"], ".0f", 1000)),
             ("energy used [Wh]", lambda s: f(s["energy_Wh"], ".2f")),
             ("mean / peak current [A]", lambda s: f"{f(s['mean_current_A'], '.1f')} / "
@@ -398,10 +396,10 @@ def _print_flight_report(report) -> None:
                   lambda s: "-" if not s.get("rmse_cell_V") else
                   " / ".join("-" if x is None else f"{1000 * x:.0f}"
                              for x in s["rmse_cell_V"]))]
-    rows.append(("under the cutoff: first dip / for good [s]",
-                 lambda s: f"{f(s.get('cutoff_dip_at_s'), '.1f')} / "
-                           f"{f(s.get('cutoff_reached_at_s'), '.1f')}"))
-    rows.append(("remaining at mid-flight [s]", _mid_flight_text))
+    rows.append(("under the cutoff: first dip / for good",
+                 lambda s: f"{duration(s.get('cutoff_dip_at_s'))} / "
+                           f"{duration(s.get('cutoff_reached_at_s'))}"))
+    rows.append(("remaining at mid-flight", _mid_flight_text))
     out.print(table(f"{Path(report.source).name}: {report.battery_label}, "
                     f"{report.cells_series} cells, capacity "
                     f"{f(report.capacity_Ah, '.3g')} Ah ({report.capacity_source}), cutoff "
@@ -424,7 +422,7 @@ def _mid_flight_text(summary) -> str:
                       ("model_s", "model (mean load)"), ("px4_s", "PX4"),
                       ("ardupilot_s", "ArduPilot")):
         if mid.get(key) is not None:
-            parts.append(f"{name} {mid[key]:.0f}")
+            parts.append(f"{name} {duration(mid[key])}")
     return ", ".join(parts) or "-"
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import click
 
 from ..errors import DischargelabError
-from ..formatting import interval, number, pack_text, quantity
+from ..formatting import duration, interval, number, pack_text, quantity
 from .common import (
     CONTEXT,
     err,
@@ -339,13 +339,13 @@ def events_cmd(name, db, as_json):
         print_json(result.to_dict())
         return
     rows = [[r["source"], (r["start_time"] or "-").replace("T", " "), r["kind"],
-             "-" if r["cycle"] is None else r["cycle"], _num(r["duration_s"], 0),
+             "-" if r["cycle"] is None else r["cycle"], duration(r["duration_s"]),
              _num(r["discharged_Ah"]), _num(r["discharged_Wh"], 2), _num(r["mean_current_A"], 2),
              _num(r["rest_voltage_V"]), _num(r["min_voltage_V"]),
              _num(r["resistance_ohm"], 1, 1000), _num(r["temperature_max_C"], 1),
              _num(r["cell_spread_V"], 0, 1000)]
             for r in result.rows]
-    out.print(table(f"Events of {name}", ["source", "start", "kind", "cycle", "duration [s]",
+    out.print(table(f"Events of {name}", ["source", "start", "kind", "cycle", "duration",
                                           "Ah", "Wh", "mean A", "rest V", "min V", "R [mOhm]",
                                           "max T [degC]", "cell spread [mV]"], rows))
 

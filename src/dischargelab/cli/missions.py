@@ -7,11 +7,11 @@ from pathlib import Path
 import click
 
 from ..errors import DischargelabError
+from ..formatting import duration
 from .common import (
     battery_input,
     cutoff_option,
     data_options,
-    duration_text,
     err,
     expand_paths,
     force_option,
@@ -19,6 +19,7 @@ from .common import (
     json_option,
     load_battery_arg,
     out,
+    pack_options,
     print_json,
     progress_callback,
     table,
@@ -67,10 +68,10 @@ def print_mission(result) -> None:
     m = result.mission
     unc = result.uncertainty
     st = result.stretch
-    head = duration_text(result.endurance_s)
+    text = result.to_dict()["text"]       # the durations as the JSON and the report write them
+    head = text["endurance_s"]
     if unc and unc.get("available"):
-        e = unc["endurance_s"]
-        head += (f"  (95 % interval {duration_text(e['low'])} to {duration_text(e['high'])}: "
+        head += (f"  (95 % interval {text['endurance_interval95']}: "
                  + " + ".join(unc.get("interval_includes", ["parameters"]))
                  + (f", {unc['accepted']} draws)" if unc.get("accepted") else ")"))
     else:
@@ -87,12 +88,12 @@ def print_mission(result) -> None:
              else "none"],
             ["cutoff / reserve", f"{m.cutoff_cell_V:g} V/cell ({m.cutoff_pack_V:.2f} V pack) / "
                                  f"{m.reserve_pct:g} %"],
-            ["flight as planned", f"{duration_text(result.flight_time_s)}"
+            ["flight as planned", text["flight_time_s"]
                                   + ("" if result.completed else
                                      f" (NOT completed: {result.ended_by})")],
             ["state of charge at landing", f"{result.soc_end_pct:.1f} %"],
-            ["reserve reached at", duration_text(result.reserve_time_s)],
-            ["cutoff reached at", duration_text(result.cutoff_time_s)],
+            ["reserve reached at", text["reserve_time_s"]],
+            ["cutoff reached at", text["cutoff_time_s"]],
             ["lowest pack voltage", f"{result.min_voltage_V:.3f} V "
                                     f"(margin {result.voltage_margin_V:.3f} V)"],
             ["charge / energy used", f"{result.simulation.capacity_Ah:.3f} Ah / "
@@ -100,17 +101,17 @@ def print_mission(result) -> None:
     if st:
         limit = ("the mission cannot complete even without it"
                  if st["binding"] == "infeasible" else f"limited by the {st['binding']}")
-        rows.append([f"max {st['phase']}", f"{duration_text(st['max_s'])} ({limit})"])
+        rows.append([f"max {st['phase']}", f"{text['stretch_max_s']} ({limit})"])
         if st["margin_s"] is not None:
-            rows.append([f"margin on {st['phase']}", duration_text(st["margin_s"])])
+            rows.append([f"margin on {st['phase']}", text["stretch_margin_s"]])
     out.print(table("Endurance", ["quantity", "value"], rows))
     phase_rows = [[r["phase"] + (f" #{r['repetition']}" if r["repetition"] else ""), r["load"],
-                   f"{r['start_s']:.0f}", f"{r['duration_s']:.1f}", f"{r['mean_current_A']:.2f}",
+                   duration(r["start_s"]), duration(r["duration_s"]), f"{r['mean_current_A']:.2f}",
                    f"{r['charge_Ah']:.3f}", f"{r['end_voltage_V']:.3f}",
                    f"{r['end_soc_pct']:.1f}"] for r in result.phases]
     if len(phase_rows) > 30:
         phase_rows = phase_rows[:12] + [["...", "", "", "", "", "", "", ""]] + phase_rows[-12:]
-    out.print(table("Phases", ["phase", "load", "start [s]", "duration [s]", "current [A]",
+    out.print(table("Phases", ["phase", "load", "start", "duration", "current [A]",
                                "charge [Ah]", "end V", "end SOC [%]"], phase_rows))
     for w in result.warnings:
         if not (result.cannot_deliver and w == result.cannot_deliver["message"]):
@@ -122,11 +123,8 @@ def print_mission(result) -> None:
 @click.command("endurance")
 @click.argument("battery", required=False)
 @click.argument("mission", required=False, type=click.Path(dir_okay=False))
-@click.option("--pack", "pack_name", metavar="NAME",
-              help="Fly a logbook pack: its model scaled to today's capacity and resistance "
-                   "(then give MISSION alone).")
-@click.option("--db", metavar="URL|FILE",
-              help="Logbook of --pack (default: $DISCHARGELAB_DB, else the user's logbook).")
+@pack_options("Fly a logbook pack: its model scaled to today's capacity and resistance "
+              "(then give MISSION alone).")
 @cutoff_option(default="the mission file's")
 @click.option("--reserve", type=click.FloatRange(0, 100, max_open=True), metavar="PCT",
               help="State of charge to land with [%] (overrides the mission file).")
@@ -183,7 +181,7 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
         from ..logbook import Logbook
 
         with Logbook(db, create=False) as lb:
-            loaded = lb.pack(pack_name, store=False).battery()  # a read: nothing stored
+            loaded = lb.model_today(pack_name)  # a read: nothing stored
     else:
         loaded = None if battery is None else load_battery_arg(battery)
     plan = load_mission(mission, battery=loaded, cutoff_cell_V=cutoff,
@@ -209,13 +207,19 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
 
 
 @click.command("report")
-@click.argument("battery")
+@click.argument("battery", required=False)
+@pack_options("Report a logbook pack: its model as of today (its fitted model, or one fitted "
+              "in memory to its latest full discharge, scaled to today's capacity and "
+              "resistance; a pack that only flies: its chemistry's model at today's figures), "
+              "read without writing to the logbook (then give no BATTERY).")
 @click.option("--mission", "mission_path", type=click.Path(dir_okay=False),
-              help="Mission TOML to fly and report.")
+              help="Mission TOML or bundled mission name to fly and report (a --pack "
+                   "keeps its cells, strings, chemistry and cutoff).")
 @click.option("--validate", "validate_paths", multiple=True, metavar="DATA",
               help="Measured discharge to validate against (repeat, or a quoted pattern "
                    "such as 'runs/*.csv').")
-@cutoff_option("for validation and curves", "the mission's, else the chemistry's")
+@cutoff_option("for validation and curves",
+               "the mission's, else the battery's own, else its chemistry's")
 @data_options
 @click.option("--cells", type=click.IntRange(1), default=None,
               help="Cells in series of the mission pack (overrides the mission file).")
@@ -229,9 +233,13 @@ def endurance_cmd(battery, mission, pack_name, db, cutoff, reserve, cells, paral
               help="HTML file to write (one self-contained page).")
 @force_option
 @json_option
-def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, sign, segment,
-               units, steps, cells, parallel, draws, seed, title, output, force, as_json):
+def report_cmd(battery, pack_name, db, mission_path, validate_paths, cutoff, columns, current,
+               sign, segment, units, steps, cells, parallel, draws, seed, title, output, force,
+               as_json):
     """Write one self-contained HTML report for the pilot: model, fit, mission, validation.
+
+    BATTERY is a battery file or a preset name; or, with --pack NAME, a logbook
+    pack's model as of today (nothing is written to the logbook).
 
     \b
     Examples:
@@ -240,7 +248,9 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
           --cutoff 3.0 --columns time_s=0,current_A=1,voltage_V=2 -o report.html
       dischargelab report hacker-4100-4s-lifepo4 \\
           --mission paper-table5 -o table5.html
+      dischargelab report --pack zippy-a --mission multirotor-hover -o zippy-a.html
     """
+    from ..identity import battery_identity
     from ..mission import load_mission, run_mission
     from ..model import CUTOFF_CELL_VOLTAGE_V
     from ..report import write_report
@@ -248,12 +258,23 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
 
     if not output.lower().endswith((".html", ".htm")):
         raise DischargelabError(f"-o must name an .html file, got {output!r}")
+    if (battery is None) == (pack_name is None):
+        raise DischargelabError("give a BATTERY (battery file or preset) or --pack NAME"
+                                + (", not both" if battery is not None else ""))
     validate_paths = expand_paths(validate_paths)
-    guard_outputs([output], battery_input(battery) + [mission_path] + validate_paths, force)
+    guard_outputs([output], battery_input(battery or "") + [mission_path] + validate_paths,
+                  force)
     from ..errors import require
 
     require("matplotlib", "plot")  # the report's figures; checked before any work
-    bat = load_battery_arg(battery)
+    if pack_name is not None:
+        from ..logbook import Logbook
+
+        with err.status(f"reading pack {pack_name}", spinner="dots"), \
+                Logbook(db, create=False) as lb:
+            bat = lb.model_today(pack_name)
+    else:
+        bat = load_battery_arg(battery)
     result = None
     cases = []
     with err.status("building the report", spinner="dots") as status:
@@ -267,8 +288,9 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
             cut = cutoff
             if cut is None and result is not None:
                 cut = result.mission.cutoff_cell_V
-            if cut is None:
-                cut = CUTOFF_CELL_VOLTAGE_V.get(bat.chemistry or "")
+            if cut is None:   # the battery's own cutoff, else its chemistry's
+                cut = battery_identity(bat).cutoff_cell_V or \
+                    CUTOFF_CELL_VOLTAGE_V.get(bat.chemistry or "")
             if cut is None:
                 raise DischargelabError("give --cutoff V (per cell) for the validation: the "
                                         "battery's chemistry is unknown")
@@ -284,7 +306,7 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
         path = Path(output)
     from ..report import model_statement
 
-    summary = {"report": str(path), "bytes": path.stat().st_size,
+    summary = {"report": str(path), "bytes": path.stat().st_size, "pack": pack_name,
                "model_statement": model_statement(bat),
                "mission": None if result is None else result.to_dict(),
                "validation": [c.summary for c in cases],
@@ -296,6 +318,8 @@ def report_cmd(battery, mission_path, validate_paths, cutoff, columns, current, 
         return
     out.print(f"report written: {path} ({summary['bytes'] / 1024:.0f} KiB)", markup=False)
     out.print(summary["model_statement"], markup=False)
+    if pack_name is not None and bat.extra.get("note"):
+        out.print(f"pack: {bat.extra['note']}", markup=False)
     if result is not None:
         print_mission(result)
 

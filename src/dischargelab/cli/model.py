@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..errors import DischargelabError
-from ..formatting import runs_label
+from ..formatting import duration, duration_interval, runs_label
 from .common import (
     OPTION_OF_ARGUMENT,
     PARAMETER_HELP,
@@ -339,8 +339,9 @@ def predict_cmd(battery, current, c_rate, power, cells, parallel, cutoff, cutoff
             else f"{summary['power_W']:.4g} W")
     rows = [["load", load],
             ["cutoff", f"{summary['cutoff_V']:.3f} V/cell ({summary['cutoff_pack_V']:.2f} V pack)"],
-            ["time to cutoff", with_interval(f"{summary['time_to_cutoff_s'] / 60:.2f} min",
-                                             "time_to_cutoff_s", 1 / 60, ".2f")],
+            ["time to cutoff", duration(summary["time_to_cutoff_s"])
+             + (f"  [95 %: {duration_interval(spread['time_to_cutoff_s'])}]"
+                if spread and "time_to_cutoff_s" in spread else "")],
             ["charge delivered", with_interval(f"{summary['capacity_Ah']:.4g} Ah",
                                                "capacity_Ah")],
             ["energy delivered", with_interval(f"{summary['energy_Wh']:.4g} Wh", "energy_Wh")],
@@ -421,8 +422,8 @@ def curves_cmd(battery, currents, c_rates, powers, cells, parallel, cutoff, cuto
     key = "power_W" if powers else "current_A"
     out.print(table(f"Discharges to {rows[0]['cutoff_V']:.3f} V/cell "
                     f"({bat.cells_series}S{bat.strings_parallel}P)",
-                    [f"load [{unit}]", "time [min]", "charge [Ah]", "energy [Wh]", "ended by"],
-                    [[f"{r[key]:.4g}", f"{r['time_to_cutoff_s'] / 60:.2f}",
+                    [f"load [{unit}]", "time to cutoff", "charge [Ah]", "energy [Wh]", "ended by"],
+                    [[f"{r[key]:.4g}", duration(r["time_to_cutoff_s"]),
                       f"{r['capacity_Ah']:.4g}", f"{r['energy_Wh']:.4g}", r["ended_by"]]
                      for r in rows]))
     for row in rows:
@@ -549,11 +550,10 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
 
     body = [[Path(r["file"]).name, f(r["current_A"], ".3g") + ("" if r["profile"] == "constant"
                                                                else " (profile)"),
-             f(r["endurance_measured_s"], ".0f"), f(r["endurance_predicted_s"], ".0f"),
-             "-" if r.get("interval_s") is None else
-             f"{r['interval_s'][0]:.0f} to {r['interval_s'][1]:.0f}",
+             duration(r["endurance_measured_s"]), duration(r["endurance_predicted_s"]),
+             duration_interval(r.get("interval_s")),
              {True: "yes", False: "NO", None: "-"}[r.get("covered")],
-             f(r["endurance_error_s"], "+.0f"), f(r["endurance_error_pct"], "+.2f"),
+             duration(r["endurance_error_s"], signed=True), f(r["endurance_error_pct"], "+.2f"),
              f(r["voltage_rmse_pct"], ".2f"), f(r["voltage_max_error_pct"], ".2f"),
              f(r["voltage_max_error_operational_pct"], ".2f"),
              {True: "yes", False: "no", None: "?"}[r["in_fit"]]] for r in rows]
@@ -562,8 +562,8 @@ def validate_cmd(battery, data, cutoff, columns, current, sign, segment, units, 
     what = "Validation" if held and not seen and len(held) == len(rows) else \
         "Measured against predicted"
     out.print(table(f"{what} to {cutoff:g} V/cell ({bat.cells_series}S{bat.strings_parallel}P)",
-                    ["file", "current [A]", "measured [s]", "predicted [s]", "95 % interval [s]",
-                     "covered", "error [s]", "error [%]", "V RMS [%]", "V max [%]",
+                    ["file", "current [A]", "measured", "predicted", "95 % interval",
+                     "covered", "error", "error [%]", "V RMS [%]", "V max [%]",
                      "V max >20% SOC [%]", "in fit"], body))
     from ..report import model_statement
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from ..formatting import duration
 from .common import err, force_option, guard_outputs, json_option, out, print_json, table
 
 
@@ -59,13 +60,13 @@ def steps_cmd(file, sign, plot_path, force, as_json):
         flag = ("fit" if s["number"] in fit else "full") if s.get("after_charge") and \
             s.get("to_limit") else ""
         rows.append([s["number"], s["cycle"], s["step"], s["kind"], s["mode"], s["rows"],
-                     number(s["duration_s"], ".0f"), number(s["mean_current_A"], ".4g"),
+                     duration(s["duration_s"]), number(s["mean_current_A"], ".4g"),
                      f"{s['start_voltage_V']:.4g} -> {s['end_voltage_V']:.4g}",
                      number(s["charge_Ah"] if s["kind"] != "rest" else None, ".5g", 1e3),
                      number(s["tester_Ah"], ".5g", 1e3), flag])
     out.print(table(f"{file}: {summary['format']} read by {summary['reader']}, "
                     f"{summary['records']} records, {len(tester.steps)} steps",
-                    ["step", "cycle", "tester step", "kind", "mode", "records", "duration [s]",
+                    ["step", "cycle", "tester step", "kind", "mode", "records", "duration",
                      "current [A]", "voltage [V]", "charge [mAh]", "tester [mAh]", ""], rows))
     out.print(f"current sign from {summary['sign_source']}", markup=False)
     for note in summary["notes"]:

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataError
+from ..formatting import duration
 from ..ocv import check_chemistry, soc_from_rest_voltage
 from ..validate import LOW_VOLTAGE_TIMER_S
 from .replay import RECENT_LOAD_S, REPLAY_EVERY_S, fly_model, mid_flight, replay_remaining, time_to
@@ -289,9 +290,9 @@ def _cutoff_crossings(t, v, s: Settings, notes: list) -> dict:
            "cutoff_reached_at_s": reached if np.isfinite(reached) else None}
     if np.isfinite(dip) and not (np.isfinite(reached) and reached <= dip):
         notes.append(f"the voltage dipped under the cutoff ({s.cutoff_cell_V:g} V/cell) at "
-                     f"{dip:.1f} s for less than {s.low_timer_s:g} s: a sag at a current peak, "
+                     f"{duration(dip)} for less than {s.low_timer_s:g} s: a sag at a current peak, "
                      f"which a low-voltage timer of {s.low_timer_s:g} s ignores"
-                     + (f"; it stayed under it from {reached:.1f} s" if np.isfinite(reached)
+                     + (f"; it stayed under it from {duration(reached)}" if np.isfinite(reached)
                         else "; the pack did not reach the cutoff in this flight"))
     return out
 

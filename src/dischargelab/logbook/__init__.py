@@ -45,6 +45,8 @@ EVENT_COLUMNS = ("id", "source", "idx", "kind", "start_time", "cycle", "duration
 
 #: Export formats.
 EXPORT_FORMATS = ("csv", "parquet")
+#: Pack names a "no such pack" error lists.
+SHOWN_PACK_NAMES = 8
 
 
 class Logbook:
@@ -480,6 +482,45 @@ class Logbook:
             (lambda: fit_job(self._job(name, health, {})))
         return make_pack(row, stored["pack"]["events"], health, model, fit=fit,
                          seen=stored["pack"].get("seen") or {})
+
+    def model_today(self, name: str):
+        """The model of a pack as of today, read without writing anything: what
+        ``dischargelab report --pack`` reports and ``endurance --pack`` flies.
+
+        :meth:`pack` with ``store=False``, then :meth:`Pack.battery`: a pack with a full
+        discharge but no stored model has its model fitted in memory, not stored; a pack
+        that only flies gets its chemistry's model built to its figures today. The
+        Battery keeps the pack's identity (cells, strings, chemistry, cutoff) and its
+        ``extra["note"]`` (which model, scaled to which figures of which events); a
+        mission flown with it keeps them too (:mod:`dischargelab.identity`).
+
+        Raises
+        ------
+        LogbookError
+            No pack of that name (some of the logbook's names listed); a pack with no
+            model yet: no fitted model, no full discharge to fit one to and no capacity
+            to build its chemistry's model at (what to add is said).
+        """
+        names = self.pack_names()
+        if name not in names:
+            if not names:
+                raise LogbookError(f"no pack named {name!r}: the logbook has no packs yet; "
+                                   f"add a pack's files with `dischargelab logbook add FILES "
+                                   f"--pack {name}`")
+            shown = ", ".join(repr(n) for n in names[:SHOWN_PACK_NAMES])
+            more = len(names) - SHOWN_PACK_NAMES
+            raise LogbookError(f"no pack named {name!r} in the logbook; its packs: {shown}"
+                               + (f" and {more} more" if more > 0 else "")
+                               + " (`dischargelab logbook packs` lists them)")
+        pack = self.pack(name, store=False)
+        if not pack.fitted and not pack.has_full_discharge and pack.capacity_Ah is None \
+                and not pack.label_capacity_Ah:
+            raise LogbookError(f"pack {name!r} has no model yet: no full discharge to fit one "
+                               f"to and no capacity to build its chemistry's model at; add a "
+                               f"full discharge (`dischargelab logbook add FILE --pack {name}`) "
+                               f"or its label capacity (`dischargelab logbook add FILES --pack "
+                               f"{name} --capacity AH`)")
+        return pack.battery()
 
     def flight_current(self, name: str) -> tuple[float, int] | None:
         """The typical pack current [A] of a pack's logged flights: the median of their mean

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationError
+from ..formatting import duration, mission_text
 from ..model import Battery
 from ..simulate import SimulationResult
 from ..uncertainty import (
@@ -144,6 +145,7 @@ class MissionResult:
             "cannot_deliver": None if self.cannot_deliver is None else
             dict(self.cannot_deliver),
         }
+        out["text"] = mission_text(out)    # the durations as every view writes them
         return out
 
     def plot(self, ax=None, **kwargs):
@@ -328,18 +330,18 @@ def run_mission(mission: Mission, *, draws: int = 0, seed: int = 0,
     elif not completed:
         where = _label_text(labels[-1])
         warnings.append(f"the mission does not complete: the {ended_by} is reached "
-                        f"after {flight_time:.0f} s, during '{where}'")
+                        f"after {duration(flight_time)}, during '{where}'")
     elif soc_end < mission.reserve_pct - 1e-6:
         warnings.append(f"the flight ends at {soc_end:.1f} % state of charge, below the "
-                        f"{mission.reserve_pct:g} % reserve (reached at {reserve_time:.0f} s)")
+                        f"{mission.reserve_pct:g} % reserve (reached at {duration(reserve_time)})")
     if stretch is not None:
         if stretch["binding"] == "infeasible":
             warnings.append(f"even without '{stretch['phase']}' the mission cannot be completed "
                             f"within the reserve and cutoff")
         elif stretch["margin_s"] is not None and stretch["margin_s"] < 0:
-            warnings.append(f"planned '{stretch['phase']}' of {stretch['planned_s']:.0f} s is "
-                            f"{-stretch['margin_s']:.0f} s longer than the maximum "
-                            f"{stretch['max_s']:.0f} s")
+            warnings.append(f"planned '{stretch['phase']}' of {duration(stretch['planned_s'])} "
+                            f"is {duration(-stretch['margin_s'])} longer than the maximum "
+                            f"{duration(stretch['max_s'])}")
     warnings += extrapolation_warnings(mission.battery, rows)
     result = MissionResult(
         mission=mission, simulation=sim, labels=labels, phases=rows,

@@ -294,7 +294,7 @@ class PackPages:
             raise RequestRefused(404, f"no file {file!r}; choose one of "
                                       f"{', '.join(AUTOPILOT_FILES)}")
         lb = self.logbook()
-        battery = lb.pack(name, store=False).battery()
+        battery = lb.model_today(name)
         typical = lb.flight_current(name)
         amps = typical[0] if typical else None
         if file == "ardupilot.lua":

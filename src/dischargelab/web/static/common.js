@@ -42,11 +42,29 @@
     return (v === null || v === undefined) ? MISSING : num(v * (scale === undefined ? 1 : scale), digits);
   }
 
-  function clock(seconds) {
-    if (seconds === null || seconds === undefined || !isFinite(seconds)) return MISSING;
-    const s = Math.max(0, Math.floor(seconds));
-    const h = Math.floor(s / 3600), m = Math.floor(s / 60) % 60, r = s % 60;
-    return h + ":" + String(m).padStart(2, "0") + ":" + String(r).padStart(2, "0");
+  // formatting.duration's twin: "42 s" under a minute, "69 min 29 s" under two hours, then
+  // "2 h 05 min"; rounded to the last unit shown as toFixed rounds; "-" before a negative,
+  // "+" before a positive one when signed
+  function duration(seconds, signed) {
+    if (seconds === null || seconds === undefined || typeof seconds === "boolean" ||
+        !isFinite(seconds)) return MISSING;
+    const v = Number(seconds), a = Math.abs(v);
+    const total = Number(a.toFixed(0));
+    let body;
+    if (total < 60) body = total + " s";
+    else if (total < 7200) body = Math.floor(total / 60) + " min " + String(total % 60).padStart(2, "0") + " s";
+    else {
+      const minutes = Number((a / 60).toFixed(0));
+      body = Math.floor(minutes / 60) + " h " + String(minutes % 60).padStart(2, "0") + " min";
+    }
+    if (total === 0) return body;
+    return (v < 0 ? "-" : signed ? "+" : "") + body;
+  }
+
+  // a duration as the server wrote it (the JSON's ``text``), else written here the same way
+  function durationText(obj, key) {
+    if (obj && obj.text && typeof obj.text[key] === "string") return obj.text[key];
+    return duration(obj ? obj[key] : null);
   }
 
   function el(tag, attrs, children) {
@@ -66,5 +84,6 @@
     box.className = "message " + (kind || "error");
   }
 
-  global.DL = {api, postJSON, num, interval, text, clock, el, showMessage, MISSING};
+  global.DL = {api, postJSON, num, interval, text, duration, durationText, el, showMessage,
+               MISSING};
 })(window);

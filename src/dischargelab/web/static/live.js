@@ -39,7 +39,7 @@
     const list = $("events");
     for (const e of events) {
       L.events.push(e);
-      const text = e.message || e.reason || (e.kind === "gap" ? DL.num(e.duration_s, 1) + " s without data" : "");
+      const text = e.message || e.reason || (e.kind === "gap" ? DL.duration(e.duration_s) + " without data" : "");
       const item = DL.el("li", {class: "ev-" + e.kind}, [DL.el("b", {text: e.kind}), " " + text]);
       list.prepend(item);
     }
@@ -56,7 +56,7 @@
     $("m-charge").textContent = r ? DL.num(r[F.ah], 4) : DL.MISSING;
     $("m-energy").textContent = r ? DL.num(r[F.wh], 3) : DL.MISSING;
     $("m-temp").textContent = r ? DL.num(r[F.temp], 1) : DL.MISSING;
-    $("m-elapsed").textContent = r ? DL.clock(r[F.t]) : DL.MISSING;
+    $("m-elapsed").textContent = r ? DL.duration(r[F.t]) : DL.MISSING;
     const limits = (s.info || {}).limits || {};
     const cutoff = limits.cutoff_pack_V;
     voltagePlot.draw({
@@ -100,7 +100,7 @@
     $("s-lost").textContent = (s.frames_lost ?? DL.MISSING) + " / " + (s.frames_corrupt ?? DL.MISSING);
     $("s-safety").textContent = s.safety || (s.active ? "within limits" : DL.MISSING);
     $("s-min").textContent = s.min_voltage_V === null || s.min_voltage_V === undefined ? DL.MISSING : DL.num(s.min_voltage_V, 3) + " V";
-    $("m-eta").textContent = s.time_to_cutoff_s === null || s.time_to_cutoff_s === undefined ? DL.MISSING : DL.clock(s.time_to_cutoff_s);
+    $("m-eta").textContent = s.time_to_cutoff_s === null || s.time_to_cutoff_s === undefined ? DL.MISSING : DL.duration(s.time_to_cutoff_s);
     $("m-eta-method").textContent = s.time_to_cutoff_method ? "(" + s.time_to_cutoff_method + ")" : "";
     $("eta-meter").title = ETA_HOW[s.time_to_cutoff_method] || "";
     $("start").disabled = !s.can_start;

@@ -181,7 +181,8 @@
     rows.push(["Model", (r.model_family ? r.model_family + " (" + r.model + ")" : r.model) || DL.MISSING],
               ["Interval", unc && unc.available ? unc.method : "none (no parameter draws flown)"]);
     rows.push(["Completed", r.completed ? "yes" : "no (" + r.ended_by + ")"],
-              ["Flight time", DL.clock(r.flight_time_s)], ["Endurance to cutoff", DL.clock(r.endurance_s)],
+              ["Flight time", DL.durationText(r, "flight_time_s")],
+              ["Endurance to cutoff", DL.durationText(r, "endurance_s")],
               ["Charge used", DL.num(r.charge_used_Ah, 3) + " Ah"], ["State of charge at the end", DL.num(r.soc_end_pct, 1) + " %"],
               ["Minimum voltage", DL.num(r.min_voltage_V, 2) + " V"]);
     for (const w of r.warnings || []) if (w !== cannot) rows.push(["Warning", w]);
