@@ -34,7 +34,8 @@ sampled at ``sample_hz`` with voltage and current noise.
 
 References: S. E. J. O'Kane et al., Phys. Chem. Chem. Phys. 24, 7909-7922 (2022);
 C.-H. Chen et al., J. Electrochem. Soc. 167, 080534 (2020); V. Sulzer et al., J. Open
-Res. Softw. 9(1), 14 (2021); A. Bills et al., Sci. Data 10, 344 (2023).
+Res. Softw. 9(1), 14 (2021); A. Bills et al., Sci. Data 10, 344 (2023); P. Mohtat et
+al., J. Electrochem. Soc. 166, A3614 (2019).
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ import pandas as pd
 from synthetic_life import Life
 
 #: Version of the generator: cached lives are made again when it changes.
-GENERATOR_VERSION = 2
+GENERATOR_VERSION = 3
 
 #: The parameter set (made for ageing studies).
 PARAMETER_SET = "OKane2022"
@@ -81,6 +82,18 @@ OPTIONS = {
 #: Mission per cell: (name, power [W], duration [s]); the cruise is scaled by the seed.
 MISSION = (("take-off", 20.0, 75.0), ("climb", 14.0, 120.0), ("cruise", 9.0, 1100.0),
            ("hover", 14.0, 60.0), ("landing", 18.0, 90.0))
+
+#: The cell's state at each cycle's end (PyBaMM's summary variables) kept in
+#: ``Life.cycles``: column -> variable. The stoichiometry windows at 100 % and 0 % state
+#: of charge give the cell's open-circuit curve (:func:`ocv`).
+STATE = {"x_100": "x_100", "x_0": "x_0", "y_100": "y_100", "y_0": "y_0",
+         "lli_pct": "Loss of lithium inventory [%]",
+         "lam_neg_pct": "Loss of active material in negative electrode [%]",
+         "lam_pos_pct": "Loss of active material in positive electrode [%]",
+         "sei_Ah": "Loss of capacity to negative SEI [A.h]",
+         "sei_cracks_Ah": "Loss of capacity to negative SEI on cracks [A.h]",
+         "plating_Ah": "Loss of capacity to negative lithium plating [A.h]",
+         "ocv_capacity_Ah": "Capacity [A.h]"}
 
 #: Solver output period of the missions and of a rest's first minute, and of the rest [s].
 FINE_S = 1.0
@@ -193,8 +206,9 @@ def _cycles(spec: PybammLifeSpec) -> list[tuple]:
 
 def pybamm_life(spec: PybammLifeSpec | None = None) -> Life:
     """A seeded PyBaMM life (module docstring): the log, per cycle the capacity of the
-    latest test, the tests ``(start_s, end_s, capacity_Ah, efc)`` and, per mission, its
-    lowest voltage (``Life.cycles["mission_min_V"]``)."""
+    latest test, the mission's lowest voltage (``mission_min_V``) and the cell's state
+    at the cycle's end (:data:`STATE`), and the tests ``(start_s, end_s, capacity_Ah,
+    efc)``."""
     import pybamm
 
     spec = spec or PybammLifeSpec()
@@ -208,6 +222,7 @@ def pybamm_life(spec: PybammLifeSpec | None = None) -> Life:
     if len(solution.cycles) < spec.cycles:
         raise RuntimeError(f"PyBaMM stopped after {len(solution.cycles)} of {spec.cycles} "
                            f"cycles: {solution.termination}")
+    summary = solution.summary_variables
     parts, tests, rows = [], [], []
     efc, latest = 0.0, float("nan")
     for cycle, sol in enumerate(solution.cycles):
@@ -228,7 +243,8 @@ def pybamm_life(spec: PybammLifeSpec | None = None) -> Life:
                 mission_min = min(mission_min, float(v.min()))
             efc += q / spec_capacity()
         rows.append({"cycle": cycle, "start_s": float(sol["Time [s]"].entries[0]),
-                     "efc": efc, "capacity_Ah": latest, "mission_min_V": mission_min})
+                     "efc": efc, "capacity_Ah": latest, "mission_min_V": mission_min,
+                     **{k: float(summary[v][cycle]) for k, v in STATE.items()}})
     t = np.concatenate([p[0] for p in parts])
     order = np.argsort(t, kind="stable")
     t = t[order]
@@ -241,6 +257,22 @@ def pybamm_life(spec: PybammLifeSpec | None = None) -> Life:
         "temperature_C": np.round(np.interp(grid, t, column[2]), 1),
     })
     return Life(frame=frame, cycles=pd.DataFrame(rows), tests=tests)
+
+
+def ocv(spec: PybammLifeSpec, state, soc) -> np.ndarray:
+    """The cell's open-circuit voltage [V] at ``soc`` (a share of its capacity between
+    the stoichiometry windows of ``state``, a row of ``Life.cycles``):
+    ``U_p(y_100 + (1 - soc)(y_0 - y_100)) - U_n(x_0 + soc (x_100 - x_0))`` (the
+    electrode-SOH windows of Mohtat et al. 2019, as PyBaMM computes them)."""
+    import pybamm
+
+    values = parameter_values(spec)
+    soc = np.atleast_1d(np.asarray(soc, dtype=float))
+    y = state["y_100"] + (1.0 - soc) * (state["y_0"] - state["y_100"])
+    x = state["x_0"] + soc * (state["x_100"] - state["x_0"])
+    up = values.process_symbol(values["Positive electrode OCP [V]"](pybamm.Vector(y)))
+    un = values.process_symbol(values["Negative electrode OCP [V]"](pybamm.Vector(x)))
+    return up.evaluate().ravel() - un.evaluate().ravel()
 
 
 def cache_folder() -> Path:
@@ -272,4 +304,4 @@ def cached_life(spec: PybammLifeSpec, folder: Path | None = None) -> tuple[Life,
 
 
 __all__ = ["GENERATOR_VERSION", "PybammLifeSpec", "pybamm_life", "cached_life", "cache_folder",
-           "parameter_values", "MISSION", "OPTIONS"]
+           "parameter_values", "ocv", "MISSION", "OPTIONS", "STATE"]
