@@ -18,8 +18,9 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   cracks), partially reversible lithium plating, particle cracking and the loss of active
   material it drives, its rates raised so that 40 cycles fade it by 10-20 %; missions
   at constant power per step, CC-CV charges to 4.2 V, a C/5 test every 5 cycles. The
-  base at 25 degC, the routine charge stopping at 4.0 V, and a cold ambient (5 degC,
-  where the loss of active material leads). The lives are kept in
+  base at 25 degC, the routine charge stopping at 4.0 V, a cold ambient (5 degC, where
+  the loss of active material leads), and deeper missions (the cruise 1.8 times as long:
+  the missions end where the lithium lost shortens the curve). The lives are kept in
   ``~/.cache/dischargelab-bench`` (``tests/pybamm_life.py``: ``cache_folder``).
 * **The shared eVTOL lives** (CMU, VAH27 and VAH30; Bills et al. 2023): as logged,
   resampled to 30 s and 60 s (interpolated between the logged samples, 166.5 s apart),
@@ -87,6 +88,7 @@ PYBAMM = {
     "PyBaMM SEI+plating+LAM NMC (OKane2022 SPM), 25 degC": {},
     "PyBaMM OKane2022, routine charge CV 4.0 V": dict(cv_V=4.0),
     "PyBaMM OKane2022, ambient 5 degC": dict(ambient_C=5.0),
+    "PyBaMM OKane2022, deep missions (cruise x1.8)": dict(cruise_scale=1.8),
 }
 
 #: The eVTOL cells' cutoff [V].

@@ -5,11 +5,12 @@ For each PyBaMM condition of ``health_matrix.py`` (the lives from
 ``tests/pybamm_life.py``, made or read from its cache) and each capacity test: the test's
 capacity, the cell's losses (lithium inventory, active material of each electrode; the
 lithium taken by SEI since the first test and the lithium plated now), the open-circuit
-voltage at 50 % state of charge and at 1.25 Ah below full against the first test's, and
-the capacity that a mission from full taking 1.25 Ah gives when its end is read on the
-first test's curve: ``1.25 Ah / (1 - s')``, ``s'`` where the first curve meets the aged
-cell's open-circuit voltage at the mission's end (what "capacity between two rests"
-reads when the curve is not learned again), against the cell's open-circuit capacity.
+voltage at 50 % state of charge and at a mission's charge below full (``Q``, the median
+of the life's missions) against the first test's, and the capacity that a mission from
+full taking ``Q`` gives when its end is read on the first test's curve: ``Q / (1 - s')``,
+``s'`` where the first curve meets the aged cell's open-circuit voltage at the mission's
+end (what "capacity between two rests" reads when the curve is not learned again),
+against the cell's open-circuit capacity.
 
 The curve of a cell at a state: PyBaMM's electrode-SOH windows (Mohtat et al. 2019),
 ``pybamm_life.ocv``.
@@ -33,8 +34,16 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from _machine import machine_line  # noqa: E402
 
-#: The charge a mission from full takes in the reading [Ah] (about the lives' missions).
-MISSION_AH = 1.25
+
+def mission_charge(frame) -> float:
+    """The median charge [Ah] of a life's missions (its discharges above 1 A)."""
+    t = frame["time_s"].to_numpy(float)
+    i = frame["current_A"].to_numpy(float)
+    on = np.r_[False, i > 1.0, False].astype(int)
+    starts, stops = np.flatnonzero(np.diff(on) == 1), np.flatnonzero(np.diff(on) == -1)
+    charges = [np.trapezoid(i[a:b], t[a:b]) / 3600.0 for a, b in zip(starts, stops)
+               if t[b - 1] - t[a] > 600.0]
+    return float(np.median(charges))
 
 
 def state_at_test(cycles, test_cycle: int):
@@ -49,22 +58,23 @@ def rows_of(spec, life) -> list[dict]:
                    for a, _, _, _ in life.tests]
     states = [state_at_test(life.cycles, c) for c in test_cycles]
     grid = np.linspace(0.0, 1.0, 401)
+    taken = mission_charge(life.frame)
     first = pl.ocv(spec, states[0], grid)
     out = []
     for (_, _, q, efc), state in zip(life.tests, states):
         cap = state["ocv_capacity_Ah"]
-        here = pl.ocv(spec, state, np.array([0.5, 1.0 - MISSION_AH / cap]))
-        fresh = pl.ocv(spec, states[0], np.array([0.5, 1.0 - MISSION_AH
+        here = pl.ocv(spec, state, np.array([0.5, 1.0 - taken / cap]))
+        fresh = pl.ocv(spec, states[0], np.array([0.5, 1.0 - taken
                                                    / states[0]["ocv_capacity_Ah"]]))
         read_soc = float(np.interp(here[1], first, grid))
-        read = MISSION_AH / (1.0 - read_soc)
+        read = taken / (1.0 - read_soc)
         out.append({"efc": efc, "test_Ah": q, "ocv_Ah": cap, "lli": state["lli_pct"],
                     "lam_n": state["lam_neg_pct"], "lam_p": state["lam_pos_pct"],
                     "sei": state["sei_Ah"] + state["sei_cracks_Ah"] - states[0]["sei_Ah"]
                     - states[0]["sei_cracks_Ah"],
                     "plating": state["plating_Ah"],
                     "d50": 1000 * (here[0] - fresh[0]), "dtop": 1000 * (here[1] - fresh[1]),
-                    "read_Ah": read, "read_err": 100 * (read / cap - 1)})
+                    "read_Ah": read, "read_err": 100 * (read / cap - 1), "taken": taken})
     return out
 
 
@@ -89,8 +99,11 @@ def main(argv=None) -> None:
         spec = pl.PybammLifeSpec(seed=args.seed, **dict(changes, cycles=BASE["cycles"]))
         life, _ = pl.cached_life(spec)
         print(f"\n## {name}\n")
+        print(f"lowest voltage of a mission: {life.cycles['mission_min_V'].min():.3f} V "
+              f"(cutoff {spec.cutoff_V:g} V)\n")
+        print(f"a mission takes {mission_charge(life.frame):.2f} Ah (median)\n")
         print("| EFC | test | OCV capacity | LLI | LAM neg | LAM pos | SEI since | plated | "
-              "OCV at 50 % | OCV 1.25 Ah below full | read on the first curve | its error |")
+              "OCV at 50 % | OCV a mission below full | read on the first curve | its error |")
         print("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in rows_of(spec, life):
             print(f"| {r['efc']:.1f} | {r['test_Ah']:.3f} Ah | {r['ocv_Ah']:.3f} Ah | "

@@ -117,6 +117,7 @@ class PybammLifeSpec:
     test_C: float = 0.2
     end_C: float = 1 / 30           # a constant-voltage hold ends at this current
     mission_scale: float = 1.0      # power of every mission step times this
+    cruise_scale: float = 1.0       # the cruise's length times this (deeper missions)
     cruise_spread: float = 0.15     # the cruise's length varies by +- this share
     sei_factor: float = SEI_FACTOR
     lam_factor: float = LAM_FACTOR
@@ -192,7 +193,7 @@ def _cycles(spec: PybammLifeSpec) -> list[tuple]:
                                              tags=["test"]))
             steps += _rest(spec, kelvin, "test")
             steps += _charge(spec, kelvin, spec.test_cv_V, "test") + _rest(spec, kelvin, "test")
-        stretch = 1.0 + spec.cruise_spread * (2.0 * rng.random() - 1.0)
+        stretch = spec.cruise_scale * (1.0 + spec.cruise_spread * (2.0 * rng.random() - 1.0))
         for name, watts, seconds in MISSION:
             seconds = seconds * stretch if name == "cruise" else seconds
             steps.append(pybamm.step.power(watts * spec.mission_scale, duration=seconds,
