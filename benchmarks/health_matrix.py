@@ -16,7 +16,7 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   otherwise): physics the estimators were not built from. PyBaMM's ``OKane2022`` cell
   (LG M50, NMC811 / graphite-SiOx, scaled to ~3 Ah) in the SPM with SEI growth (also on
   cracks), partially reversible lithium plating, particle cracking and the loss of active
-  material it drives, its rates raised so that 40 cycles fade it by 10-20 %; missions
+  material it drives, its rates raised so that 40 cycles fade it by 12-16 %; missions
   at constant power per step, CC-CV charges to 4.2 V, a C/5 test every 5 cycles. The
   base at 25 degC, the routine charge stopping at 4.0 V, a cold ambient (5 degC, where
   the loss of active material leads), and deeper missions (the cruise 1.8 times as long:
@@ -332,7 +332,7 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", type=int, default=1,
                         help="synthetic (and PyBaMM) lives per condition")
     parser.add_argument("--cycles", type=int, default=BASE["cycles"],
-                        help="cycles per synthetic life (a test every 5)")
+                        help="cycles per synthetic or PyBaMM life (a test every 5)")
     parser.add_argument("--only", nargs="*", default=None,
                         help="conditions whose name contains one of these words")
     parser.add_argument("--cache", type=Path, default=ROOT / ".cache" / "health_matrix",
