@@ -83,7 +83,12 @@ def main(argv=None) -> None:
     parser.add_argument("--only", nargs="*", default=None,
                         help="conditions whose name contains one of these words")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--cycles", type=int, default=None,
+                        help="cycles per life (default: health_matrix.py's)")
+    parser.add_argument("--cache", type=Path, default=None,
+                        help="folder keeping the lives (default: pybamm_life.cache_folder())")
     args = parser.parse_args(argv)
+    print(f"# The PyBaMM lives' open-circuit curve with age ({machine_line()})\n")
     try:
         import pybamm_life as pl
     except ImportError:
@@ -91,13 +96,13 @@ def main(argv=None) -> None:
         return
     from health_matrix import BASE, PYBAMM
 
-    print(f"# The PyBaMM lives' open-circuit curve with age ({machine_line()})\n")
     started = time.perf_counter()
     for name, changes in PYBAMM.items():
         if args.only and not any(w.lower() in name.lower() for w in args.only):
             continue
-        spec = pl.PybammLifeSpec(seed=args.seed, **dict(changes, cycles=BASE["cycles"]))
-        life, _ = pl.cached_life(spec)
+        cycles = args.cycles or BASE["cycles"]
+        spec = pl.PybammLifeSpec(seed=args.seed, **dict(changes, cycles=cycles))
+        life, _ = pl.cached_life(spec, args.cache)
         print(f"\n## {name}\n")
         print(f"lowest voltage of a mission: {life.cycles['mission_min_V'].min():.3f} V "
               f"(cutoff {spec.cutoff_V:g} V)\n")
