@@ -14,7 +14,7 @@ cell), isothermal at the ambient of each step. Ageing, as the set supports it in
   material that the particles' stress drives.
 
 The degradation rates are raised (:data:`SEI_FACTOR`, :data:`LAM_FACTOR`) so that a life
-of a few tens of cycles fades by 10-20 % (the real cell takes hundreds); the laws are
+of 40 cycles fades by 12-16 % (the real cell takes hundreds); the laws are
 PyBaMM's, only their rate constants move. The porosity change of SEI and plating is
 left out (at these rates it clogs the pores, which the real cell does not do in so few
 cycles).
@@ -127,6 +127,8 @@ class PybammLifeSpec:
 
 
 def parameter_values(spec: PybammLifeSpec):
+    """The set's PyBaMM parameter values: the electrodes narrowed, the degradation sped
+    up and the ambient of ``spec``."""
     import pybamm
 
     values = pybamm.ParameterValues(PARAMETER_SET)
