@@ -12,6 +12,16 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   stop voltage (3.9-4.1 V, the tests still charged to 4.2 V; constant current only),
   the sampling period (30-200 s, the missions' power steps between samples), the ambient
   (0 and 45 degC), short rests (60 s), shallow missions.
+* **PyBaMM lives** (``tests/pybamm_life.py``, only where PyBaMM is installed; skipped
+  otherwise): physics the estimators were not built from. PyBaMM's ``OKane2022`` cell
+  (LG M50, NMC811 / graphite-SiOx, scaled to ~3 Ah) in the SPM with SEI growth (also on
+  cracks), partially reversible lithium plating, particle cracking and the loss of active
+  material it drives, its rates raised so that 40 cycles fade it by 12-16 %; missions
+  at constant power per step, CC-CV charges to 4.2 V, a C/5 test every 5 cycles. The
+  base at 25 degC, the routine charge stopping at 4.0 V, a cold ambient (5 degC, where
+  the loss of active material leads), and deeper missions (the cruise 1.8 times as long:
+  the missions end where the lithium lost shortens the curve). The lives are kept in
+  ``~/.cache/dischargelab-bench`` (``tests/pybamm_life.py``: ``cache_folder``).
 * **The shared eVTOL lives** (CMU, VAH27 and VAH30; Bills et al. 2023): as logged,
   resampled to 30 s and 60 s (interpolated between the logged samples, 166.5 s apart),
   and with the routine charges ending at 4.0 V: every voltage of the routine moved to
@@ -71,6 +81,14 @@ SYNTHETIC = {
     "ambient 45 degC": dict(ambient_C=45.0, season_C=3.0),
     "rests of 60 s": dict(rest_s=60.0),
     "shallow missions (60 %)": dict(mission_scale=0.6),
+}
+
+#: PyBaMM conditions: name -> changes to ``pybamm_life.PybammLifeSpec``.
+PYBAMM = {
+    "PyBaMM SEI+plating+LAM NMC (OKane2022 SPM), 25 degC": {},
+    "PyBaMM OKane2022, routine charge CV 4.0 V": dict(cv_V=4.0),
+    "PyBaMM OKane2022, ambient 5 degC": dict(ambient_C=5.0),
+    "PyBaMM OKane2022, deep missions (cruise x1.8)": dict(cruise_scale=1.8),
 }
 
 #: The eVTOL cells' cutoff [V].
@@ -158,6 +176,28 @@ def synthetic_log(name: str, changes: dict, seed: int, cache: Path):
     else:
         life = sl.synthetic_life(spec)
         path.write_bytes(pickle.dumps(life))
+    truth = [{"start_s": a, "Ah": q} for a, _, q, _ in life.tests]
+    return life.frame, truth
+
+
+def pybamm_installed() -> bool:
+    try:
+        import pybamm  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def pybamm_log(changes: dict, seed: int):
+    """(log frame, tests) of one PyBaMM condition, kept in the generator's own cache (the
+    lives take a minute or more each). Prints the wall time of a life made now."""
+    import pybamm_life as pl
+
+    started = time.perf_counter()
+    life, cached = pl.cached_life(pl.PybammLifeSpec(seed=seed, **changes))
+    if not cached:
+        print(f"  (life made in {time.perf_counter() - started:.0f} s)", file=sys.stderr,
+              flush=True)
     truth = [{"start_s": a, "Ah": q} for a, _, q, _ in life.tests]
     return life.frame, truth
 
@@ -259,7 +299,8 @@ def needed_share(rows: pd.DataFrame, coverage: float = 0.9) -> float:
 def calibration(rows: pd.DataFrame) -> None:
     """The drift share each condition needs, the share chosen without it (the largest
     the other synthetic conditions need) and the coverage that gives it; each real cell
-    checked at the share the other cell needs."""
+    checked at the share the other cell needs, each PyBaMM life at the share the engine's
+    lives need."""
     if rows.empty or "drift_unit" not in rows:
         return
     from dischargelab.logbook.results import DRIFT_SHARE
@@ -270,11 +311,12 @@ def calibration(rows: pd.DataFrame) -> None:
     print("| condition | needs | chosen without it | band holds the test at that share |")
     print("|---|---|---|---|")
     for c, n in need.items():
-        if c in SYNTHETIC:
+        if c in SYNTHETIC or c in PYBAMM:
             others = [need[o] for o in synthetic if o != c]
         else:
             cell = c.split()[0]
-            others = [need[o] for o in need if o not in SYNTHETIC and not o.startswith(cell)]
+            others = [need[o] for o in need if o not in SYNTHETIC and o not in PYBAMM
+                      and not o.startswith(cell)]
         if not others:
             print(f"| {c} | {n:.2f} | - | - |")
             continue
@@ -287,9 +329,10 @@ def calibration(rows: pd.DataFrame) -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=1, help="synthetic lives per condition")
+    parser.add_argument("--seeds", type=int, default=1,
+                        help="synthetic (and PyBaMM) lives per condition")
     parser.add_argument("--cycles", type=int, default=BASE["cycles"],
-                        help="cycles per synthetic life (a test every 5)")
+                        help="cycles per synthetic or PyBaMM life (a test every 5)")
     parser.add_argument("--only", nargs="*", default=None,
                         help="conditions whose name contains one of these words")
     parser.add_argument("--cache", type=Path, default=ROOT / ".cache" / "health_matrix",
@@ -304,16 +347,22 @@ def main(argv=None) -> None:
     started = time.perf_counter()
     every = []
     todo = [(n, "synthetic", c) for n, c in SYNTHETIC.items()] + \
+        [(n, "pybamm", c) for n, c in PYBAMM.items()] + \
         [(n, "real", c) for n, c in REAL.items()] + \
         [(n, "label", c) for n, c in LABEL_ONLY.items()]
     for name, kind, conf in todo:
         if args.only and not any(w.lower() in name.lower() for w in args.only):
             continue
+        if kind == "pybamm" and not pybamm_installed():
+            print(f"| {name} | skipped: pybamm not installed | | | | | | |", flush=True)
+            continue
         rows = []
-        for seed in range(args.seeds if kind == "synthetic" else 1):
+        for seed in range(args.seeds if kind in ("synthetic", "pybamm") else 1):
             if kind == "synthetic":
                 frame, truth = synthetic_log(name, dict(conf, cycles=args.cycles), seed,
                                              args.cache)
+            elif kind == "pybamm":
+                frame, truth = pybamm_log(dict(conf, cycles=args.cycles), seed)
             else:
                 frame, truth = real_log(*conf) if kind == "real" else real_log(conf, None, None)
             db = logbook_of(frame, f"{name}/{seed}", args.cache, first=kind != "label")

@@ -113,3 +113,12 @@ def test_health_matrix_resamples_and_chooses_the_drift_share():
     # 0.2 on the grid
     assert matrix.needed_share(rows) == 0.2
     assert matrix.needed_share(rows.assign(drift_unit=0.0)) == float("inf")
+
+
+def test_health_matrix_says_its_pybamm_conditions_are_skipped_without_pybamm(
+        monkeypatch, tmp_path, capsys):
+    matrix = _load("health_matrix")
+    monkeypatch.setattr(matrix, "pybamm_installed", lambda: False)
+    matrix.main(["--only", "PyBaMM", "--cache", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert out.count("skipped: pybamm not installed") == len(matrix.PYBAMM) > 0

@@ -43,6 +43,9 @@ BENCHMARKS = {
     "health_matrix.py": (["--only", "generic curve", "--cycles", "11", "--cache", "{tmp}"],
                          "band holds"),
     "fade_span.py": (["--skip-cmu"], "EFC"),
+    # with PyBaMM (the `virtual` extra) a short life; without it, says it is skipped
+    "pybamm_ocv_drift.py": (["--only", "25 degC", "--cycles", "6", "--cache", "{tmp}"],
+                            "open-circuit curve with age"),
     # needs Debian's lua5.3 (make lua), as the on-board script tests do
     "onboard.py": (["--quick", "--skip-real"], "largest |DL_TREM - time left|"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only
