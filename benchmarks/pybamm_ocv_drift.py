@@ -89,11 +89,12 @@ def main(argv=None) -> None:
                         help="folder keeping the lives (default: pybamm_life.cache_folder())")
     args = parser.parse_args(argv)
     print(f"# The PyBaMM lives' open-circuit curve with age ({machine_line()})\n")
-    try:
-        import pybamm_life as pl
-    except ImportError:
+    import importlib.util
+
+    if importlib.util.find_spec("pybamm") is None:
         print("skipped: pybamm not installed")
         return
+    import pybamm_life as pl
     from health_matrix import BASE, PYBAMM
 
     started = time.perf_counter()
