@@ -180,3 +180,22 @@ def test_cells_and_a_cutoff_that_disagree_with_the_voltages_and_the_chemistry_ar
     assert len(cells) == 1 and "--cells 6" in cells[0]
     cutoff = [w for w in row["warnings"] if "a cutoff of 2.5 V per cell" in w]
     assert len(cutoff) == 1 and "lipo" in cutoff[0] and "--cutoff 3" in cutoff[0]
+
+
+def test_a_bench_cell_flies_in_the_pack_its_mission_was_planned_for(capsys, tmp_path,
+                                                                    bundled_data):
+    """multirotor-hover names its pack by `source` (a 4S LiFePO4 preset) without a `series`
+    key: a cell fitted on the bench flew it as one cell (1S1P), where the mission's own
+    battery and paper-table5's `series = 4` put it into four."""
+    cell = tmp_path / "cell.json"
+    code, _, err = run(capsys, "fit", bundled_data / "Q30_S001_1C.csv", "--columns",
+                       "time_s=0,current_A=1,voltage_V=2,temperature_C=4", "--bootstrap", "0",
+                       "-o", cell)
+    assert code == 0, err
+    planned = dl.load("hacker-4100-4s-lifepo4")
+    code, out, err = run(capsys, "endurance", cell, "multirotor-hover", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert (doc["cells_series"], doc["strings_parallel"]) == (planned.cells_series,
+                                                              planned.strings_parallel)
+    assert planned.cells_series == 4

@@ -45,11 +45,12 @@ KEYS: tuple[Key, ...] = (
     Key("", "phase", "array of tables", "required", "The `[[phase]]` tables, in flight order."),
     Key("battery", "source", "path or preset", "none (give BATTERY on the command line)",
         "Battery file (a path relative to the mission file) or a preset name; a battery "
-        "given on the command line or with --pack wins."),
-    Key("battery", "series", "whole number", "the battery's",
+        "given on the command line or with --pack wins, and flies as a pack like this one "
+        "(its cells, strings and chemistry are the defaults of the keys below)."),
+    Key("battery", "series", "whole number", "the source's, else the battery's",
         "Cells in series, for a battery of one cell; a pack keeps its own (a warning when "
         "they differ)."),
-    Key("battery", "parallel", "whole number", "the battery's",
+    Key("battery", "parallel", "whole number", "the source's, else the battery's",
         "Strings in parallel, for a battery of one cell; a pack keeps its own."),
     Key("battery", "chemistry", "lipo, li-ion or lifepo4", "the battery's",
         "Chemistry the mission was written for, for a battery of unknown chemistry; a known "

@@ -526,17 +526,17 @@ def _battery(ctx, bat_table, battery, base_dir) -> Battery:
     return load_battery(src)
 
 
-def _source_chemistry(src: str, base_dir) -> str | None:
-    """Chemistry of a mission's ``[battery] source`` (None when it cannot be read)."""
+def _source_battery(src: str, base_dir):
+    """The battery a mission's ``[battery] source`` names (None when it cannot be read)."""
     from ..model import PRESETS
 
     if src in PRESETS:
-        return PRESETS[src].chemistry
+        return PRESETS[src]
     candidate = Path(base_dir or ".") / src
     if not candidate.is_file():
         return None
     try:
-        return load_battery(candidate).chemistry
+        return load_battery(candidate)
     except DataError:
         return None
 
@@ -573,12 +573,18 @@ def parse_mission(data: dict, *, battery=None, base_dir=None, source: str = "",
     battery = _battery(ctx, bat_table, battery, base_dir)
     where = f"{name if not source else Path(source).name} [battery]"
     chem = bat_table.get("chemistry")
-    if chem is None and isinstance(bat_table.get("source"), str):
-        chem = _source_chemistry(bat_table["source"], base_dir)
+    series = _integer(ctx, "[battery]", bat_table, "series")
+    parallel = _integer(ctx, "[battery]", bat_table, "parallel")
+    planned = _source_battery(bat_table["source"], base_dir) \
+        if isinstance(bat_table.get("source"), str) else None
+    if planned is not None:  # the pack the mission was planned for: defaults, as its table
+        chem = chem or planned.chemistry
+        if series is None and parallel is None and \
+                planned.cells_series * planned.strings_parallel > 1:
+            series, parallel = planned.cells_series, planned.strings_parallel
     try:
         flown = resolve(
-            battery, where=where, series=_integer(ctx, "[battery]", bat_table, "series"),
-            parallel=_integer(ctx, "[battery]", bat_table, "parallel"), chemistry=chem,
+            battery, where=where, series=series, parallel=parallel, chemistry=chem,
             cutoff_cell_V=_number(ctx, "[battery]", bat_table, "cutoff_cell_V", positive=True),
             cells_given=cells_series, parallel_given=strings_parallel,
             cutoff_given=cutoff_cell_V)
