@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import DataError, DischargelabError
-from .formatting import duration, duration_interval
+from .formatting import duration, duration_interval, number
 from .identity import battery_identity
 from .model import CUTOFF_CELL_VOLTAGE_V, Battery, load_battery
 from .nexttest import fit_next_test
@@ -485,8 +485,8 @@ def _mission_section(result) -> str:
              if np.isfinite(result.reserve_time_s) else "not during the flight"],
             ["cutoff reached at", duration(result.cutoff_time_s)
              if np.isfinite(result.cutoff_time_s) else "not during the flight"],
-            ["lowest pack voltage", f"{result.min_voltage_V:.2f} V (margin "
-                                    f"{result.voltage_margin_V:.2f} V to the cutoff)"],
+            ["lowest pack voltage", f"{number(result.min_voltage_V, 2)} V (margin "
+                                    f"{number(result.voltage_margin_V, 2)} V to the cutoff)"],
             ["charge / energy used", f"{result.simulation.capacity_Ah:.3f} Ah / "
                                      f"{result.simulation.energy_Wh_total:.1f} Wh"]]
     if st:

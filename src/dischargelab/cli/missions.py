@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from ..errors import DischargelabError
-from ..formatting import duration
+from ..formatting import duration, number
 from .common import (
     battery_input,
     cutoff_option,
@@ -94,8 +94,8 @@ def print_mission(result) -> None:
             ["state of charge at landing", f"{result.soc_end_pct:.1f} %"],
             ["reserve reached at", text["reserve_time_s"]],
             ["cutoff reached at", text["cutoff_time_s"]],
-            ["lowest pack voltage", f"{result.min_voltage_V:.3f} V "
-                                    f"(margin {result.voltage_margin_V:.3f} V)"],
+            ["lowest pack voltage", f"{number(result.min_voltage_V)} V "
+                                    f"(margin {number(result.voltage_margin_V)} V)"],
             ["charge / energy used", f"{result.simulation.capacity_Ah:.3f} Ah / "
                                      f"{result.simulation.energy_Wh_total:.1f} Wh"]]
     if st:
@@ -106,9 +106,10 @@ def print_mission(result) -> None:
             rows.append([f"margin on {st['phase']}", text["stretch_margin_s"]])
     out.print(table("Endurance", ["quantity", "value"], rows))
     phase_rows = [[r["phase"] + (f" #{r['repetition']}" if r["repetition"] else ""), r["load"],
-                   duration(r["start_s"]), duration(r["duration_s"]), f"{r['mean_current_A']:.2f}",
-                   f"{r['charge_Ah']:.3f}", f"{r['end_voltage_V']:.3f}",
-                   f"{r['end_soc_pct']:.1f}"] for r in result.phases]
+                   duration(r["start_s"]), duration(r["duration_s"]),
+                   number(r["mean_current_A"], 2), number(r["charge_Ah"]),
+                   number(r["end_voltage_V"]), number(r["end_soc_pct"], 1)]
+                  for r in result.phases]
     if len(phase_rows) > 30:
         phase_rows = phase_rows[:12] + [["...", "", "", "", "", "", "", ""]] + phase_rows[-12:]
     out.print(table("Phases", ["phase", "load", "start", "duration", "current [A]",

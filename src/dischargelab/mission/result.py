@@ -383,16 +383,20 @@ def mission_summary(mission: Mission, *, points_per_step: int = POINTS_PER_PHASE
 def mission_extrapolation_ratio(battery: Battery, phase_rows: list[dict]) -> float:
     """Effective extrapolation ratio of a mission: the charge-weighted geometric mean of
     its phases' ratios (each phase at its mean cell current), so that
-    ``s0 (1 + 0.8 ln r_eff)`` is the charge-weighted mean of the phases' model error."""
+    ``s0 (1 + 0.8 ln r_eff)`` is the charge-weighted mean of the phases' model error.
+    A mission that draws no charge (it cannot take off) gets its largest phase ratio."""
     weights, logs = [], []
     for row in phase_rows:
+        current = row.get("mean_current_A")
+        if current is None or not np.isfinite(current):
+            continue
         charge = float(row.get("charge_Ah") or 0.0)
-        if charge > 0:
-            cell = row["mean_current_A"] / battery.strings_parallel
-            weights.append(charge)
-            logs.append(math.log(battery.extrapolation_ratio(cell)))
-    if not weights:
+        weights.append(max(charge, 0.0))
+        logs.append(math.log(battery.extrapolation_ratio(current / battery.strings_parallel)))
+    if not logs:
         return 1.0
+    if sum(weights) <= 0:
+        return float(math.exp(max(logs)))
     return float(math.exp(np.average(logs, weights=weights)))
 
 
