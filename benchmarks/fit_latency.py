@@ -26,6 +26,8 @@ Usage: python benchmarks/fit_latency.py [--repeats N] [--bootstrap N]
 
 import os
 
+# the caller's own setting ("" none), which the command in a fresh process gets back
+os.environ.setdefault("DISCHARGELAB_CALLER_BLAS", os.environ.get("OPENBLAS_NUM_THREADS", ""))
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
@@ -81,7 +83,11 @@ def command_fit(out: Path, bootstrap: int | None):
             COLUMNS, "-o", str(out), "--force"]
     if bootstrap is not None:
         args += ["--bootstrap", str(bootstrap)]
-    env = dict(os.environ)
+    # the user's environment, not this script's: the command chooses its own BLAS threads
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OPENBLAS_NUM_THREADS", "DISCHARGELAB_CALLER_BLAS")}
+    if os.environ.get("DISCHARGELAB_CALLER_BLAS"):
+        env["OPENBLAS_NUM_THREADS"] = os.environ["DISCHARGELAB_CALLER_BLAS"]
     src = str(HERE.parent / "src")
     env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -34,6 +34,13 @@ from .common import BUG_LINE, CONTEXT, cli_message, err, usage_line
 
 __all__ = ["BUG_LINE", "app", "main"]
 
+# The numerics of every command are small matrices (tens of columns): BLAS threads only
+# wait for one another there, and on two shared cores the whole `fit` of three rates took
+# 2-3x the time with them (benchmarks/fit_latency.py). Numpy loads only when a command runs
+# (nothing above imports it), so this is before; a user's own setting wins.
+for _threads in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS"):
+    os.environ.setdefault(_threads, "1")
+
 
 @click.group(context_settings=CONTEXT)
 @click.version_option(package_name="dischargelab")
