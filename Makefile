@@ -31,9 +31,11 @@ demo: $(STAMP)
 # the sources byte-compiled first: the suite starts many Python processes (commands, servers,
 # Dask workers), and where PYTHONDONTWRITEBYTECODE is set each would compile them again
 # (the docs extra too: the site test builds the documentation; no test is skipped for want of it)
+# (one BLAS thread, as the command line takes: the suite's matrices are small, and threads
+# only wait for one another on a shared machine)
 test: $(DOCS_STAMP) browser lua postgres mdbtools
 	$(BIN)/python -m compileall -q src
-	$(BIN)/python -m pytest
+	OPENBLAS_NUM_THREADS=$${OPENBLAS_NUM_THREADS:-1} $(BIN)/python -m pytest
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples
