@@ -212,16 +212,16 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
     amps = f"{load:.3g} A"
     how = (f"{bat.model} model, {cells}S{bat.strings_parallel}P, at {amps} "
            f"({load / bat.rated_capacity_Ah:.2g}C): {duration(total)} to {cut:g} V/cell")
-    source = load_source or ("1C of the rated capacity" if load_current_A is None
+    today = bool(bat.extra.get("logbook"))
+    basis = "today's capacity estimate of the logbook pack" if today else bat.capacity_basis
+    source = load_source or (f"1C of {basis}" if load_current_A is None
                              else "the given load")
     notes = [how, f"load {amps}: {source}",
              f"reserve {reserve_s:g} s at the low level, {critical:.0f} s at the critical level"]
-    today = bool(bat.extra.get("logbook"))
     if today and bat.extra.get("note"):  # a logbook pack, today
         notes.append(str(bat.extra["note"]))
     if firmware == "ardupilot":
-        capacity_how = ("today's capacity estimate of the logbook pack" if today
-                        else "rated pack capacity")
+        capacity_how = basis
         coefficients, worst = battestimate_coefficients(bat, ambient)
         settings = [
             Setting("BATT_CAPACITY", capacity_mAh, "mAh", capacity_how, True),
@@ -253,8 +253,7 @@ def autopilot_params(battery, *, firmware: str, cells: int | None = None,
         settings = [
             Setting("BAT1_N_CELLS", cells, "", "cells in series", True),
             Setting("BAT1_CAPACITY", capacity_mAh, "mAh",
-                    "today's capacity estimate of the logbook pack" if today
-                    else "rated pack capacity"),
+                    basis),
             Setting("BAT1_V_CHARGED", full_rest / cells, "V", "resting cell voltage when full"),
             Setting("BAT1_V_EMPTY", empty_rest / cells, "V", f"resting cell voltage when the "
                     f"pack reaches {cut:g} V/cell under {amps} (load-compensated with "

@@ -102,6 +102,15 @@ class Battery:
                 return float(value) * self.strings_parallel
         return self.capacity_Ah
 
+    @property
+    def capacity_basis(self) -> str:
+        """Where :attr:`rated_capacity_Ah` comes from, in words."""
+        if self.extra.get("nominal_capacity_Ah"):
+            return "the rated pack capacity"
+        if self.extra.get("measured_capacity_Ah"):
+            return "the pack capacity measured in the slowest fitted discharge"
+        return "the pack capacity of the model"
+
     def extrapolation(self, cell_current_A: float) -> str | None:
         """"above" / "below" when a cell current [A] lies far outside the fitted currents.
 

@@ -52,7 +52,7 @@ def test_autopilot_params_from_a_pack_leaves_the_logbook_unchanged(tmp_path, sha
     assert stored_rows(db) == before                    # no model, no figure stored
     derivation = out["derivation"]
     assert derivation["BATT_CAPACITY"].startswith("today's capacity estimate")
-    assert "1C of the rated capacity" in " ".join(out["notes"])       # no flights logged
+    assert "1C of today's capacity estimate" in " ".join(out["notes"])   # no flights logged
     assert 0 < out["parameters"]["BATT_SOC1_C3"] <= 0.5
     assert "worst difference" in derivation["BATT_SOC1_C1"]
 
