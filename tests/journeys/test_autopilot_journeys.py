@@ -179,14 +179,17 @@ def test_the_pack_page_offers_the_parameters_and_the_script_without_writing(tmp_
 
 
 def test_endurance_from_a_pack_leaves_the_logbook_unchanged(tmp_path):
-    """`endurance --pack` on a pack with capacity tests and no model yet: nothing stored,
-    and the second run answers as the first (the first fitted and stored a model, and
+    """`endurance --pack` on a pack with capacity tests, no model yet and figures from an
+    older release: nothing stored (the stale figures were redone and stored), and the second
+    run answers as the first (the first fitted and stored a model, and
     the second, flying the stored model with figures redone around it, differed by 2 %)."""
     from dischargelab.examples import copy_examples
 
     copy_examples(tmp_path / "ex")
     db = tmp_path / "lb.sqlite"
     cli("logbook", "add", tmp_path / "ex" / "ageing", "--pack", "C", "--db", db)
+    with sqlite3.connect(db) as conn:  # figures stored by an older release: stale
+        conn.execute("UPDATE pack_figures SET figures_version = '1/0.0.0'")
     before = stored_rows(db)
     runs = [json.loads(cli("endurance", "--pack", "C", "multirotor-hover", "--cells", "4",
                            "--db", db, "--json").stdout) for _ in range(2)]

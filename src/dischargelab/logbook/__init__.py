@@ -295,14 +295,15 @@ class Logbook:
                 store: bool = True) -> dict:
         """``{name: figures.Stored}`` of the packs named (all for None), stale ones computed
         first when ``recompute`` (stored when the logbook can be written and ``store``)."""
-        from . import figures, store
+        from . import figures
+        from . import store as stored_rows  # (not `store`: that is the argument)
 
         with self._errors(), self._read() as conn:
             found = figures.read_stored(conn, names, columns)
             if names is not None:
                 for name in names:
                     if name not in found:
-                        store.pack_row(conn, name)     # raises: no such pack
+                        stored_rows.pack_row(conn, name)     # raises: no such pack
         stale = [n for n, s in found.items() if not s.current]
         if recompute and stale:
             for name, value in self._recompute(stale, store=None if store else False).items():
