@@ -23,7 +23,9 @@ the database.
   (:func:`dischargelab.logbook.estimates.capacity_between_rests`). The curve is the
   pack's own, learned from its slow full discharge nearest in its life
   (:meth:`~dischargelab.logbook.estimates.OcvCurve.from_discharge`, the drop added
-  back measured :data:`SETTLE_S` into the load), else the chemistry's generic curve.
+  back measured :data:`SETTLE_S` into the load, or at rests a load from full leaves when
+  the two disagree), else the chemistry's generic curve (a pack of no given chemistry's:
+  read from a full discharge, else from its loads).
   A charge that ends in a constant-voltage taper at the chemistry's charge voltage
   ends full (``FULL_SOC`` of :mod:`.estimates`), as a charger and a fuel gauge define
   it; one that stops lower (a charger set to 4.0 V, a storage charge) is read through
@@ -741,8 +743,8 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
             continue
         n = pack_cells(e, cells, chemistry)
         if first_drop is None:
-            first_drop = checked_drop(ordered, k, e, n, lambda charge, n=n: _full_after(
-                charge, n, full_cell))
+            first_drop = checked_drop(ordered, k, e, n,
+                                      lambda c, n=n: _full_after(c, n, full_cell))
         curves.append((k, learned_curve(dict(e, source=e.get("source")), cap, n, chemistry,
                                         resistance_ohm=first_drop)))
     return PackContext(cells=cells, chemistry=chemistry, model=model, fulls=fulls,
