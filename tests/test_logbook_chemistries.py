@@ -50,7 +50,8 @@ def test_a_steep_fall_from_full_is_not_read_as_resistance():
     # the settled drop's extrapolation from 300 s in takes the fall for resistance
     assert settled_drop(event) > 3 * 0.04
     rests = [(q, float(ocv(1.0 - q / 3.0))) for q in (1.8, 2.0, 2.1)]
-    assert rest_drop(event, rests) == pytest.approx(0.04, rel=0.02)
+    drop, scatter = rest_drop(event, rests)
+    assert drop == pytest.approx(0.04, rel=0.02) and scatter < 0.005
     ordered = [event] + [_load_from_full(q, v) for q, v in rests]
     full = lambda charge: bool(charge and charge.get("taper"))  # noqa: E731
     assert checked_drop(ordered, 0, event, 1, full) == pytest.approx(0.04, rel=0.02)
@@ -60,11 +61,25 @@ def test_a_steep_fall_from_full_is_not_read_as_resistance():
 
 def test_a_curve_without_a_steep_top_keeps_its_settled_drop():
     event, ocv = _slow_discharge(top_fall_V=0.0)
-    rests = [(q, float(ocv(1.0 - q / 3.0))) for q in (1.8, 2.0)]
+    rests = [(q, float(ocv(1.0 - q / 3.0))) for q in (1.8, 2.0, 2.1)]
     ordered = [event] + [_load_from_full(q, v) for q, v in rests]
     full = lambda charge: bool(charge and charge.get("taper"))  # noqa: E731
     assert settled_drop(event) == pytest.approx(0.04, rel=0.05)
     assert checked_drop(ordered, 0, event, 1, full) == settled_drop(event)
+
+
+def test_rests_that_disagree_among_themselves_leave_the_settled_drop():
+    event, ocv = _slow_discharge(top_fall_V=0.1)
+    # rests 0-150 mV off the curve (relaxation left): their scatter is larger than the gap
+    rests = [(q, float(ocv(1.0 - q / 3.0)) + off)
+             for q, off in ((1.6, 0.0), (1.8, 0.15), (2.0, 0.05), (2.1, 0.10))]
+    ordered = [event] + [_load_from_full(q, v) for q, v in rests]
+    full = lambda charge: bool(charge and charge.get("taper"))  # noqa: E731
+    drop, scatter = rest_drop(event, rests)
+    assert abs(drop - settled_drop(event)) < scatter
+    assert checked_drop(ordered, 0, event, 1, full) == settled_drop(event)
+    # fewer than three rests give no scatter: no reading
+    assert rest_drop(event, rests[:2]) is None
 
 
 @pytest.mark.slow

@@ -208,17 +208,21 @@ def settled_drop(event: dict) -> float:
     return max(0.0, float(event["rest_voltage_V"]) - (v1 + (v1 - v2))) / mean_i
 
 
-#: Loads from full read by :func:`rest_drop` at most (the nearest after the discharge).
+#: Loads from full read by :func:`rest_drop` at most (the nearest after the discharge),
+#: and at least (fewer give no scatter to judge the reading by).
 REST_DROP_LOADS = 5
+REST_DROP_MIN = 3
 
 
-def rest_drop(event: dict, rests: list[tuple[float, float]]) -> float | None:
+def rest_drop(event: dict, rests: list[tuple[float, float]]) -> tuple[float, float] | None:
     """Resistance [ohm] a slow full discharge's load showed, read where its open-circuit
-    voltage is known: a load that starts from full and leaves a relaxed rest after
-    ``counted_Ah`` has the open-circuit voltage ``relaxed_V`` there, and the slow
-    discharge's loaded voltage at the same charge drawn lies the drop below it (Plett
-    2015, ch. 2). ``rests`` holds ``(counted_Ah, relaxed_V)`` pack pairs; the median over
-    the first :data:`REST_DROP_LOADS` inside the discharge's charge, None without any.
+    voltage is known, and the scatter of that reading between rests [ohm]: a load that
+    starts from full and leaves a relaxed rest after ``counted_Ah`` has the open-circuit
+    voltage ``relaxed_V`` there, and the slow discharge's loaded voltage at the same charge
+    drawn lies the drop below it (Plett 2015, ch. 2). ``rests`` holds ``(counted_Ah,
+    relaxed_V)`` pack pairs; the median over the first :data:`REST_DROP_LOADS` inside the
+    discharge's charge and their scatter (1.4826 x their median absolute deviation), None
+    with fewer than :data:`REST_DROP_MIN` (a scatter needs them).
 
     Unlike :func:`settled_drop` it needs no open-circuit voltage near full: a curve that
     falls steeply from full (LiFePO4 over its last per cent) puts that fall in the
@@ -227,10 +231,13 @@ def rest_drop(event: dict, rests: list[tuple[float, float]]) -> float | None:
     q = np.asarray(curve["charge_Ah"], dtype=float)
     v = np.asarray(curve["voltage_V"], dtype=float)
     mean_i = float(event["mean_current_A"])
-    drops = [(relaxed - float(np.interp(counted, q, v))) / mean_i
-             for counted, relaxed in rests[:REST_DROP_LOADS]
-             if 0.1 * q[-1] < counted < 0.9 * q[-1]]
-    return float(max(np.median(drops), 0.0)) if drops and mean_i > 0 else None
+    drops = np.array([(relaxed - float(np.interp(counted, q, v))) / mean_i
+                      for counted, relaxed in rests[:REST_DROP_LOADS]
+                      if 0.1 * q[-1] < counted < 0.9 * q[-1]]) if mean_i > 0 else np.array([])
+    if drops.size < REST_DROP_MIN:
+        return None
+    mid = float(np.median(drops))
+    return max(mid, 0.0), 1.4826 * float(np.median(np.abs(drops - mid)))
 
 
 def checked_drop(ordered: list[dict], position: int, event: dict, cells: int,
@@ -238,8 +245,10 @@ def checked_drop(ordered: list[dict], position: int, event: dict, cells: int,
     """The slow full discharge ``event`` (at ``position`` in ``ordered``)'s settled drop
     [ohm], or its drop read at the rests the next loads from full leave
     (:func:`rest_drop`; ``ends_full(charge figures)`` says which charges end full) when the
-    two differ by more than the learned curve's error per cell: the settled drop's
-    extrapolation takes a steep fall from full (LiFePO4) for resistance."""
+    two differ by more than the learned curve's error per cell and more than the rests'
+    own scatter: the settled drop's extrapolation takes a steep fall from full (LiFePO4)
+    for resistance, while rests that disagree among themselves (relaxation left, ageing
+    since) read nothing better."""
     rests = []
     for later in ordered[position + 1:]:
         if len(rests) >= REST_DROP_LOADS:
@@ -252,10 +261,10 @@ def checked_drop(ordered: list[dict], position: int, event: dict, cells: int,
             rests.append((float(d.get("counted_Ah") or 0.0), float(after["relaxed_V"])))
     drop = settled_drop(event)
     check = rest_drop(event, rests)
-    if check is not None and \
-            abs(check - drop) * float(event["mean_current_A"]) / cells > LEARNED_CURVE_SD_CELL_V:
-        return check
-    return drop
+    if check is None:
+        return drop
+    limit = max(LEARNED_CURVE_SD_CELL_V * cells / float(event["mean_current_A"]), check[1])
+    return check[0] if abs(check[0] - drop) > limit else drop
 
 
 def learned_curve(event: dict, capacity_Ah: float, cells: int, chemistry: str | None,
@@ -283,7 +292,7 @@ def learned_curve(event: dict, capacity_Ah: float, cells: int, chemistry: str | 
 
 
 __all__ = ["ReferenceCurve", "partial_capacity", "curve_match", "matched_capacity",
-           "learned_curve", "is_slow", "settled_drop", "rest_drop", "checked_drop",
+           "learned_curve", "is_slow", "settled_drop", "rest_drop", "checked_drop", "REST_DROP_MIN",
            "VOLTAGE_SD_CELL_V", "RELAXED_S",
            "MIN_SHARE", "MATCH_REFERENCES", "SLOW_C_RATE", "SETTLE_S"]
 
