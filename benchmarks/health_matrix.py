@@ -11,7 +11,13 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   25 degC): the curve (the generic one; moving faster with age), the routine charge's
   stop voltage (3.9-4.1 V, the tests still charged to 4.2 V; constant current only),
   the sampling period (30-200 s, the missions' power steps between samples), the ambient
-  (0 and 45 degC), short rests (60 s), shallow missions.
+  (0 and 45 degC), short rests (60 s), shallow missions; the chemistry (a LiPo LiCoO2
+  cell charged to 4.2 V, a LiHV one to 4.35 V, both cut off at 3.0 V; an LFP cell charged
+  to 3.65 V, its curve flat over most of its charge); a partial routine charge (constant
+  current stopped at 80 %, no constant voltage); flights from a storage charge (the
+  routine charge stopped at 60 %, ~3.8 V per cell, two hours' rest before each mission,
+  the missions at 60 % so that they end above the cutoff: compare with the shallow
+  missions).
 * **PyBaMM lives** (``tests/pybamm_life.py``, only where PyBaMM is installed; skipped
   otherwise): physics the estimators were not built from. PyBaMM's ``OKane2022`` cell
   (LG M50, NMC811 / graphite-SiOx, scaled to ~3 Ah) in the SPM with SEI growth (also on
@@ -81,6 +87,13 @@ SYNTHETIC = {
     "ambient 45 degC": dict(ambient_C=45.0, season_C=3.0),
     "rests of 60 s": dict(rest_s=60.0),
     "shallow missions (60 %)": dict(mission_scale=0.6),
+    "LiPo (LiCoO2) 4.2 V, cutoff 3.0 V": dict(chemistry="lipo", cutoff_V=3.0),
+    "LiHV 4.35 V, cutoff 3.0 V": dict(chemistry="lihv", cv_V=4.35, test_cv_V=4.35,
+                                      cutoff_V=3.0),
+    "LFP 3.65 V, flat curve": dict(chemistry="lifepo4", cv_V=3.65, test_cv_V=3.65),
+    "partial routine charge: CC to 80 %": dict(charge_stop_soc=0.8),
+    "flights from a storage charge (60 %, 2 h rest; missions 60 %)":
+        dict(charge_stop_soc=0.6, storage_rest_s=7200.0, mission_scale=0.6),
 }
 
 #: PyBaMM conditions: name -> changes to ``pybamm_life.PybammLifeSpec``.

@@ -13,6 +13,15 @@ thermal state with Arrhenius resistances). Its life, cycle by cycle:
 * every ``test_every`` cycles a capacity test: the charge, a rest, C/5 to the cutoff, a
   rest (its delivered charge is the test's capacity, as the CMU tests measure it).
 
+The chemistry (``chemistry``) sets the generic curve the cell's own is made from:
+``"li-ion"`` (NMC, the default), ``"lipo"`` (LiCoO2, charged to 4.2 V), ``"lihv"`` (the
+high-voltage LiCoO2 curve, charged to 4.35 V) or ``"lifepo4"`` (LFP, charged to 3.65 V,
+its long flat middle), each raised near full so that a constant-voltage charge at its
+charge voltage ends at C/30 as a real cell's does (:data:`TOP_RAISE`). The routine charge
+may stop before full (``charge_stop_soc``: constant current only, stopped at that state
+of charge, as a timer or an operator stops it; a storage charge at ~55 %), and the rest
+before each mission may be longer than the others (``storage_rest_s``).
+
 The cell's own open-circuit curve is the generic one off by ``ocv_wiggle_V`` (a
 smooth wave, zero at both ends), and ageing moves it: the state of charge on the
 fresh curve is ``s - 4 lli_share fade s (1 - s)`` (the ends fixed by the charge and
@@ -40,7 +49,7 @@ import pandas as pd
 from dischargelab.engine import Step, run
 from dischargelab.models import get_family
 from dischargelab.models.ecm import OCV_DROP_NAMES, OCV_NODES
-from dischargelab.ocv import ocv_from_soc
+from dischargelab.ocv import LIHV_OCV_V, OCV_SOC, ocv_from_soc
 
 FAMILY = get_family("ecm")
 
@@ -49,8 +58,23 @@ FAMILY = get_family("ecm")
 #: constant-voltage charge ends at C/30 as a real cell's does (its OCV at full ~4.2 V).
 TOP_RAISE_V = 0.07
 
-#: Version of the generator: lives cached by a benchmark are made again when it changes.
-GENERATOR_VERSION = 3
+#: Per chemistry: the generic table (:mod:`dischargelab.ocv`), and the raise near full
+#: ``(V, power)``: ``V SOC^power`` lifts the table's full value (a slow discharge's first
+#: voltage) to ~12 mV above the charge voltage, as :data:`TOP_RAISE_V` does for Li-ion;
+#: LFP's rise is confined to its last per cent (its plateau left flat: a high power).
+TOP_RAISE = {"li-ion": (TOP_RAISE_V, 3.0), "lipo": (0.031, 3.0), "lihv": (0.031, 3.0),
+             "lifepo4": (0.232, 200.0)}
+
+#: Per chemistry whose curve rises steeply at the top (LFP: ~15 V per unit of charge in
+#: its last per cent): the constant-current phase stops this far below the charge voltage
+#: (settled at the charge current) [V] and the constant-voltage steps are this long [s],
+#: so that the charge does not overshoot its voltage as a charger's regulation would not.
+STEEP_TOP = {"lifepo4": (0.05, 2.0)}
+
+#: Version of the generator: lives cached by a benchmark are made again when it changes
+#: (4: chemistries, partial charges, storage rests; 5: an LFP charge no longer overshoots
+#: its voltage; a Li-ion life is unchanged).
+GENERATOR_VERSION = 5
 
 #: Bound on the steps of one constant-voltage phase.
 MAX_CV_STEPS = 2000
@@ -88,6 +112,9 @@ class LifeSpec:
     ocv_wiggle_V: float = 0.0       # the cell's own curve off the generic one [V]
     lli_share: float = 0.0          # how far ageing moves the curve (module docstring)
     seed: int = 0
+    chemistry: str = "li-ion"       # "li-ion", "lipo", "lihv", "lifepo4" (module docstring)
+    charge_stop_soc: float | None = None   # the routine charge stops there (CC only)
+    storage_rest_s: float | None = None    # the rest before each mission, if not rest_s
 
 
 @dataclass
@@ -114,7 +141,12 @@ def cell_ocv(spec: LifeSpec, soc, efc: float) -> np.ndarray:
     moved = np.clip(soc - 4.0 * spec.lli_share * fade * soc * (1.0 - soc), 0.0, 1.0)
     phase = 2 * np.pi * np.random.default_rng(spec.seed + 1000).random()
     wiggle = spec.ocv_wiggle_V * np.sin(6 * np.pi * soc + phase) * 4 * soc * (1 - soc)
-    return ocv_from_soc(moved, "li-ion") + TOP_RAISE_V * soc ** 3 + wiggle
+    raise_V, power = TOP_RAISE[spec.chemistry]
+    if spec.chemistry == "lihv":
+        base = np.interp(moved, OCV_SOC[::-1], LIHV_OCV_V[::-1])
+    else:
+        base = ocv_from_soc(moved, spec.chemistry)
+    return base + raise_V * soc ** power + wiggle
 
 
 def parameters(spec: LifeSpec, efc: float) -> dict:
@@ -146,6 +178,9 @@ class _Logger:
                   initial_state=self.state, initial_temperature_C=ambient, record=True,
                   max_dt_s=max_dt_s, max_engine_steps=400_000)
         s = res.series
+        # a step ended at the cutoff may record its crossing as -inf (LFP's steep end)
+        keep = np.isfinite(np.asarray(s["voltage_V"], dtype=float))
+        s = {k: np.asarray(v)[keep] if np.size(v) == keep.size else v for k, v in s.items()}
         s = dict(s, time_s=s["time_s"] + self.t0)
         self.parts.append(s)
         self.state = {k: np.asarray(v)[:1].copy() for k, v in res.final_state.items()}
@@ -171,6 +206,13 @@ class _Logger:
         q = self.charge_removed()
         if q <= 1e-4:
             return
+        if not test and spec.charge_stop_soc is not None:
+            # a partial charge: constant current until the counted state of charge
+            t_cc = (q - (1.0 - spec.charge_stop_soc) * cap) * 3600.0 / i_cc
+            if t_cc > 1.0:
+                self.go([Step("profile", profile_time_s=(t_cc,),
+                              profile_current_A=(-i_cc,))], p, ambient, max_dt_s=20.0)
+            return
         # constant current until the voltage reaches the charge voltage: where the
         # settled voltage at the charge current crosses it (the filtered currents at
         # the charge current, the temperature as it is)
@@ -179,7 +221,8 @@ class _Logger:
         calm.update({st.name: np.full(grid_q.size, -i_cc) for st in FAMILY.states
                      if st.kind == "lowpass"}, charge_Ah=grid_q)
         v = FAMILY.voltage(p, calm, -i_cc)
-        over = np.flatnonzero(v >= cv_V)
+        margin_V, cv_step_s = STEEP_TOP.get(spec.chemistry, (0.0, spec.cv_step_s))
+        over = np.flatnonzero(v >= cv_V - (margin_V if hold else 0.0))
         q_cv = float(grid_q[over[0]]) if over.size else 0.0
         t_cc = (q - q_cv) * 3600.0 / i_cc
         if t_cc > 1.0:
@@ -194,8 +237,8 @@ class _Logger:
             i = max(min((a - cv_V) / b, 0.0), -i_cc)
             if -i < i_end:
                 break
-            self.go([Step("profile", profile_time_s=(spec.cv_step_s,),
-                          profile_current_A=(i,))], p, ambient, max_dt_s=spec.cv_step_s)
+            self.go([Step("profile", profile_time_s=(cv_step_s,),
+                          profile_current_A=(i,))], p, ambient, max_dt_s=cv_step_s)
 
     def series(self) -> dict:
         return {k: np.concatenate([s[k] for s in self.parts]) for k in
@@ -219,7 +262,8 @@ def synthetic_life(spec: LifeSpec | None = None) -> Life:
             log.charge(p, ambient, test=True)
             log.rest(spec.rest_s, p, ambient)
         if cycle % spec.test_every == 0:
-            if cycle > 0 and (spec.cv_V != spec.test_cv_V or not spec.cv):
+            if cycle > 0 and (spec.cv_V != spec.test_cv_V or not spec.cv
+                              or spec.charge_stop_soc is not None):
                 log.charge(p, ambient, test=True)   # the test starts from a full charge
                 log.rest(spec.rest_s, p, ambient)
             start = log.t0
@@ -237,7 +281,7 @@ def synthetic_life(spec: LifeSpec | None = None) -> Life:
         efc += (log.charge_removed() - q0) / spec.capacity_Ah
         log.rest(spec.rest_s, p, ambient)
         log.charge(p, ambient)
-        log.rest(spec.rest_s, p, ambient)
+        log.rest(spec.storage_rest_s or spec.rest_s, p, ambient)
     s = log.series()
     # the logger: samples at a fixed rate, with noise
     t = np.arange(0.0, s["time_s"][-1], 1.0 / spec.sample_hz)

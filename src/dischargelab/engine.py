@@ -516,8 +516,9 @@ def _run_step(pack, st, k, state, active, ended, t_now, energy, vmin, peak_t, cu
             h[idx] = h_idx
         # bookkeeping
         v0 = sub_pack.voltage(sub, i0)
-        p0 = np.where(np.isfinite(i0) & np.isfinite(v0), i0 * v0, 0.0)
-        p1 = np.where(np.isfinite(i1) & np.isfinite(v1), i1 * v1, 0.0)
+        with np.errstate(invalid="ignore"):  # 0 A at -inf V beyond the capacity: no power
+            p0 = np.where(np.isfinite(i0) & np.isfinite(v0), i0 * v0, 0.0)
+            p1 = np.where(np.isfinite(i1) & np.isfinite(v1), i1 * v1, 0.0)
         energy[idx] += 0.5 * (p0 + p1) * h[idx] / 3600.0
         t_now[idx] += h[idx]
         t_in[idx] += h[idx]

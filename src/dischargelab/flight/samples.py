@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataError
-from ..ocv import CHARGE_CELL_V, check_chemistry
+from ..ocv import CHARGE_CELL_V, LIHV_FULL_CELL_V, check_chemistry
 from ..validate import LOW_VOLTAGE_TIMER_S
 
 #: Sampling rates above this [Hz] are averaged into bins of 1/rate (current and voltage
@@ -263,15 +263,29 @@ def flight_numbers(log, flights) -> list[int]:
     return [choose_span(log, int(n)).number for n in numbers]
 
 
+#: The lowest a LiPo pack's highest voltage per cell is read at [V]: a pack whose log
+#: never rises above it is near empty throughout (3.3 V rests below 5 % of charge on the
+#: generic LiPo curve), so a count that puts it there is one cell too many for a
+#: high-voltage pack (a 1S LiHV cell at 4.35 V is not two cells at 2.2 V).
+LOWEST_TOP_CELL_V = 3.3
+
+
 def infer_cells(voltage_V, chemistry: str | None = None) -> int:
     """Cells in series of a pack from its highest voltage [V]: the fewest cells that stay
-    at or below the chemistry's charge voltage (:data:`CHARGE_CELL_V`) plus 0.05 V."""
+    at or below the chemistry's charge voltage (:data:`CHARGE_CELL_V`) plus 0.05 V; for a
+    LiPo pack, one fewer when that count reads below :data:`LOWEST_TOP_CELL_V` per cell and
+    one fewer holds the high-voltage (LiHV) charge voltage plus 0.05 V."""
     values = np.asarray(voltage_V, dtype=float)
     values = values[np.isfinite(values)]
     if values.size == 0:
         raise DataError("no voltage to infer the cell count from; give cells=N (--cells N)")
     top = float(np.percentile(values, 99))
-    return max(1, int(np.ceil(top / (CHARGE_CELL_V[check_chemistry(chemistry)] + 0.05))))
+    chem = check_chemistry(chemistry)
+    n = max(1, int(np.ceil(top / (CHARGE_CELL_V[chem] + 0.05))))
+    if chem == "lipo" and n > 1 and top / n < LOWEST_TOP_CELL_V \
+            and top / (n - 1) <= LIHV_FULL_CELL_V + 0.05:
+        n -= 1
+    return n
 
 
 #: Rest voltage per cell of a lithium pack just charged full [V]: LiFePO4 (3.65 V charge),

@@ -1,11 +1,13 @@
-"""Which 4.2 V chemistry a pack is, read from how its voltage falls under load.
+"""Which chemistry a pack is, read from how its voltage falls under load.
 
 A LiPo pouch's open-circuit voltage is flat from 60 % to 20 % of its charge (3.84 to
 3.71 V per cell on the generic curve); an NMC cylinder's falls three times as steeply
-(3.79 to 3.41 V). A load that starts from a rest and moves a tenth of the charge or more
-shows which: for each chemistry, the rest reads the start on its curve and the loaded
+(3.79 to 3.41 V); a LiFePO4 cell rests below 3.45 V per cell when full and holds
+3.2-3.35 V over most of its charge, where the 4.2 V curves are empty. A load that starts
+from a rest and moves a tenth of the charge or more shows which: for each chemistry, the
+rest reads the start on its curve and the loaded
 voltage is fitted as ``OCV_c(s0 - q / C) - r I`` over the capacity ``C`` (a grid) and
-the resistance ``r`` (least squares), the first :data:`SETTLE_SHARE` of the load left
+the resistance ``r >= 0`` (least squares), the first :data:`SETTLE_SHARE` of the load left
 out (its polarisation still building). The chemistry whose fits leave clearly less
 (rms below :data:`CLEAR_RATIO` of the other's over the pack's loads) is the pack's;
 otherwise it stays unknown.
@@ -18,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Chemistries told apart (both charged to 4.2 V per cell).
-CANDIDATES = ("lipo", "li-ion")
+#: Chemistries told apart (the first two charged to 4.2 V per cell, LiFePO4 to 3.65 V).
+CANDIDATES = ("lipo", "li-ion", "lifepo4")
 
 #: Share of a load's charge left out at its start (the polarisation building).
 SETTLE_SHARE = 0.15
@@ -42,7 +44,8 @@ def _fit_rms(q, v_cell, i, s0: float, table_soc, table_v) -> float:
             continue
         ocv = np.interp(soc, table_soc, table_v)
         gap = ocv - v_cell
-        r = float(gap @ i / (i @ i)) if i @ i > 0 else 0.0
+        # a resistance is not negative: a curve below the loaded voltage does not fit
+        r = max(float(gap @ i / (i @ i)), 0.0) if i @ i > 0 else 0.0
         rms = float(np.sqrt(np.mean((gap - r * i) ** 2)))
         best = min(best, rms)
     return best
@@ -73,13 +76,24 @@ def chemistry_from_loads(loads: list[tuple[dict, int]]) -> tuple[str | None, str
     if not used:
         return None, "no load from a rest to read the chemistry from"
     rms = {c: np.sqrt(s / used) for c, s in sums.items()}
-    best, other = sorted(CANDIDATES, key=rms.get)
+    best, other = sorted(CANDIDATES, key=rms.get)[:2]
     if rms[best] < CLEAR_RATIO * rms[other]:
         return best, (f"read from {used} load(s): the {best} curve fits to "
                       f"{1000 * rms[best]:.0f} mV, the {other} curve to "
                       f"{1000 * rms[other]:.0f} mV per cell")
-    return None, (f"not told apart by {used} load(s) ({1000 * rms['lipo']:.0f} and "
-                  f"{1000 * rms['li-ion']:.0f} mV per cell)")
+    return None, (f"not told apart by {used} load(s) (the {best} and {other} curves fit to "
+                  f"{1000 * rms[best]:.0f} and {1000 * rms[other]:.0f} mV per cell)")
 
 
-__all__ = ["chemistry_from_loads", "CANDIDATES", "CLEAR_RATIO"]
+def infer_chemistry(full_cell_V: float, end_cell_V: float) -> str:
+    """The chemistry whose charge and cutoff voltages per cell lie nearest to a full
+    discharge's rest (or first) voltage and end voltage [V] (tables
+    :data:`dischargelab.ocv.CHARGE_CELL_V`, :data:`dischargelab.cell.CUTOFF_CELL_VOLTAGE_V`)."""
+    from ..cell import CUTOFF_CELL_VOLTAGE_V
+    from ..ocv import CHARGE_CELL_V
+
+    return min(CHARGE_CELL_V, key=lambda c: abs(CHARGE_CELL_V[c] - full_cell_V)
+               + abs(CUTOFF_CELL_VOLTAGE_V[c] - end_cell_V))
+
+
+__all__ = ["chemistry_from_loads", "infer_chemistry", "CANDIDATES", "CLEAR_RATIO"]

@@ -22,8 +22,10 @@ the database.
   in state of charge they read through the pack's open-circuit voltage
   (:func:`dischargelab.logbook.estimates.capacity_between_rests`). The curve is the
   pack's own, learned from its slow full discharge nearest in its life
-  (:meth:`~dischargelab.logbook.estimates.OcvCurve.from_discharge`, the drop added
-  back measured :data:`SETTLE_S` into the load), else the chemistry's generic curve.
+  (:meth:`~dischargelab.logbook.estimates.OcvCurve.from_discharge`, the drop added back
+  measured :data:`SETTLE_S` into the load, or at rests a load from full leaves when the
+  two disagree), else the chemistry's generic curve (read from a full discharge, else
+  from its loads, for a pack of no given chemistry).
   A charge that ends in a constant-voltage taper at the chemistry's charge voltage
   ends full (``FULL_SOC`` of :mod:`.estimates`), as a charger and a fuel gauge define
   it; one that stops lower (a charger set to 4.0 V, a storage charge) is read through
@@ -73,6 +75,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 
+from .chemistry import infer_chemistry
 from .estimates import (
     FULL_SOC_SD,
     MIN_SWING,
@@ -87,17 +90,17 @@ from .estimates import (
 )
 from .references import (
     RELAXED_S,
-    SAME_RATE_SHARE,
     SETTLE_S,
     VOLTAGE_SD_CELL_V,
     ReferenceCurve,
+    checked_drop,
     curve_match,
     is_slow,
     learned_curve,
     matched_capacity,
     partial_capacity,
+    rate_kinds,
     run_to_empty_capacity,
-    settled_drop,
 )
 
 #: A discharge starts full when its rest voltage reads at least this state of charge.
@@ -434,17 +437,6 @@ def flag_outliers(efc, values, neighbours: int = OUTLIER_NEIGHBOURS,
     return flags
 
 
-def infer_chemistry(full_cell_V: float, end_cell_V: float) -> str:
-    """The chemistry whose charge and cutoff voltages per cell lie nearest to a full
-    discharge's rest (or first) voltage and end voltage [V] (tables
-    :data:`dischargelab.ocv.CHARGE_CELL_V`, :data:`dischargelab.cell.CUTOFF_CELL_VOLTAGE_V`)."""
-    from ..cell import CUTOFF_CELL_VOLTAGE_V
-    from ..ocv import CHARGE_CELL_V
-
-    return min(CHARGE_CELL_V, key=lambda c: abs(CHARGE_CELL_V[c] - full_cell_V)
-               + abs(CUTOFF_CELL_VOLTAGE_V[c] - end_cell_V))
-
-
 #: Events in the local line that gives a pack's capacity and resistance today.
 TODAY_EVENTS = 7
 
@@ -513,14 +505,14 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     """Capacity between the rests around a load (sets ``h``); returns why not, or None."""
     details = e.get("details") or {}
     before, after = details.get("rest_before"), details.get("rest_after")
-    ends_full = _full_after(details.get("charge"), n_cells, ctx)
+    ends_full = _full_after(details.get("charge"), n_cells, ctx.full_cell_V)
     if before is None:
         return "no rest before it"
     if after is None and not ends_full:
         return "no rest after it"
     curve = ctx.curve_at(position)
     r = e.get("resistance_ohm")
-    begins_full = _full_after(before.get("after_charge"), n_cells, ctx)
+    begins_full = _full_after(before.get("after_charge"), n_cells, ctx.full_cell_V)
     if begins_full:
         soc_a, sd_a = 1.0, FULL_SOC_SD
     else:
@@ -565,11 +557,11 @@ def _fade_since(curve: OcvCurve, capacity_Ah: float, ctx: PackContext) -> float 
     return None if not scale else max(0.0, 1.0 - abs(capacity_Ah) / scale)
 
 
-def _full_after(charge: dict | None, n_cells: int, ctx: PackContext) -> bool:
+def _full_after(charge: dict | None, n_cells: int, full_cell_V: float) -> bool:
     """A charge (its figures) that ends full: in a taper at the pack's full voltage."""
     if not charge or not charge.get("taper") or charge.get("max_voltage_V") is None:
         return False
-    return charge["max_voltage_V"] / n_cells >= ctx.full_cell_V - FULL_VOLTAGE_MARGIN_CELL_V
+    return charge["max_voltage_V"] / n_cells >= full_cell_V - FULL_VOLTAGE_MARGIN_CELL_V
 
 
 def _soon_after(reading: dict, e: dict) -> dict:
@@ -720,34 +712,20 @@ def _cells(e: dict, h: EventHealth, ctx: PackContext, position: int) -> None:
 
 
 def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, model,
-             label_Ah: float | None = None) -> PackContext:
+             label_Ah: float | None = None, read_from_loads: tuple | None = None
+             ) -> PackContext:
     fulls = [(k, e, health[k].capacity_Ah) for k, e in enumerate(ordered) if health[k].full]
     if chemistry is None and fulls:
         e = fulls[0][1]
         n = pack_cells(e, cells, chemistry)
         top = e.get("rest_voltage_V") or e["curve"]["voltage_V"][0]
         chemistry = infer_chemistry(top / n, float(e["end_voltage_V"]) / n)
-    curves = []
-    first_drop = None
-    for k, e, cap in fulls:
-        if not is_slow(e, cap):
-            continue
-        first_drop = settled_drop(e) if first_drop is None else first_drop
-        n = pack_cells(e, cells, chemistry)
-        curves.append((k, learned_curve(dict(e, source=e.get("source")), cap, n, chemistry,
-                                        resistance_ohm=first_drop)))
-    from ..ocv import charge_cell_V
+    from ..ocv import charge_cell_V, is_lihv
 
     top = highest_rest_cell_V(ordered, cells, chemistry)
-    from ..ocv import is_lihv
-
     read = ""
     if chemistry is None and not is_lihv(None, top):
-        from .chemistry import chemistry_from_loads
-
-        loads = [(e, pack_cells(e, cells, None)) for e in ordered
-                 if e.get("kind") in ("discharge", "flight")]
-        chemistry, read = chemistry_from_loads(loads)
+        chemistry, read = read_from_loads or _chemistry_from_loads(ordered, cells)
     # a 4.2 V pack of no known chemistry reads through both generic curves' mean, their
     # difference carried in the interval (a LiPo curve read on an NMC cell: -27 %)
     prior = OcvCurve.unknown() if chemistry is None and not is_lihv(None, top) else \
@@ -758,25 +736,19 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
     # to 4.0 or 4.1 V, a storage charge) leaves the pack part-charged, whatever the pack's
     # first full discharge started from
     full_cell = charge_cell_V(chemistry, top)
+    curves = []
+    first_drop = None
+    for k, e, cap in fulls:
+        if not is_slow(e, cap):
+            continue
+        n = pack_cells(e, cells, chemistry)
+        if first_drop is None:
+            first_drop = checked_drop(ordered, k, e, n,
+                                      lambda c, n=n: _full_after(c, n, full_cell))
+        curves.append((k, learned_curve(dict(e, source=e.get("source")), cap, n, chemistry,
+                                        resistance_ohm=first_drop)))
     return PackContext(cells=cells, chemistry=chemistry, model=model, fulls=fulls,
                        curves=curves, prior=prior, full_cell_V=full_cell, label_Ah=label_Ah)
-
-
-def _rate_kinds(ordered: list[dict], out: list[EventHealth]) -> None:
-    """Full discharges much faster than the pack's slowest ones (a mission run to its
-    cutoff beside C/5 capacity tests) deliver less by the rate-capacity effect: their
-    coulomb count is a kind of estimate of its own. Rates are compared on one scale, the
-    pack's largest full discharge (a test at the same current on an aged pack is the
-    same test, however much less it delivers)."""
-    fulls = {k: h for k, h in enumerate(out) if h.full and h.capacity_Ah}
-    if not fulls:
-        return
-    scale = max(h.capacity_Ah for h in fulls.values())
-    rates = {k: float(ordered[k].get("mean_current_A") or 0.0) / scale for k in fulls}
-    slowest = min(rates.values())
-    for k, rate in rates.items():
-        if rate > (1.0 + SAME_RATE_SHARE) * slowest:
-            out[k].capacity_method = "coulomb count at a high rate"
 
 
 def highest_rest_cell_V(ordered: list[dict], cells: int | None, chemistry: str | None
@@ -787,6 +759,40 @@ def highest_rest_cell_V(ordered: list[dict], cells: int | None, chemistry: str |
     tops = [float(e["rest_voltage_V"]) / n for e, n in zip(ordered, counts)
             if e.get("rest_voltage_V") and e.get("kind") in ("discharge", "flight")]
     return max(tops) if tops else None
+
+
+def _classify(ordered: list[dict], counts: list[int], chemistry: str | None
+              ) -> list[EventHealth]:
+    """Each event's figures as logged, its full discharges measured (module docstring)."""
+    out: list[EventHealth] = []
+    for k, e in enumerate(ordered):
+        kind = e.get("kind", "discharge")
+        n_cells = counts[k]
+        full = is_full(dict(e, kind=kind), n_cells, chemistry)
+        charge = (e.get("details") or {}).get("charge") or {}
+        h = EventHealth(event_id=e.get("id") or k, source=e.get("source", ""),
+                        start=e.get("start_time"), kind=kind, cycle=e.get("cycle"),
+                        discharged_Ah=float(e.get("discharged_Ah") or 0.0), full=full,
+                        resistance_ohm=e.get("resistance_ohm"),
+                        charged_Ah=charge.get("charged_Ah"))
+        if e.get("resistance_low_ohm") is not None:
+            h.resistance_interval95 = [e["resistance_low_ohm"], e["resistance_high_ohm"]]
+        if full:
+            h.capacity_Ah, h.capacity_interval95 = full_capacity(e)
+            # a full discharge at a high rate (a mission run to its cutoff) delivers less
+            # than a slow one: a kind of estimate of its own
+            h.capacity_method = "coulomb count"
+            h.soc_start, h.soc_end = 1.0, 0.0
+        out.append(h)
+    return out
+
+
+def _chemistry_from_loads(ordered: list[dict], cells: int | None) -> tuple[str | None, str]:
+    """The chemistry the pack's loads from a rest read (:mod:`.chemistry`), with why."""
+    from .chemistry import chemistry_from_loads
+
+    return chemistry_from_loads([(e, pack_cells(e, cells, None)) for e in ordered
+                                 if e.get("kind") in ("discharge", "flight")])
 
 
 def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
@@ -811,29 +817,18 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
     from .cells import drift_flags
 
     ordered = order_events(events)
-    out: list[EventHealth] = []
     counts = _cell_counts(ordered, cells, chemistry)
-    for k, e in enumerate(ordered):
-        kind = e.get("kind", "discharge")
-        n_cells = counts[k]
-        full = is_full(dict(e, kind=kind), n_cells, chemistry)
-        charge = (e.get("details") or {}).get("charge") or {}
-        h = EventHealth(event_id=e.get("id") or k, source=e.get("source", ""),
-                        start=e.get("start_time"), kind=kind, cycle=e.get("cycle"),
-                        discharged_Ah=float(e.get("discharged_Ah") or 0.0), full=full,
-                        resistance_ohm=e.get("resistance_ohm"),
-                        charged_Ah=charge.get("charged_Ah"))
-        if e.get("resistance_low_ohm") is not None:
-            h.resistance_interval95 = [e["resistance_low_ohm"], e["resistance_high_ohm"]]
-        if full:
-            h.capacity_Ah, h.capacity_interval95 = full_capacity(e)
-            # a full discharge at a high rate (a mission run to its cutoff) delivers less
-            # than a slow one: a kind of estimate of its own
-            h.capacity_method = "coulomb count"
-            h.soc_start, h.soc_end = 1.0, 0.0
-        out.append(h)
-    _rate_kinds(ordered, out)
-    ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah)
+    out = _classify(ordered, counts, chemistry)
+    read = None
+    if chemistry is None and not any(h.full for h in out):
+        # no full discharge on a 4.2 V curve: the loads read the chemistry (a LiFePO4
+        # pack's full rest is empty there), and a LiFePO4 pack's events are classified again
+        read = _chemistry_from_loads(ordered, cells)
+        if read[0] == "lifepo4":
+            counts = _cell_counts(ordered, cells, read[0])
+            out = _classify(ordered, counts, read[0])
+    rate_kinds(ordered, out)
+    ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah, read)
     charges = [k for k, e in enumerate(ordered) if e.get("kind") == "charge"]
     added = charge_start_corrections([((ordered[k].get("details") or {}).get("charge") or {})
                                       .get("start") for k in charges])

@@ -8,7 +8,8 @@
   match a partial one best over the charge they share (the same stage of life, wherever
   the event sits in the order), their estimates weighted by the match.
 * :func:`learned_curve`: the pack's open-circuit voltage from a slow full discharge (the
-  loaded curve plus the settled drop, :func:`settled_drop`).
+  loaded curve plus the settled drop, :func:`settled_drop`, checked against the rests that
+  loads from full leave at a counted state of charge, :func:`rest_drop`).
 
 References
 ----------
@@ -22,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .estimates import OcvCurve
+from .estimates import LEARNED_CURVE_SD_CELL_V, OcvCurve
 
 #: Standard deviation of a voltage placed on the reference curve, per cell [V]:
 #: relaxation left after a rest, temperature and ageing since the reference.
@@ -207,6 +208,65 @@ def settled_drop(event: dict) -> float:
     return max(0.0, float(event["rest_voltage_V"]) - (v1 + (v1 - v2))) / mean_i
 
 
+#: Loads from full read by :func:`rest_drop` at most (the nearest after the discharge),
+#: and at least (fewer give no scatter to judge the reading by).
+REST_DROP_LOADS = 5
+REST_DROP_MIN = 3
+
+
+def rest_drop(event: dict, rests: list[tuple[float, float]]) -> tuple[float, float] | None:
+    """Resistance [ohm] a slow full discharge's load showed, read where its open-circuit
+    voltage is known, and the scatter of that reading between rests [ohm]: a load that
+    starts from full and leaves a relaxed rest after ``counted_Ah`` has the open-circuit
+    voltage ``relaxed_V`` there, and the slow discharge's loaded voltage at the same charge
+    drawn lies the drop below it (Plett 2015, ch. 2). ``rests`` holds ``(counted_Ah,
+    relaxed_V)`` pack pairs; the median over the first :data:`REST_DROP_LOADS` inside the
+    discharge's charge and their scatter (1.4826 x their median absolute deviation), None
+    with fewer than :data:`REST_DROP_MIN` (a scatter needs them).
+
+    Unlike :func:`settled_drop` it needs no open-circuit voltage near full: a curve that
+    falls steeply from full (LiFePO4 over its last per cent) puts that fall in the
+    settled drop's extrapolation, not here."""
+    curve = event["curve"]
+    q = np.asarray(curve["charge_Ah"], dtype=float)
+    v = np.asarray(curve["voltage_V"], dtype=float)
+    mean_i = float(event["mean_current_A"])
+    drops = np.array([(relaxed - float(np.interp(counted, q, v))) / mean_i
+                      for counted, relaxed in rests[:REST_DROP_LOADS]
+                      if 0.1 * q[-1] < counted < 0.9 * q[-1]]) if mean_i > 0 else np.array([])
+    if drops.size < REST_DROP_MIN:
+        return None
+    mid = float(np.median(drops))
+    return max(mid, 0.0), 1.4826 * float(np.median(np.abs(drops - mid)))
+
+
+def checked_drop(ordered: list[dict], position: int, event: dict, cells: int,
+                 ends_full) -> float:
+    """The slow full discharge ``event`` (at ``position`` in ``ordered``)'s settled drop
+    [ohm], or its drop read at the rests the next loads from full leave
+    (:func:`rest_drop`; ``ends_full(charge figures)`` says which charges end full) when the
+    two differ by more than the learned curve's error per cell and more than the rests'
+    own scatter: the settled drop's extrapolation takes a steep fall from full (LiFePO4)
+    for resistance, while rests that disagree among themselves (relaxation left, ageing
+    since) read nothing better."""
+    rests = []
+    for later in ordered[position + 1:]:
+        if len(rests) >= REST_DROP_LOADS:
+            break
+        d = later.get("details") or {}
+        before, after = d.get("rest_before") or {}, d.get("rest_after")
+        if later.get("kind") in ("discharge", "flight") and after and \
+                (later.get("rest_after_s") or 0) >= RELAXED_S and \
+                ends_full(before.get("after_charge")):
+            rests.append((float(d.get("counted_Ah") or 0.0), float(after["relaxed_V"])))
+    drop = settled_drop(event)
+    check = rest_drop(event, rests)
+    if check is None:
+        return drop
+    limit = max(LEARNED_CURVE_SD_CELL_V * cells / float(event["mean_current_A"]), check[1])
+    return check[0] if abs(check[0] - drop) > limit else drop
+
+
 def learned_curve(event: dict, capacity_Ah: float, cells: int, chemistry: str | None,
                   resistance_ohm: float | None = None) -> OcvCurve | None:
     """The pack's open-circuit voltage from one slow full discharge (see the module
@@ -231,8 +291,26 @@ def learned_curve(event: dict, capacity_Ah: float, cells: int, chemistry: str | 
                                    source=f"the pack's slow full discharge ({event.get('source')})")
 
 
-__all__ = ["ReferenceCurve", "partial_capacity", "curve_match", "matched_capacity",
-           "learned_curve", "is_slow", "settled_drop", "VOLTAGE_SD_CELL_V", "RELAXED_S",
+
+def rate_kinds(ordered: list[dict], out: list) -> None:
+    """Mark the full discharges of ``out`` (the events' EventHealth; ``ordered``: their
+    stored summaries) much faster than the pack's slowest ones (a mission run to its
+    cutoff beside C/5 capacity tests): they deliver less by the rate-capacity effect, and
+    their coulomb count is a kind of estimate of its own. Their currents are compared (a test at
+    the same current on an aged pack is the same test, however much less it delivers)."""
+    rates = {k: float(ordered[k].get("mean_current_A") or 0.0)
+             for k, h in enumerate(out) if h.full and h.capacity_Ah}
+    if not rates:
+        return
+    slowest = min(rates.values())
+    for k, rate in rates.items():
+        if rate > (1.0 + SAME_RATE_SHARE) * slowest:
+            out[k].capacity_method = "coulomb count at a high rate"
+
+
+__all__ = ["ReferenceCurve", "partial_capacity", "rate_kinds", "curve_match", "matched_capacity",
+           "learned_curve", "is_slow", "settled_drop", "rest_drop", "checked_drop", "REST_DROP_MIN",
+           "VOLTAGE_SD_CELL_V", "RELAXED_S",
            "MIN_SHARE", "MATCH_REFERENCES", "SLOW_C_RATE", "SETTLE_S"]
 
 
