@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import FitError
 from .family import fit_family, several_rates
-from .heldout import held_out_error
+from .heldout import start_held_out
 from .result import FitResult
 from .workers import fold_workers
 
@@ -140,14 +140,21 @@ def _holding(kw: dict, held: dict) -> dict:
 
 def fit_with_model_error(curves, model_error: bool = True, **kw) -> FitResult:
     """:func:`fit_family` plus, with several rates, its held-out model error."""
-    res = fit_family(curves, **kw)
-    if model_error and not kw.get("paper_mode"):
-        common = {k: kw[k] for k in ("cells_series", "strings_parallel", "fixed", "bounds",
-                                     "use_rest", "weighting", "cooling", "chemistry")
-                  if k in kw}
-        res.model_error = held_out_error(curves, model=res.model, battery=res.battery,
-                                         **common)
+    with fold_workers():
+        res, gather = _fit_and_start(curves, model_error, **kw)
+        res.model_error = gather()
     return res
+
+
+def _fit_and_start(curves, model_error: bool = True, **kw):
+    """:func:`fit_family`, and its held-out folds started (:func:`start_held_out`):
+    ``(result, gather)``, ``gather()`` the model error (None without one)."""
+    res = fit_family(curves, **kw)
+    if not model_error or kw.get("paper_mode"):
+        return res, lambda: res.model_error
+    common = {k: kw[k] for k in ("cells_series", "strings_parallel", "fixed", "bounds",
+                                 "use_rest", "weighting", "cooling", "chemistry") if k in kw}
+    return res, start_held_out(curves, model=res.model, battery=res.battery, **common)
 
 
 def fit_auto(curves, t_start, **kw) -> FitResult:
@@ -170,16 +177,19 @@ def fit_auto(curves, t_start, **kw) -> FitResult:
     # the linearised bootstrap costs little: every candidate gets it, no refit of the best
     linear = kw.get("bootstrap_method", "linearised") == "linearised"
     forms = candidate_forms(names, kw.get("fixed"), kw.get("bounds"))
+    gathers = {}
     with fold_workers():  # one set of workers for every candidate's held-out folds
         for label, (name, held) in forms.items():
             args = _holding(kw if linear else dict(kw, bootstrap=0, progress=None), held)
             if held and name in fits and args.get("start") is None:
                 # a simpler form starts from its family's fit (the same data)
                 args["start"] = fits[name].parameters.as_dict()
-            try:
-                fits[label] = fit_with_model_error(curves, model=name, **args)
+            try:  # the next candidate is fitted while this one's folds run
+                fits[label], gathers[label] = _fit_and_start(curves, model=name, **args)
             except FitError:
                 continue
+        for label, gather in gathers.items():
+            fits[label].model_error = gather()
             err = fits[label].model_error or {}
             scores[label] = selection_score(err.get("held_out_rms"), err.get("end_rms"),
                                             err.get("rate_rms"), len(curves))

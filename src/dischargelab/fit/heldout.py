@@ -78,10 +78,23 @@ def held_out_error(curves, *, model, battery=None, cells_series=1, strings_paral
         ``rate_capacity``, ``fitted_floor`` (the lower bound, [-] or None);
         ``source = "held-out"``.
     """
-    from ..uncertainty import EXTRAPOLATION_GROWTH, held_out_posterior
+    with fold_workers():
+        return start_held_out(curves, model=model, battery=battery,
+                              cells_series=cells_series, strings_parallel=strings_parallel,
+                              fixed=fixed, bounds=bounds, use_rest=use_rest,
+                              weighting=weighting, cooling=cooling, chemistry=chemistry)()
+
+
+def start_held_out(curves, *, model, battery=None, cells_series=1, strings_parallel=1,
+                   fixed=None, bounds=None, use_rest=True, weighting="equal",
+                   cooling="still-air", chemistry=None):
+    """:func:`held_out_error` in two halves: the folds are handed to the workers of an
+    active :func:`~dischargelab.fit.workers.fold_workers` (else fitted here and now) and the
+    rate-capacity check is run; the function returned gathers them into the same dict (a
+    caller fits the next candidate in between)."""
 
     if not several_rates(curves):
-        return None
+        return lambda: None
     common = dict(cells_series=cells_series, strings_parallel=strings_parallel, fixed=fixed,
                   bounds=bounds, use_rest=use_rest, weighting=weighting, model=model,
                   max_samples=FOLD_SAMPLES_PER_CURVE, cooling=cooling, chemistry=chemistry,
@@ -89,40 +102,46 @@ def held_out_error(curves, *, model, battery=None, cells_series=1, strings_paral
     if battery is not None:  # warm start from the full fit
         common["start"] = battery.parameters.as_dict()
     folds = []  # (k, ratio, whole-curve fold, curve-end fold or None), in curve order
-    with fold_workers():
-        for k, left in enumerate(curves):
-            rest = [c for j, c in enumerate(curves) if j != k]
-            whole = submit(_held_out_fold, rest, left, common)
-            t = left.time_s
-            keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
-            cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
-                   "current_A": left.current_A[keep]}
-            if left.temperature_C is not None:
-                cut["temperature_C"] = left.temperature_C[keep]
-            try:
-                shortened = _replace(left, **cut)
-            except DataError:
-                end = None
-            else:
-                end = submit(_held_out_fold,
-                             [shortened if j == k else c for j, c in enumerate(curves)],
-                             left, common)
-            folds.append((k, current_ratio(left, rest), whole, end))
-        # the full fit's own check runs here while the folds run in the workers
-        rate = None if battery is None else rate_capacity_error(battery, curves)
-        errors, ratios, names, ends, end_ratios, pooled = [], [], [], [], [], []
-        for k, ratio, whole, end in folds:
-            error = whole.result()
-            if error is not None:
-                errors.append(100.0 * error)
-                ratios.append(ratio)
-                names.append(curves[k].name)
-                if several_rates([c for j, c in enumerate(curves) if j != k]):
-                    pooled.append(error / (1.0 + EXTRAPOLATION_GROWTH * np.log(ratio)))
-            error = None if end is None else end.result()
-            if error is not None:
-                ends.append(error)
-                end_ratios.append(ratio)
+    for k, left in enumerate(curves):
+        rest = [c for j, c in enumerate(curves) if j != k]
+        whole = submit(_held_out_fold, rest, left, common)
+        t = left.time_s
+        keep = t <= t[0] + (1.0 - HELD_OUT_TAIL) * (t[-1] - t[0])
+        cut = {"time_s": t[keep], "voltage_V": left.voltage_V[keep],
+               "current_A": left.current_A[keep]}
+        if left.temperature_C is not None:
+            cut["temperature_C"] = left.temperature_C[keep]
+        try:
+            shortened = _replace(left, **cut)
+        except DataError:
+            end = None
+        else:
+            end = submit(_held_out_fold,
+                         [shortened if j == k else c for j, c in enumerate(curves)],
+                         left, common)
+        folds.append((k, current_ratio(left, rest), whole, end))
+    # the full fit's own check runs here while the folds run in the workers
+    rate = None if battery is None else rate_capacity_error(battery, curves)
+    return lambda: _gathered(curves, folds, rate)
+
+
+def _gathered(curves, folds, rate) -> dict | None:
+    """:func:`held_out_error`'s dict from the folds started by :func:`start_held_out`."""
+    from ..uncertainty import EXTRAPOLATION_GROWTH, held_out_posterior
+
+    errors, ratios, names, ends, end_ratios, pooled = [], [], [], [], [], []
+    for k, ratio, whole, end in folds:
+        error = whole.result()
+        if error is not None:
+            errors.append(100.0 * error)
+            ratios.append(ratio)
+            names.append(curves[k].name)
+            if several_rates([c for j, c in enumerate(curves) if j != k]):
+                pooled.append(error / (1.0 + EXTRAPOLATION_GROWTH * np.log(ratio)))
+        error = None if end is None else end.result()
+        if error is not None:
+            ends.append(error)
+            end_ratios.append(ratio)
     between = [] if rate is None else [e / 100.0 for e in rate["between_pct"]
                                        if np.isfinite(e)]
     if not errors and not ends and not between:
