@@ -27,10 +27,10 @@ def _fingerprint(res):
 def test_workers_change_nothing(runs, monkeypatch):
     monkeypatch.setenv("DISCHARGELAB_WORKERS", "2")
     assert workers.usable_workers() == 2
-    parallel = dl.fit(runs, model="shepherd-thermal", bootstrap=0)
+    parallel = dl.fit(runs, bootstrap=0)  # auto: every candidate's folds, pipelined
     monkeypatch.setenv("DISCHARGELAB_WORKERS", "1")
     assert workers.usable_workers() == 1
-    alone = dl.fit(runs, model="shepherd-thermal", bootstrap=0)
+    alone = dl.fit(runs, bootstrap=0)
     assert parallel.model_error["source"] == "held-out"
     assert _fingerprint(parallel) == _fingerprint(alone)
 
