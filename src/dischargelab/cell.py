@@ -94,6 +94,9 @@ class CellParameters(Mapping):
 
     __hash__ = None
 
+    def __reduce__(self):  # pickled as its values (a worker process gets a copy)
+        return (self.__class__, (dict(self._values),))
+
     def as_dict(self) -> dict[str, float]:
         """Parameters as ``{name: float}``."""
         return {name: float(value) for name, value in self._values.items()}

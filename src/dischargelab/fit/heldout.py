@@ -120,13 +120,14 @@ def start_held_out(curves, *, model, battery=None, cells_series=1, strings_paral
                          [shortened if j == k else c for j, c in enumerate(curves)],
                          left, common)
         folds.append((k, current_ratio(left, rest), whole, end))
-    # the full fit's own check runs here while the folds run in the workers
-    rate = None if battery is None else rate_capacity_error(battery, curves)
-    return lambda: _gathered(curves, folds, rate)
+    # the full fit's own check, a task like the folds
+    rate = None if battery is None else submit(rate_capacity_error, battery, curves)
+    return lambda: _gathered(curves, folds, None if rate is None else rate.result())
 
 
 def _gathered(curves, folds, rate) -> dict | None:
-    """:func:`held_out_error`'s dict from the folds started by :func:`start_held_out`."""
+    """:func:`held_out_error`'s dict from the folds started by :func:`start_held_out` and
+    the rate-capacity check ``rate``."""
     from ..uncertainty import EXTRAPOLATION_GROWTH, held_out_posterior
 
     errors, ratios, names, ends, end_ratios, pooled = [], [], [], [], [], []
