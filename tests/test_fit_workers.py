@@ -58,3 +58,12 @@ def test_worker_errors_reach_the_caller(monkeypatch):
         with pytest.raises(ZeroDivisionError):
             workers.submit(divmod, 1, 0).result()
     assert workers._POOL.get() is None
+
+
+def test_a_battery_reaches_a_worker_whole(runs):
+    """What the workers are handed (a fitted battery) pickles to an equal copy."""
+    import pickle
+
+    battery = dl.fit(runs, model="shepherd", bootstrap=0).battery
+    copy = pickle.loads(pickle.dumps(battery))
+    assert copy.parameters == battery.parameters and copy.model == battery.model
