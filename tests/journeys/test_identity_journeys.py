@@ -199,3 +199,20 @@ def test_a_bench_cell_flies_in_the_pack_its_mission_was_planned_for(capsys, tmp_
     assert (doc["cells_series"], doc["strings_parallel"]) == (planned.cells_series,
                                                               planned.strings_parallel)
     assert planned.cells_series == 4
+
+
+def test_a_pack_that_cannot_take_off_says_so_in_one_way(capsys, tmp_path, bundled_data):
+    """A single 1C cell on paper-table5 (4S, a 50 A take-off): it cannot take off. The
+    table showed "nan V" for voltages never reached, and the extrapolation warning said
+    "far above the fitted currents" beside a ratio of x1.0 (no charge drawn to weigh)."""
+    cell = tmp_path / "cell.json"
+    code, _, err = run(capsys, "fit", bundled_data / "Q30_S001_1C.csv", "--columns",
+                       "time_s=0,current_A=1,voltage_V=2,temperature_C=4", "--model",
+                       "shepherd", "--bootstrap", "0", "-o", cell)
+    assert code == 0, err
+    code, out, err = run(capsys, "endurance", cell, "paper-table5", "--draws", "0")
+    assert code == 0, err
+    assert "cannot fly" in out + err and "nan" not in out.lower()
+    ratio = [line for line in (out + err).splitlines()
+             if "far above the fitted currents" in line]
+    assert ratio and "(x1.0," not in ratio[0]
