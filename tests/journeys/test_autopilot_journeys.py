@@ -11,34 +11,20 @@ import json
 import os
 import shutil
 import sqlite3
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 import dischargelab as dl
+from cli_run import command as cli
+from cli_run import stored_rows
 
 CELL_C = "samsung30q_ageing_cellC"
 FLIGHTS = "flight_logs/ina3221_fpv_4s"
 
 
-def cli(*args, timeout=900) -> subprocess.CompletedProcess:
-    """``python -m dischargelab ARGS`` as a user runs it; fails on a non-zero exit."""
-    done = subprocess.run([sys.executable, "-m", "dischargelab", *map(str, args)],
-                          capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, "COLUMNS": "200",
-                               "PYTHONPATH": str(Path(dl.__file__).parents[1])})
-    assert done.returncode == 0, done.stderr[-3000:] + done.stdout[-3000:]
-    return done
 
 
-def stored_rows(db: Path) -> dict:
-    """Every row of every table of a SQLite logbook, in a fixed order."""
-    with sqlite3.connect(db) as conn:
-        tables = [r[0] for r in conn.execute(
-            "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
-        return {t: sorted(map(repr, conn.execute(f'SELECT * FROM "{t}"'))) for t in tables}
 
 
 def test_autopilot_params_from_a_pack_leaves_the_logbook_unchanged(tmp_path, shared_data):

@@ -12,30 +12,22 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import dischargelab as dl
+from cli_run import command
 from dischargelab.examples import EXAMPLE_COLUMNS, example_files
 
 pytestmark = pytest.mark.slow
 
 
-def cli(*args, cwd, ok=True, timeout=600) -> subprocess.CompletedProcess:
-    """``python -m dischargelab ARGS`` in ``cwd`` as a user runs it."""
-    done = subprocess.run([sys.executable, "-m", "dischargelab", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd, timeout=timeout,
-                          env={**os.environ, "COLUMNS": "200",
-                               "DISCHARGELAB_DB": str(Path(cwd) / "default.db"),
-                               "PYTHONPATH": str(Path(dl.__file__).parents[1])})
-    if ok:
-        assert done.returncode == 0, done.stderr[-3000:] + done.stdout[-3000:]
-    return done
+def cli(*args, cwd, ok=True, timeout=600):
+    """``python -m dischargelab ARGS`` in ``cwd`` as a user runs it (its own logbook)."""
+    return command(*args, cwd=cwd, env={"DISCHARGELAB_DB": str(Path(cwd) / "default.db")},
+                   check=ok, timeout=timeout)
 
 
 def bench(path: Path) -> dict[str, np.ndarray]:

@@ -231,15 +231,20 @@ def test_a_small_full_cell_without_step_numbers_gives_its_loads_as_events(capsys
         assert e["discharged_Ah"] == pytest.approx(capacity_Ah, rel=0.02)
 
 
-def test_one_efc_rendering_in_every_view(capsys, tmp_path, shared_data):
-    """Two telemetry logs of a pack: the EFC of `logbook packs` is the one the health
-    lines give for capacity today (it read "EFC 0" beside "0.5" in the list)."""
+def telemetry_pack(capsys, tmp_path, shared_data):
+    """A pack of two MAVLink telemetry logs: its logbook and its `logbook packs` row."""
     db = tmp_path / "lb.sqlite"
     tlogs = shared_data / "flight_logs" / "mavlink_tlog"
     add(capsys, db, tlogs / "thayer_rural.tlog", tlogs / "olivieri_20211202-132614.tlog")
     code, out, err = run(capsys, "logbook", "packs", "--db", db, "--json")
     assert code == 0, err
-    row = json.loads(out)["rows"][0]
+    return db, json.loads(out)["rows"][0]
+
+
+def test_one_efc_rendering_in_every_view(capsys, tmp_path, shared_data):
+    """Two telemetry logs of a pack: the EFC of `logbook packs` is the one the health
+    lines give for capacity today (it read "EFC 0" beside "0.5" in the list)."""
+    db, row = telemetry_pack(capsys, tmp_path, shared_data)
     code, text, err = run(capsys, "logbook", "health", "P", "--db", db)
     assert code == 0, err
     shown = row["text"]["efc"]
@@ -251,12 +256,7 @@ def test_flight_time_carries_the_capacity_band(capsys, tmp_path, shared_data):
     """A pack known only from two telemetry logs: its capacity today is known to about
     +-50 %, and the flight time's band says so (it gave +-3 % from the model error
     alone, as if the capacity were certain)."""
-    db = tmp_path / "lb.sqlite"
-    tlogs = shared_data / "flight_logs" / "mavlink_tlog"
-    add(capsys, db, tlogs / "thayer_rural.tlog", tlogs / "olivieri_20211202-132614.tlog")
-    code, out, err = run(capsys, "logbook", "packs", "--db", db, "--json")
-    assert code == 0, err
-    row = json.loads(out)["rows"][0]
+    db, row = telemetry_pack(capsys, tmp_path, shared_data)
     lo_c, hi_c = row["capacity_interval95"]
     code, out, err = run(capsys, "endurance", "--pack", "P", "multirotor-hover", "--db", db,
                          "--json")

@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import html
 import json
-import os
 import re
-import sqlite3
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 import dischargelab as dl
+from cli_run import command as cli
+from cli_run import stored_rows
 from dischargelab.cell import CUTOFF_CELL_VOLTAGE_V
 from dischargelab.formatting import duration, mission_text
 
@@ -33,27 +31,10 @@ FLIGHTS = "flight_logs/ina3221_fpv_4s"
 HOVER = "multirotor-hover"
 
 
-def run(*args, timeout=900) -> subprocess.CompletedProcess:
-    """``python -m dischargelab ARGS`` as a user runs it."""
-    return subprocess.run([sys.executable, "-m", "dischargelab", *map(str, args)],
-                          capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, "COLUMNS": "200",
-                               "PYTHONPATH": str(Path(dl.__file__).parents[1])})
 
 
-def cli(*args, timeout=900) -> subprocess.CompletedProcess:
-    """:func:`run`, failing on a non-zero exit."""
-    done = run(*args, timeout=timeout)
-    assert done.returncode == 0, done.stderr[-3000:] + done.stdout[-3000:]
-    return done
 
 
-def stored_rows(db: Path) -> dict:
-    """Every row of every table of a SQLite logbook, in a fixed order."""
-    with sqlite3.connect(db) as conn:
-        tables = [r[0] for r in conn.execute(
-            "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
-        return {t: sorted(map(repr, conn.execute(f'SELECT * FROM "{t}"'))) for t in tables}
 
 
 def facts(page: str) -> dict[str, str]:
@@ -144,7 +125,7 @@ def test_report_of_a_pack_says_in_one_line_what_is_missing(tmp_path):
                                    "--capacity AH"]),
              (("hacker-4100-4s-lifepo4", "--pack", "bare"), ["not both"])]
     for args, said in cases:
-        done = run("report", *args, "--db", db, "-o", out)
+        done = cli("report", *args, "--db", db, "-o", out, check=False)
         assert done.returncode == 2, done.stderr
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr

@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import html
 import json
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 import dischargelab as dl
+from cli_run import command as cli
 from dischargelab.formatting import interval, pack_text
 
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
@@ -26,14 +24,6 @@ CELL_C = "samsung30q_ageing_cellC"
 CYCLES = (1, 100, 200, 300)
 
 
-def cli(*args, cwd=None, timeout=600) -> subprocess.CompletedProcess:
-    """``python -m dischargelab ARGS`` as a user runs it; fails on a non-zero exit."""
-    done = subprocess.run([sys.executable, "-m", "dischargelab", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd, timeout=timeout,
-                          env={**os.environ, "COLUMNS": "200",
-                               "PYTHONPATH": str(Path(dl.__file__).parents[1])})
-    assert done.returncode == 0, done.stderr[-3000:] + done.stdout[-3000:]
-    return done
 
 
 def cards(page: str) -> list[tuple[str, str, str]]:
