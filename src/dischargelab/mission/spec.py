@@ -526,17 +526,13 @@ def _battery(ctx, bat_table, battery, base_dir) -> Battery:
     return load_battery(src)
 
 
-def _source_battery(src: str, base_dir):
-    """The battery a mission's ``[battery] source`` names (None when it cannot be read)."""
-    from ..model import PRESETS
-
-    if src in PRESETS:
-        return PRESETS[src]
-    candidate = Path(base_dir or ".") / src
-    if not candidate.is_file():
+def _source_battery(ctx, bat_table, base_dir):
+    """The battery ``[battery] source`` names, found as :func:`_battery` finds it, or None
+    without a readable one (a battery given instead flies; the source lends its layout)."""
+    if not isinstance(bat_table.get("source"), str):
         return None
     try:
-        return load_battery(candidate)
+        return _battery(ctx, bat_table, None, base_dir)
     except DataError:
         return None
 
@@ -570,13 +566,12 @@ def parse_mission(data: dict, *, battery=None, base_dir=None, source: str = "",
         raise ctx.error("", "name must be a string")
     bat_table = data.get("battery", {})
     _check_keys(ctx, "[battery]", bat_table, BATTERY_KEYS)
-    battery = _battery(ctx, bat_table, battery, base_dir)
+    given, battery = battery, _battery(ctx, bat_table, battery, base_dir)
     where = f"{name if not source else Path(source).name} [battery]"
     chem = bat_table.get("chemistry")
     series = _integer(ctx, "[battery]", bat_table, "series")
     parallel = _integer(ctx, "[battery]", bat_table, "parallel")
-    planned = _source_battery(bat_table["source"], base_dir) \
-        if isinstance(bat_table.get("source"), str) else None
+    planned = battery if given is None else _source_battery(ctx, bat_table, base_dir)
     if planned is not None:  # the pack the mission was planned for: defaults, as its table
         chem = chem or planned.chemistry
         if series is None and parallel is None and \
