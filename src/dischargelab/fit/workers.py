@@ -43,10 +43,11 @@ def fold_workers():
     """Worker processes for :func:`submit` inside the ``with`` block (none when
     :func:`usable_workers` is 1; an active pool is reused). They are forked at once,
     while this is the only thread (a caller may start a progress display after)."""
-    if _POOL.get() is not None or usable_workers() < 2:
+    workers = usable_workers()
+    if _POOL.get() is not None or workers < 2:
         yield
         return
-    pool = ProcessPoolExecutor(max_workers=usable_workers(),
+    pool = ProcessPoolExecutor(max_workers=workers,
                                mp_context=multiprocessing.get_context("fork"),
                                initializer=_ignore_interrupt)
     pool.submit(int).result()  # forks every worker now (the fork start method)

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import LogbookError
 from .health import EventHealth
-from .trend import Smoothed
+from .trend import Smoothed, sd_from_interval
 
 #: Default end of life: this share of the reference capacity.
 DEFAULT_EOL = 0.8
@@ -401,7 +401,7 @@ class Pack:
         band = self.capacity_interval95
         if not self.capacity_Ah or not band or any(b is None for b in band):
             return None
-        return max(0.0, (float(band[1]) - float(band[0])) / (2.0 * 1.96 * self.capacity_Ah))
+        return float(sd_from_interval(*band)) / self.capacity_Ah
 
     def _note(self) -> str:
         from .today import figures_note
@@ -646,8 +646,9 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed) -> list[str]:
     discharge, and on the charge it has not seen."""
     last = max(e.efc for e in with_cap)
     anchor = _anchor(with_cap)
-    notes = _unseen_depth_notes(with_cap, anchor)
-    if not any(estimate_kind(e) == REFERENCE_KIND for e in with_cap):
+    tested = any(estimate_kind(e) == REFERENCE_KIND for e in with_cap)
+    notes = _unseen_depth_notes(with_cap, anchor, tested)
+    if not tested:
         return ["capacity today: no slow full discharge yet; its scale rests on "
                 f"{len({estimate_kind(e) for e in with_cap})} kind(s) of estimate whose "
                 "offsets are not measured, and the band carries them (a full discharge "
@@ -668,11 +669,11 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed) -> list[str]:
 UNSEEN_BELOW_SOC = 0.3
 
 
-def _unseen_depth_notes(with_cap: list[EventHealth], anchor: float) -> list[str]:
-    """A note when every estimate since ``anchor`` [EFC] (the last slow full discharge; all
-    of them without one) stopped above :data:`UNSEEN_BELOW_SOC`: the charge below is
-    extrapolated, not measured."""
-    tested = any(estimate_kind(e) == REFERENCE_KIND for e in with_cap)
+def _unseen_depth_notes(with_cap: list[EventHealth], anchor: float, tested: bool
+                        ) -> list[str]:
+    """A note when every estimate since ``anchor`` [EFC] (the last slow full discharge, when
+    ``tested``; all of them without one) stopped above :data:`UNSEEN_BELOW_SOC`: the charge
+    below is extrapolated, not measured."""
     ends = [e.soc_end for e in with_cap if e.efc is not None and e.soc_end is not None
             and (e.efc > anchor or not tested) and estimate_kind(e) != REFERENCE_KIND]
     if not ends or min(ends) <= UNSEEN_BELOW_SOC:

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import LogbookError
 from ..formatting import quantity, quantity_interval
+from .trend import sd_from_interval
 
 #: Pack resistance per cell assumed when no event measured one [ohm]: the ``ecm``
 #: family's default start.
@@ -85,7 +86,7 @@ def prior_battery(name: str, chemistry: str, cells: int, capacity_Ah: float,
         variance[fam.names.index("C_Ah")] = (capacity_sd * capacity_Ah) ** 2
     band = resistance_interval95
     if resistance_ohm is not None and band and None not in band:
-        variance[fam.names.index("R0_ohm")] = ((band[1] - band[0]) / (2 * 1.96 * cells)) ** 2
+        variance[fam.names.index("R0_ohm")] = (float(sd_from_interval(*band)) / cells) ** 2
     return Battery(parameters=CellParameters.from_dict(values, fam.names), cells_series=cells,
                    covariance=np.diag(variance) if np.any(variance) else None,
                    name=f"{name} (today, {chemistry} prior)", chemistry=chemistry,
