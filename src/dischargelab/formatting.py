@@ -183,7 +183,6 @@ def pack_text(row: dict) -> dict:
     return out
 
 
-
 def runs_label(names) -> str:
     """The runs a battery was fitted on, in one label: ``"a.csv, b.csv"``, with the steps of
     one tester file together (``"maccor_001 steps 7, 12, 17"`` for ``"maccor_001 step 7"``...)."""

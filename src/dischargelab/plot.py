@@ -23,11 +23,11 @@ if TYPE_CHECKING:
     from .flight import FlightReport
 
 
-
 def _wrapped(title: str, width: int = 80) -> str:
     """A title broken into lines of at most ``width`` characters (a long battery name, such
     as the list of the runs it was fitted on, would run off the figure)."""
     return "\n".join(textwrap.wrap(title, width)) or title
+
 
 def pyplot():
     """matplotlib.pyplot, with the Agg backend when there is no display."""
@@ -132,7 +132,7 @@ def plot_fit(result, ax=None, x: str = "charge"):
     ax.set_ylabel(f"pack voltage [V] ({result.cells_series}S{result.strings_parallel}P)")
     # wrapped between parameters (ecm names many); no-break spaces hold each one together
     title = f"{_fit_title(result)}   RMSE\u00a0{result.rmse_V * 1000:.1f}\u00a0mV/cell"
-    ax.set_title("\n".join(textwrap.wrap(title, 95)), fontsize=9)
+    ax.set_title(_wrapped(title, 95), fontsize=9)
     ax.grid(alpha=0.3)
     res_ax.grid(alpha=0.3)
     ax.legend(fontsize=8, ncol=2 if len(result.curves) > 2 else 1)

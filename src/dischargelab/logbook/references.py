@@ -291,13 +291,13 @@ def learned_curve(event: dict, capacity_Ah: float, cells: int, chemistry: str | 
                                    source=f"the pack's slow full discharge ({event.get('source')})")
 
 
-
 def rate_kinds(ordered: list[dict], out: list) -> None:
     """Mark the full discharges of ``out`` (the events' EventHealth; ``ordered``: their
     stored summaries) much faster than the pack's slowest ones (a mission run to its
     cutoff beside C/5 capacity tests): they deliver less by the rate-capacity effect, and
-    their coulomb count is a kind of estimate of its own. Their currents are compared (a test at
-    the same current on an aged pack is the same test, however much less it delivers)."""
+    their coulomb count is a kind of estimate of its own. Their currents are compared (a
+    test at the same current on an aged pack is the same test, however much less it
+    delivers)."""
     rates = {k: float(ordered[k].get("mean_current_A") or 0.0)
              for k, h in enumerate(out) if h.full and h.capacity_Ah}
     if not rates:
@@ -308,10 +308,10 @@ def rate_kinds(ordered: list[dict], out: list) -> None:
             out[k].capacity_method = "coulomb count at a high rate"
 
 
-__all__ = ["ReferenceCurve", "partial_capacity", "rate_kinds", "curve_match", "matched_capacity",
-           "learned_curve", "is_slow", "settled_drop", "rest_drop", "checked_drop", "REST_DROP_MIN",
-           "VOLTAGE_SD_CELL_V", "RELAXED_S",
-           "MIN_SHARE", "MATCH_REFERENCES", "SLOW_C_RATE", "SETTLE_S"]
+__all__ = ["ReferenceCurve", "partial_capacity", "rate_kinds", "curve_match",
+           "matched_capacity", "learned_curve", "is_slow", "settled_drop", "rest_drop",
+           "checked_drop", "REST_DROP_MIN", "VOLTAGE_SD_CELL_V", "RELAXED_S", "MIN_SHARE",
+           "MATCH_REFERENCES", "SLOW_C_RATE", "SETTLE_S"]
 
 
 #: A full discharge is laid on a run to empty when their mean currents agree within this
