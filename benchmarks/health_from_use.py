@@ -77,7 +77,7 @@ def capacity_now(events) -> tuple[float | None, float | None]:
     from dischargelab.logbook.results import capacity_now as now_of
 
     now = now_of([e for e in events if e.capacity_Ah is not None and not e.outlier
-                  and e.efc is not None])
+                  and e.efc is not None], per_event=events)
     if now is None:
         return None, None
     low, high = now.interval95()

@@ -266,7 +266,8 @@ def blocks(db: Path, truth: list[dict]) -> list[dict]:
         if k + 1 >= len(truth):
             break
         now = capacity_now([e for e in so_far if e.capacity_Ah is not None
-                            and not e.outlier and e.efc is not None])
+                            and not e.outlier and e.efc is not None],
+                           per_event=so_far)
         if now is None:
             out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": None,
                         "low": None, "high": None, "why": "no estimate"})
@@ -274,7 +275,8 @@ def blocks(db: Path, truth: list[dict]) -> list[dict]:
         low, high = now.interval95()
         out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": now.value_Ah,
                     "low": low, "high": high, "why": "", "trend_sd": now.trend_sd_Ah,
-                    "drift_unit": now.drift_unit_Ah, "quantile": now.quantile})
+                    "drift_unit": now.drift_unit_Ah, "quantile": now.quantile,
+                    "rise": now.rise, "seen_fade": now.seen_fade})
     return out
 
 
@@ -294,33 +296,42 @@ def summary(name: str, rows: list[dict]) -> str:
 #: Drift shares tried by the calibration (results.DRIFT_SHARE).
 SHARES = np.round(np.arange(0.0, 2.01, 0.05), 2)
 
+#: Hidden fade per unit of resistance rise tried (results.HIDDEN_FADE_PER_RISE).
+PER_RISE = np.round(np.arange(0.0, 0.301, 0.01), 2)
 
-def needed_share(rows: pd.DataFrame, coverage: float = 0.9) -> float:
-    """The smallest drift share whose band holds the next test in ``coverage`` of the
-    blocks (inf when none does)."""
+
+def _held(got: pd.DataFrame, share: float, per_rise: float) -> pd.Series:
+    """Whether each block's band holds the next test at ``share`` and ``per_rise``."""
+    low, high = _band(got, share, per_rise)
+    return (low <= got["truth_Ah"]) & (got["truth_Ah"] <= high)
+
+
+def needed(rows: pd.DataFrame, tried, held, coverage: float = 0.9) -> float:
+    """The smallest of ``tried`` whose band (``held(blocks, value)``) holds the next test
+    in ``coverage`` of the blocks (inf when none does)."""
     got = rows.dropna(subset=["now_Ah"])
     if got.empty:
         return 0.0
-    for share in SHARES:
-        sd = np.hypot(got["trend_sd"], share * got["drift_unit"])
-        held = (got["now_Ah"] - got["truth_Ah"]).abs() <= got["quantile"] * sd
-        if held.mean() >= coverage:
-            return float(share)
+    for value in tried:
+        if held(got, value).mean() >= coverage:
+            return float(value)
     return float("inf")
 
 
 def calibration(rows: pd.DataFrame) -> None:
     """The drift share each condition needs, the share chosen without it (the largest
     the other synthetic conditions need) and the coverage that gives it; each real cell
-    checked at the share the other cell needs, each PyBaMM life at the share the engine's
-    lives need."""
+    checked at the share the other cell needs. Then the hidden fade per resistance rise
+    each condition needs at the share in use, chosen for each PyBaMM life on the other
+    PyBaMM lives, the rest checked at the value in use."""
     if rows.empty or "drift_unit" not in rows:
         return
-    from dischargelab.logbook.results import DRIFT_SHARE
+    from dischargelab.logbook.results import DRIFT_SHARE, HIDDEN_FADE_PER_RISE
 
-    need = {c: needed_share(g) for c, g in rows.groupby("condition", sort=False)}
+    groups = dict(list(rows.groupby("condition", sort=False)))
+    need = {c: needed(g, SHARES, lambda b, v: _held(b, v, 0.0)) for c, g in groups.items()}
     synthetic = [c for c in need if c in SYNTHETIC]
-    print(f"\n## The drift share (in use: {DRIFT_SHARE})\n")
+    print(f"\n## The drift share (in use: {DRIFT_SHARE}; no hidden fade)\n")
     print("| condition | needs | chosen without it | band holds the test at that share |")
     print("|---|---|---|---|")
     for c, n in need.items():
@@ -334,10 +345,34 @@ def calibration(rows: pd.DataFrame) -> None:
             print(f"| {c} | {n:.2f} | - | - |")
             continue
         chosen = max(others)
-        got = rows[(rows["condition"] == c)].dropna(subset=["now_Ah"])
-        sd = np.hypot(got["trend_sd"], chosen * got["drift_unit"])
-        held = ((got["now_Ah"] - got["truth_Ah"]).abs() <= got["quantile"] * sd).mean()
+        held = _held(groups[c].dropna(subset=["now_Ah"]), chosen, 0.0).mean()
         print(f"| {c} | {n:.2f} | {chosen:.2f} | {held:.0%} |")
+    need = {c: needed(g, PER_RISE, lambda b, v: _held(b, DRIFT_SHARE, v))
+            for c, g in groups.items()}
+    pybamm = [c for c in need if c in PYBAMM]
+    print(f"\n## The hidden fade per resistance rise (in use: {HIDDEN_FADE_PER_RISE})\n")
+    print("| condition | needs | chosen without it | band holds the test | median half "
+          "width (none / in use) |")
+    print("|---|---|---|---|---|")
+    for c, n in need.items():
+        got = groups[c].dropna(subset=["now_Ah"])
+        others = [need[o] for o in pybamm if o != c]
+        chosen = max(others) if c in PYBAMM and others else HIDDEN_FADE_PER_RISE
+        widths = []
+        for v in (0.0, HIDDEN_FADE_PER_RISE):
+            lo, hi = _band(got, DRIFT_SHARE, v)
+            widths.append(f"{np.median(50 * (hi - lo) / got['now_Ah']):.1f} %")
+        print(f"| {c} | {n:.2f} | {chosen:.2f} | {_held(got, DRIFT_SHARE, chosen).mean():.0%}"
+              f" | {' / '.join(widths)} |")
+
+
+def _band(got: pd.DataFrame, share: float, per_rise: float):
+    """Each block's 95 % band at ``share`` and ``per_rise`` (as results.CapacityNow)."""
+    rise = got["rise"] if "rise" in got else 0.0
+    seen = got["seen_fade"] if "seen_fade" in got else 0.0
+    hidden = np.clip(per_rise * rise - seen, 0.0, None) * got["now_Ah"]
+    sd = np.sqrt(got["trend_sd"] ** 2 + (share * got["drift_unit"]) ** 2 + hidden ** 2)
+    return got["now_Ah"] - got["quantile"] * sd, got["now_Ah"] + got["quantile"] * sd
 
 
 def main(argv=None) -> None:

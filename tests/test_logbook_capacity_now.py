@@ -137,3 +137,48 @@ def test_a_chemistry_not_known_carries_both_curves_in_the_reading():
     assert soc == pytest.approx(0.3, abs=0.05)
     assert sd > 3 * soc_reading(lipo, reading, 3)[1]
     assert unknown.sd_at(1.0) < 0.03 and unknown.sd_at(0.3) > 0.1
+
+
+def _hiding_life(fade_seen: float):
+    """A life whose charges read capacity through a curve that hides the fade: the
+    capacity estimates fall by ``fade_seen`` over 60 EFC while the resistance doubles."""
+    rng = np.random.default_rng(2)
+    events = [_event(0, 0.0, 3.0, "coulomb count", "discharge", 0.005)]
+    for k, x in enumerate(np.linspace(1.0, 60.0, 40), start=1):
+        e = _event(k, float(x), 3.0 * (1 - fade_seen * x / 60) + rng.normal(0, 0.005),
+                   "rests before and after (charge ends full)")
+        e.resistance_ref_ohm = 0.03 * (1 + x / 60)
+        e.resistance_ref_interval95 = [0.9 * e.resistance_ref_ohm, 1.1 * e.resistance_ref_ohm]
+        events.append(e)
+    return events
+
+
+def test_a_resistance_that_doubles_while_the_estimates_show_no_fade_widens_the_band():
+    from dischargelab.logbook.results import (
+        HIDDEN_FADE_PER_RISE,
+        _scale_notes,
+        hidden_fade,
+        resistance_rise,
+    )
+
+    events = _hiding_life(0.0)
+    assert resistance_rise(events, 0.0, [60.0])[0] == pytest.approx(0.9, abs=0.02)
+    alone = capacity_now(events)
+    now = capacity_now(events, per_event=events)
+    assert now.rise == pytest.approx(0.9, abs=0.02)
+    low, high = now.interval95()
+    # a pack that lost 12 % below the charge its events swing through: held by the band
+    assert low < 0.88 * 3.0 < high
+    assert not alone.interval95()[0] < 0.88 * 3.0
+    hidden = (HIDDEN_FADE_PER_RISE * now.rise - now.seen_fade) * now.value_Ah
+    assert (high - low) / 2 / now.quantile == pytest.approx(np.sqrt(
+        now.trend_sd_Ah ** 2 + (DRIFT_SHARE * now.drift_unit_Ah) ** 2 + hidden ** 2))
+    trend = capacity_over_life([e for e in events if e.capacity_Ah], per_event=events)
+    assert trend.at(60.0)[1][0] > 2 * capacity_over_life(events).at(60.0)[1][0]
+    notes = _scale_notes(events, trend, events)
+    assert any("resistance rose" in n and "may not show" in n for n in notes)
+    # estimates that show the fade such a rise goes with: nothing hidden, no note
+    seen = _hiding_life(0.15)
+    trend = capacity_over_life(seen, per_event=seen)
+    assert hidden_fade(trend, seen, 0.0, [60.0])[0] == 0.0
+    assert not any("resistance rose" in n for n in _scale_notes(seen, trend, seen))
