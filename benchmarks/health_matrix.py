@@ -367,12 +367,14 @@ def calibration(rows: pd.DataFrame) -> None:
 
 
 def _band(got: pd.DataFrame, share: float, per_rise: float):
-    """Each block's 95 % band at ``share`` and ``per_rise`` (as results.CapacityNow)."""
+    """Each block's 95 % band at ``share`` and ``per_rise`` (as results.CapacityNow: the
+    hidden fade on the low side only)."""
     rise = got["rise"] if "rise" in got else 0.0
     seen = got["seen_fade"] if "seen_fade" in got else 0.0
     hidden = np.clip(per_rise * rise - seen, 0.0, None) * got["now_Ah"]
-    sd = np.sqrt(got["trend_sd"] ** 2 + (share * got["drift_unit"]) ** 2 + hidden ** 2)
-    return got["now_Ah"] - got["quantile"] * sd, got["now_Ah"] + got["quantile"] * sd
+    sd = np.hypot(got["trend_sd"], share * got["drift_unit"])
+    return (got["now_Ah"] - got["quantile"] * np.hypot(sd, hidden),
+            got["now_Ah"] + got["quantile"] * sd)
 
 
 def main(argv=None) -> None:

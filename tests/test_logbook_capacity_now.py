@@ -147,7 +147,7 @@ def _hiding_life(fade_seen: float):
     for k, x in enumerate(np.linspace(1.0, 60.0, 40), start=1):
         e = _event(k, float(x), 3.0 * (1 - fade_seen * x / 60) + rng.normal(0, 0.005),
                    "rests before and after (charge ends full)")
-        e.resistance_ref_ohm = 0.03 * (1 + x / 60)
+        e.resistance_ohm = e.resistance_ref_ohm = 0.03 * (1 + x / 60)
         e.resistance_ref_interval95 = [0.9 * e.resistance_ref_ohm, 1.1 * e.resistance_ref_ohm]
         events.append(e)
     return events
@@ -170,11 +170,18 @@ def test_a_resistance_that_doubles_while_the_estimates_show_no_fade_widens_the_b
     # a pack that lost 12 % below the charge its events swing through: held by the band
     assert low < 0.88 * 3.0 < high
     assert not alone.interval95()[0] < 0.88 * 3.0
+    # on the low side only: the estimates can only overstate what they cannot see
     hidden = (HIDDEN_FADE_PER_RISE * now.rise - now.seen_fade) * now.value_Ah
-    assert (high - low) / 2 / now.quantile == pytest.approx(np.sqrt(
-        now.trend_sd_Ah ** 2 + (DRIFT_SHARE * now.drift_unit_Ah) ** 2 + hidden ** 2))
+    sd = np.hypot(now.trend_sd_Ah, DRIFT_SHARE * now.drift_unit_Ah)
+    assert (now.value_Ah - low) / now.quantile == pytest.approx(np.hypot(sd, hidden))
+    assert (high - now.value_Ah) / now.quantile == pytest.approx(sd)
     trend = capacity_over_life([e for e in events if e.capacity_Ah], per_event=events)
-    assert trend.at(60.0)[1][0] > 2 * capacity_over_life(events).at(60.0)[1][0]
+    plain = capacity_over_life(events)
+    value, (lo, hi) = trend.interval95(60.0)
+    assert value - lo > 2 * (value - plain.interval95(60.0)[1][0])
+    assert hi == pytest.approx(plain.interval95(60.0)[1][1])
+    again = type(trend).from_dict(trend.to_dict())
+    assert again.interval95(60.0)[1][0] == pytest.approx(lo, rel=1e-3)
     notes = _scale_notes(events, trend, events)
     assert any("resistance rose" in n and "may not show" in n for n in notes)
     # estimates that show the fade such a rise goes with: nothing hidden, no note
@@ -182,3 +189,25 @@ def test_a_resistance_that_doubles_while_the_estimates_show_no_fade_widens_the_b
     trend = capacity_over_life(seen, per_event=seen)
     assert hidden_fade(trend, seen, 0.0, [60.0])[0] == 0.0
     assert not any("resistance rose" in n for n in _scale_notes(seen, trend, seen))
+
+
+def test_open_circuit_drop_resistances_only_when_the_events_give_no_other():
+    from dischargelab.logbook.health import DROP_METHOD
+    from dischargelab.logbook.results import resistance_over_life, resistance_rise
+
+    events = _hiding_life(0.0)
+    for e in events[1:]:
+        e.resistance_method = "load steps"
+    charges = []
+    for k, x in enumerate(np.linspace(1.5, 60.0, 40), start=100):
+        e = _event(k, float(x), 3.0, "rests before and after")
+        e.resistance_ohm = e.resistance_ref_ohm = 0.08
+        e.resistance_ref_interval95 = [0.07, 0.09]
+        e.resistance_method = DROP_METHOD
+        charges.append(e)
+    mixed = sorted(events + charges, key=lambda e: e.efc)
+    # the trend and the rise read the load steps (0.03 -> 0.06), not the drop's 0.08
+    assert resistance_over_life(mixed).at(60.0)[0][0] == pytest.approx(0.06, rel=0.1)
+    assert resistance_rise(mixed, 0.0, [60.0])[0] == pytest.approx(0.9, abs=0.02)
+    # alone, the drops are the pack's resistance
+    assert resistance_over_life(charges).at(60.0)[0][0] == pytest.approx(0.08, rel=0.01)

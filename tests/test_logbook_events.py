@@ -15,6 +15,7 @@ from dischargelab.logbook.estimates import (
     capacity_between_rests,
     charge_start_corrections,
     counted_charge,
+    drop_resistance,
     regression_resistance,
     relaxation,
     resistance_at_reference,
@@ -253,6 +254,30 @@ def test_regression_resistance_of_a_sparse_log():
     voltage = 15.6 - 0.6 * q / 3600 - 0.025 * current + rng.normal(0, 0.005, t.size)
     r, (lo, hi) = regression_resistance(t, voltage, current)
     assert lo < 0.025 < hi and hi - lo < 0.025
+
+
+def test_drop_resistance_of_a_log_sampled_every_160_s():
+    """A 4S pack at 40 mOhm whose mission and charge are seen every 160 s: neither steps
+    nor a regression, but the loaded voltage's distance to the curve between the two
+    rest readings gives the resistance."""
+    from dischargelab.logbook.events import compact_curve
+
+    curve = OcvCurve.prior("li-ion")
+    t = np.arange(0.0, 1300.0, 160.0)
+    current = np.full(t.size, 6.0)
+    q = 6.0 * t / 3600
+    soc = 0.95 - q / 3.0
+    voltage = 4 * curve.voltage_at(soc) - 0.04 * current
+    points = compact_curve(q, voltage, current)
+    r, (lo, hi) = drop_resistance(points, 0.95, float(soc[-1]), curve, 4, 1)
+    assert r == pytest.approx(0.04, rel=0.02) and lo < 0.04 < hi
+    # a charge: the loaded voltage above the curve
+    soc_c = float(soc[-1]) + q / 3.0
+    points = compact_curve(q, 4 * curve.voltage_at(soc_c) + 0.04 * current, current)
+    r, _ = drop_resistance(points, float(soc[-1]), float(soc_c[-1]), curve, 4, -1)
+    assert r == pytest.approx(0.04, rel=0.02)
+    # read the wrong way round, no positive resistance
+    assert drop_resistance(points, float(soc[-1]), float(soc_c[-1]), curve, 4, 1) == (None, None)
 
 
 def test_capacity_read_through_a_curve_shares_its_error_and_its_ageing():

@@ -35,3 +35,32 @@ def test_a_pybamm_life_fades_test_by_test_and_its_missions_stay_above_the_cutoff
     # every mission discharge in the log ends above the cutoff
     missions = frame[frame["current_A"] > 1.0]
     assert missions["voltage_V"].min() > spec.cutoff_V
+
+
+@pytest.mark.slow
+def test_a_cell_losing_lithium_below_its_missions_gets_a_band_that_holds_its_next_test(
+        tmp_path):
+    """A PyBaMM cell's missions and charges read the capacity it had (the lithium is lost
+    below the charge they swing through); its resistance rises with the SEI, and capacity
+    today's band takes that as the fade the estimates cannot show."""
+    from dischargelab.logbook import Logbook
+    from dischargelab.logbook.results import capacity_now
+    from pybamm_life import PybammLifeSpec, pybamm_life
+
+    life = pybamm_life(PybammLifeSpec(cycles=11, test_every=10, seed=5))
+    (_, _, first, _), (start, _, truth, _) = life.tests[:2]
+    assert truth < 0.97 * first
+    path = tmp_path / "life.csv"
+    life.frame[life.frame["time_s"] < start].to_csv(path, index=False)  # up to the next test
+    with Logbook(tmp_path / "logbook.sqlite") as lb:
+        lb.set_pack("cell")
+        lb.add(path, pack="cell")
+        health = lb.health("cell")
+    value, (low, high) = health.today["capacity_Ah"], health.today["capacity_interval95"]
+    assert value > 1.02 * truth               # the estimates read the capacity it had
+    assert low < truth < high
+    assert any("resistance rose" in n for n in health.notes)
+    # the estimates' own band, without the resistance's evidence, misses the test
+    events = [e for e in health.events if e.capacity_Ah is not None and not e.outlier
+              and e.efc is not None]
+    assert capacity_now(events).interval95()[0] > truth

@@ -203,10 +203,13 @@ def health_cmd(name, eol, plot_path, force, db, as_json):
     \b
     Per event: capacity with its 95 % interval (a full discharge: the charge it
     delivered; a partial event or a flight: the charge moved over the share of the
-    capacity it used), resistance from its load steps, EFC. Outliers (over- or
-    undercharged cycles) are flagged and left out of the trends.
+    capacity it used), resistance from its load steps (a sparse log: from how the
+    voltage follows the current, or its distance to the open-circuit curve), EFC.
+    Outliers (over- or undercharged cycles) are flagged and left out of the trends.
     Over the life: the estimates combined by their intervals (a smoother over EFC)
-    into the capacity today with its 95 % interval, and the events it comes from.
+    into the capacity today with its 95 % interval, and the events it comes from; the
+    interval's low side widens when the resistance rose more than the estimates faded
+    (capacity lost where they cannot see it).
     Ahead: a trend that may bend (fast early fade, a knee) chosen by evidence
     against a straight line, and the EFC of end of life with a 95 % interval from
     simulated futures (knees that have not shown yet included). No end of life until

@@ -746,6 +746,54 @@ def regression_resistance(time_s, voltage_V, current_A) -> tuple[float | None, l
     return r, [max(0.0, r - half), r + half]
 
 
+#: The open-circuit drop resistance is read over this middle share of an event's charge
+#: (away from the start's polarisation building up and the end's curve knee).
+DROP_SPAN = (0.2, 0.8)
+
+#: ... where the current is at least this share of the event's largest.
+DROP_MIN_CURRENT_SHARE = 0.3
+
+
+def drop_resistance(curve_points: dict, soc_start: float, soc_end: float, ocv: OcvCurve,
+                    cells: int, direction: int) -> tuple[float | None, list | None]:
+    """Pack resistance [ohm] from how far the loaded voltage lies from the open-circuit
+    voltage through the middle of an event, for logs too sparse for load steps or a
+    regression (the CMU eVTOL logs' one sample every 158-167 s).
+
+    ``R = direction (OCV(soc) cells - V) / I`` at each point of the event's compact curve
+    in :data:`DROP_SPAN` of its charge (current at least :data:`DROP_MIN_CURRENT_SHARE`
+    of its largest), ``soc`` linear in the charge between the two rest readings
+    ``soc_start`` and ``soc_end``; the median. ``direction`` +1 for a discharge, -1 for
+    a charge. The resistance of minutes under load (series resistance and the
+    polarisation built by then, Plett 2015 ch. 2): larger than a step's, and compared
+    only with its own kind. 95 % interval: the curve's error and the points' spread.
+
+    Returns
+    -------
+    (resistance_ohm, [low, high]) or (None, None) when no point qualifies.
+    """
+    q = np.asarray(curve_points.get("charge_Ah") or [], dtype=float)
+    v = np.asarray(curve_points.get("voltage_V") or [], dtype=float)
+    i = np.abs(np.asarray(curve_points.get("current_A") or [], dtype=float))
+    if q.size < 3 or not q[-1] > 0 or v.size != q.size or i.size != q.size:
+        return None, None
+    share = q / q[-1]
+    sel = (share >= DROP_SPAN[0]) & (share <= DROP_SPAN[1]) & \
+        (i >= DROP_MIN_CURRENT_SHARE * i.max()) & (i > 0)
+    if not sel.any():
+        return None, None
+    soc = soc_start + (soc_end - soc_start) * share[sel]
+    drop = direction * (ocv.voltage_at(soc) * cells - v[sel])
+    values = drop / i[sel]
+    r = float(np.median(values))
+    if not r > 0:
+        return None, None
+    curve_sd = cells * ocv.sd_at(float(np.median(soc)))
+    spread = 1.4826 * float(np.median(np.abs(values - r))) if values.size >= 3 else 0.0
+    half = 1.96 * float(np.hypot(curve_sd / float(np.median(i[sel])), spread))
+    return r, [max(0.0, r - half), r + half]
+
+
 def resistance_at_reference(resistance_ohm: float | None, interval95, temperature_C,
                             *, soc: float | None = None, model=None,
                             current_A: float | None = None
@@ -803,7 +851,8 @@ def _model_soc_ratio(model, soc: float, current_A: float) -> float | None:
     return float(drop[0] / drop[1])
 
 
-__all__ = ["relaxation", "step_resistance", "sample_noise", "regression_resistance", "OcvCurve",
+__all__ = ["relaxation", "step_resistance", "sample_noise", "regression_resistance",
+           "drop_resistance", "OcvCurve",
            "soc_reading",
            "counted_charge", "sampling_figures", "charge_start_corrections",
            "capacity_between_rests", "systematic_share",

@@ -83,6 +83,7 @@ from .estimates import (
     OcvCurve,
     capacity_between_rests,
     charge_start_corrections,
+    drop_resistance,
     resistance_at_reference,
     soc_reading,
     systematic_share,
@@ -155,6 +156,7 @@ class EventHealth:
     capacity_note: str | None = None
     resistance_ohm: float | None = None
     resistance_interval95: list | None = None
+    resistance_method: str | None = None
     resistance_ref_ohm: float | None = None
     resistance_ref_interval95: list | None = None
     charged_Ah: float | None = None
@@ -188,6 +190,7 @@ class EventHealth:
                 "capacity_method": self.capacity_method,
                 "capacity_note": self.capacity_note,
                 "resistance_interval95": self.resistance_interval95,
+                "resistance_method": self.resistance_method,
                 "resistance_ref_ohm": self.resistance_ref_ohm,
                 "resistance_ref_interval95": self.resistance_ref_interval95,
                 "charged_Ah": self.charged_Ah, "soc_start": self.soc_start,
@@ -206,6 +209,7 @@ class EventHealth:
                    capacity_note=data.get("capacity_note"),
                    resistance_ohm=data["resistance_ohm"],
                    resistance_interval95=data["resistance_interval95"],
+                   resistance_method=data.get("resistance_method"),
                    resistance_ref_ohm=data.get("resistance_ref_ohm"),
                    resistance_ref_interval95=data.get("resistance_ref_interval95"),
                    charged_Ah=data.get("charged_Ah"), soc_start=data.get("soc_start"),
@@ -691,9 +695,26 @@ def _resistance(e: dict, h: EventHealth, ctx: PackContext) -> None:
         current_A=e.get("mean_current_A"))
     h.resistance_ref_ohm, h.resistance_ref_interval95 = r, interval
     if r is not None:
-        method = (e.get("details") or {}).get("resistance_method")
-        h.notes.append(f"resistance from {method or 'load steps'}; at reference conditions "
-                       f"{how}")
+        h.notes.append(f"resistance from {h.resistance_method or 'load steps'}; at reference "
+                       f"conditions {how}")
+
+
+#: How a resistance from :func:`drop_resistance` is named.
+DROP_METHOD = "open-circuit drop"
+
+
+def _drop_resistance(e: dict, h: EventHealth, ctx: PackContext, n_cells: int,
+                     position: int) -> None:
+    """The resistance of an event whose samples gave none, from its loaded voltage's
+    distance to the open-circuit curve between its two rest readings (sets ``h``)."""
+    if h.soc_start is None or h.soc_end is None or h.full or not e.get("curve"):
+        return
+    direction = -1 if h.kind == "charge" else 1
+    r, interval = drop_resistance(e["curve"], h.soc_start, h.soc_end,
+                                  ctx.curve_at(position), n_cells, direction)
+    if r is not None:
+        h.resistance_ohm, h.resistance_interval95 = r, interval
+        h.resistance_method = DROP_METHOD
 
 
 def _cells(e: dict, h: EventHealth, ctx: PackContext, position: int) -> None:
@@ -775,6 +796,9 @@ def _classify(ordered: list[dict], counts: list[int], chemistry: str | None
                         discharged_Ah=float(e.get("discharged_Ah") or 0.0), full=full,
                         resistance_ohm=e.get("resistance_ohm"),
                         charged_Ah=charge.get("charged_Ah"))
+        if h.resistance_ohm is not None:
+            h.resistance_method = (e.get("details") or {}).get("resistance_method") \
+                or "load steps"
         if e.get("resistance_low_ohm") is not None:
             h.resistance_interval95 = [e["resistance_low_ohm"], e["resistance_high_ohm"]]
         if full:
@@ -839,6 +863,8 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
         n_cells = counts[k]
         if not h.full:
             _capacity(e, h, ctx, n_cells, k)
+        if h.resistance_ohm is None:
+            _drop_resistance(e, h, ctx, n_cells, k)
         if h.resistance_ohm is not None:
             _resistance(e, h, ctx)
         _cells(e, h, ctx, k)

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import LogbookError
-from .health import EventHealth
+from .health import DROP_METHOD, EventHealth
 from .trend import Smoothed, sd_from_interval
 
 #: Default end of life: this share of the reference capacity.
@@ -580,8 +580,13 @@ def resistance_over_life(per_event: list[EventHealth]) -> Smoothed | None:
 
 def _resistances(per_event: list[EventHealth]):
     """Each event's resistance at reference conditions when the events give it, else as
-    measured: (values, intervals, basis, events)."""
+    measured: (values, intervals, basis, events). Resistances read from the open-circuit
+    drop (minutes of polarisation in them) only when the events give no other."""
     rows = [(e, e.to_dict()) for e in per_event if not e.outlier and e.efc is not None]
+    sampled = [(e, d) for e, d in rows if e.resistance_ohm is not None
+               and e.resistance_method != DROP_METHOD]
+    if sampled:
+        rows = [(e, d) for e, d in rows if e.resistance_method != DROP_METHOD]
     ref = [(e, d) for e, d in rows if d.get("resistance_ref_ohm") is not None]
     if ref:
         return ([d["resistance_ref_ohm"] for _, d in ref],
@@ -617,9 +622,9 @@ def capacity_over_life(with_cap: list[EventHealth], drift_share: float | None = 
     the pack has both and carried in the band until then (:mod:`.trend`). After the last
     full discharge the band widens by ``drift_share`` (:data:`DRIFT_SHARE`) times the
     fade since then (:func:`drift_unit`): the curves every estimate is read through age
-    with the pack, and no later full discharge checks them. And by the fade the
-    resistance of ``per_event`` (all the pack's events) says the estimates may not show
-    (:func:`hidden_fade`)."""
+    with the pack, and no later full discharge checks them. Its low side also by the fade
+    the resistance of ``per_event`` (all the pack's events) says the estimates may not
+    show (:func:`hidden_fade`: they can only overstate the capacity)."""
     if not with_cap:
         return None
     kinds = [estimate_kind(e) for e in with_cap]
@@ -632,10 +637,12 @@ def capacity_over_life(with_cap: list[EventHealth], drift_share: float | None = 
     if trend is not None:
         share = DRIFT_SHARE if drift_share is None else drift_share
         anchor = _anchor(with_cap)
-        extra = np.hypot(share * drift_unit(trend, anchor, trend.efc),
-                         hidden_fade(trend, per_event, anchor, trend.efc) * trend.level)
+        extra = share * drift_unit(trend, anchor, trend.efc)
         trend.level_sd = np.sqrt(trend.level_sd ** 2 + extra ** 2)
         trend.last_cov = trend.last_cov + np.array([[extra[-1] ** 2, 0.0], [0.0, 0.0]])
+        hidden = hidden_fade(trend, per_event, anchor, trend.efc) * trend.level
+        if hidden.any():
+            trend.low_extra_sd = hidden
     return trend
 
 
@@ -670,9 +677,9 @@ def resistance_rise(per_event: list[EventHealth] | None, anchor_efc: float, efc
                     ) -> np.ndarray:
     """The relative rise of the pack's resistance at each ``efc`` since ``anchor_efc``:
     per kind of event (charges, loads; full discharges left out, measured at another
-    current), the median of its last :data:`RISE_EVENTS` estimates up to ``efc`` over the
-    median of its first ones after ``anchor_efc``, less 1; the kind with the most
-    estimates; 0 with fewer than twice as many."""
+    current) and way of measuring it, the median of its last :data:`RISE_EVENTS`
+    estimates up to ``efc`` over the median of its first ones after ``anchor_efc``, less
+    1; the kind with the most estimates; 0 with fewer than twice as many."""
     x = np.atleast_1d(np.asarray(efc, dtype=float))
     out = np.zeros_like(x)
     if not per_event:
@@ -681,7 +688,7 @@ def resistance_rise(per_event: list[EventHealth] | None, anchor_efc: float, efc
     by_kind: dict[str, list[tuple[float, float]]] = {}
     for e, r in zip(with_r, values):
         if e.efc > anchor_efc and r and estimate_kind(e) != REFERENCE_KIND:
-            by_kind.setdefault(e.kind, []).append((float(e.efc), float(r)))
+            by_kind.setdefault((e.kind, e.resistance_method), []).append((float(e.efc), float(r)))
     if not by_kind:
         return out
     got = np.array(max(by_kind.values(), key=len))
@@ -794,9 +801,9 @@ class CapacityNow:
     def interval95(self, drift_share: float = DRIFT_SHARE,
                    per_rise: float = HIDDEN_FADE_PER_RISE) -> list[float]:
         hidden = max(0.0, per_rise * self.rise - self.seen_fade) * self.value_Ah
-        sd = float(np.sqrt(self.trend_sd_Ah ** 2 + (drift_share * self.drift_unit_Ah) ** 2
-                           + hidden ** 2))
-        return [self.value_Ah - self.quantile * sd, self.value_Ah + self.quantile * sd]
+        sd = float(np.hypot(self.trend_sd_Ah, drift_share * self.drift_unit_Ah))
+        return [self.value_Ah - self.quantile * float(np.hypot(sd, hidden)),
+                self.value_Ah + self.quantile * sd]
 
 
 def capacity_now(with_cap: list[EventHealth], per_event: list[EventHealth] | None = None

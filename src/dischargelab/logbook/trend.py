@@ -131,6 +131,9 @@ class Smoothed:
     systematic : float
         Standard deviation of the error the estimates share, at the last point [unit]
         (included in ``level_sd``).
+    low_extra_sd : numpy.ndarray or None
+        A further standard deviation of the low side only at each point [unit] (what the
+        estimates can only overstate; carried flat past the last point).
     """
 
     efc: np.ndarray
@@ -147,10 +150,22 @@ class Smoothed:
     quantile: float = Z95
     systematic: float = 0.0
     offsets: dict = field(default_factory=dict)
+    low_extra_sd: np.ndarray | None = None
+
+    def low_sd(self, efc=None) -> np.ndarray:
+        """Standard deviation of the low side at ``efc`` (default :attr:`efc`) [unit]."""
+        if efc is None:
+            sd, x = self.level_sd, self.efc
+        else:
+            x = np.atleast_1d(np.asarray(efc, dtype=float))
+            sd = self.at(x)[1]
+        if self.low_extra_sd is None:
+            return sd
+        return np.hypot(sd, np.interp(x, self.efc, self.low_extra_sd))
 
     def band(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper 95 % band at :attr:`efc`."""
-        return (self.level - self.quantile * self.level_sd,
+        return (self.level - self.quantile * self.low_sd(),
                 self.level + self.quantile * self.level_sd)
 
     def at(self, efc) -> tuple[np.ndarray, np.ndarray]:
@@ -172,7 +187,7 @@ class Smoothed:
         """Value at ``efc`` with its 95 % interval ``[low, high]``."""
         mean, sd = self.at(efc)
         m, s = float(mean[0]), float(sd[0])
-        return m, [m - self.quantile * s, m + self.quantile * s]
+        return m, [m - self.quantile * float(self.low_sd(efc)[0]), m + self.quantile * s]
 
     def to_dict(self, points: int | None = None) -> dict:
         """``{"efc", "value", "sd", "lo", "hi"}`` lists (value, its standard deviation and
@@ -185,7 +200,9 @@ class Smoothed:
                 "sd": self.level_sd[idx].tolist(), "lo": lo[idx].tolist(),
                 "hi": hi[idx].tolist(), "quantile": self.quantile, "drift": self.drift,
                 "nugget": self.nugget, "estimates": self.n, "systematic": self.systematic,
-                "offsets": dict(self.offsets)}
+                "offsets": dict(self.offsets),
+                "low_extra_sd": None if self.low_extra_sd is None
+                else self.low_extra_sd[idx].tolist()}
 
     @classmethod
     def from_dict(cls, d: dict) -> Smoothed:
@@ -201,7 +218,9 @@ class Smoothed:
                    weights=np.ones(0), influence=np.ones(0), n=int(d.get("estimates") or 0),
                    quantile=float(d.get("quantile") or Z95),
                    systematic=float(d.get("systematic") or 0.0),
-                   offsets=dict(d.get("offsets") or {}))
+                   offsets=dict(d.get("offsets") or {}),
+                   low_extra_sd=None if d.get("low_extra_sd") is None
+                   else np.asarray(d["low_extra_sd"], dtype=float))
 
 
 def sd_from_interval(low95, high95) -> np.ndarray:
