@@ -80,6 +80,21 @@ def test_charge_ending_in_a_voltage_taper_is_full():
     assert fig["taper"] and fig["charged_Ah"] == pytest.approx(
         (3.0 * 2000 + 3.0 * 200 * (1 - np.exp(-995 / 200))) / 3600, rel=0.01)
     assert not charge_figures(t[:150], voltage[:150], current[:150])["taper"]
+    # the same charge logged every 160 s and resampled to 30 s: the last samples lie on the
+    # ramp from the taper's last record (4.2 V, 0.25 A) down to the rest's first
+    coarse = np.append(t[::16], 3100.0)
+    i_c = np.append(current[::16], 0.0)
+    v_c = np.append(voltage[::16], 4.12)
+    fine = np.arange(0.0, 3100.0, 30.0)
+    i_f, v_f = np.interp(fine, coarse, i_c), np.interp(fine, coarse, v_c)
+    moving = i_f < -0.01
+    assert charge_figures(fine[moving], v_f[moving], i_f[moving])["taper"]
+    # a constant-current charge stopped at 4.2 V, then ramped down the same way: not a taper
+    i_cc = np.where(fine < 2000, -3.0, np.interp(fine, [2000.0, 2100.0], [-3.0, 0.0]))
+    v_cc = np.where(fine < 2000, 3.7 + 0.5 * fine / 2000, np.interp(fine, [2000.0, 2100.0],
+                                                                   [4.2, 4.12]))
+    moving = i_cc < -0.01
+    assert not charge_figures(fine[moving], v_cc[moving], i_cc[moving])["taper"]
 
 
 # --------------------------------------------------------------------------- relaxation

@@ -87,9 +87,11 @@ MIN_REST_S = 60.0
 #: their neighbours.
 MIN_BLIP_S = 10.0
 
-#: A charge ends in a constant-voltage taper when its current at the end has fallen below
-#: this share of its median current while the voltage stayed within
-#: :data:`TAPER_HOLD_CELL_V` per cell of its highest value.
+#: A charge ends in a constant-voltage taper when its current has fallen below this share
+#: of its median current while the voltage stayed within :data:`TAPER_HOLD_CELL_V` per
+#: cell of its highest value, and stayed below it to the end (the samples between the
+#: taper and the rest may fall in voltage: a log resampled between a record every few
+#: minutes draws a ramp from the taper's last sample to the rest's first).
 TAPER_SHARE = 0.3
 TAPER_HOLD_CELL_V = 0.015
 
@@ -442,9 +444,9 @@ def charge_figures(time_s, voltage_V, current_A, *, cells: int | None = None) ->
     dict
         ``charged_Ah``, ``duration_s``, ``mean_current_A`` and ``max_current_A``
         (positive), ``start_voltage_V``, ``max_voltage_V``, ``end_voltage_V``,
-        ``end_current_A``, ``taper`` (ended in a constant-voltage taper: the current at
-        the end below :data:`TAPER_SHARE` of the median while the voltage held within
-        :data:`TAPER_HOLD_CELL_V` per cell of its highest value).
+        ``end_current_A``, ``taper`` (ended in a constant-voltage taper: the current
+        below :data:`TAPER_SHARE` of the median while the voltage held within
+        :data:`TAPER_HOLD_CELL_V` per cell of its highest value, and below it to the end).
     """
     t = np.asarray(time_s, dtype=float)
     v = np.asarray(voltage_V, dtype=float)
@@ -455,8 +457,11 @@ def charge_figures(time_s, voltage_V, current_A, *, cells: int | None = None) ->
     median_i = float(np.median(i)) if i.size else 0.0
     hold = TAPER_HOLD_CELL_V * (cells or 1)
     vmax = float(np.max(v))
-    taper = bool(t.size >= 3 and median_i > 0 and end_i < TAPER_SHARE * median_i
-                 and np.all(v[tail] >= vmax - hold))
+    low = TAPER_SHARE * median_i
+    last_held = int(np.flatnonzero(v >= vmax - hold)[-1])
+    held_i = float(np.mean(i[max(0, last_held - 2):last_held + 1]))
+    taper = bool(t.size >= 3 and median_i > 0 and held_i < low
+                 and np.all(i[last_held + 1:] < low))
     return {"charged_Ah": q, "duration_s": float(t[-1] - t[0]) if t.size else 0.0,
             "mean_current_A": float(q * 3600.0 / (t[-1] - t[0])) if t.size > 1 and t[-1] > t[0]
             else float(np.mean(i)), "max_current_A": float(np.max(i)),
