@@ -211,3 +211,17 @@ def test_open_circuit_drop_resistances_only_when_the_events_give_no_other():
     assert resistance_rise(mixed, 0.0, [60.0])[0] == pytest.approx(0.9, abs=0.02)
     # alone, the drops are the pack's resistance
     assert resistance_over_life(charges).at(60.0)[0][0] == pytest.approx(0.08, rel=0.01)
+
+
+def test_a_pack_model_takes_the_capacity_spread_from_the_band_low_side():
+    from dischargelab.logbook.results import Pack
+
+    def pack(band):
+        return Pack(name="p", label_capacity_Ah=3.0, reference_capacity_Ah=3.0,
+                    chemistry="li-ion", cells=1, events=10, efc=50.0, capacity_Ah=2.9,
+                    resistance_ohm=0.03, capacity_interval95=band)
+
+    even = pack([2.8, 3.0])._capacity_sd()
+    assert even == pytest.approx(0.1 / 1.96 / 2.9)
+    # a fade the estimates may not show widens the low side only: the spread follows it
+    assert pack([2.5, 3.0])._capacity_sd() == pytest.approx(0.4 / 1.96 / 2.9)
