@@ -293,6 +293,10 @@ def test_drop_resistance_of_a_log_sampled_every_160_s():
     assert r == pytest.approx(0.04, rel=0.02)
     # read the wrong way round, no positive resistance
     assert drop_resistance(points, float(soc[-1]), float(soc_c[-1]), curve, 4, 1) == (None, None)
+    # a light load (0.3 A: 12 mV of drop against the curve's 60 mV): no resistance
+    light = compact_curve(q / 20, 4 * curve.voltage_at(0.95 - q / 60) - 0.04 * 0.3,
+                          np.full(t.size, 0.3))
+    assert drop_resistance(light, 0.95, 0.95 - float(q[-1]) / 60, curve, 4, 1) == (None, None)
 
 
 def test_capacity_read_through_a_curve_shares_its_error_and_its_ageing():

@@ -753,6 +753,10 @@ DROP_SPAN = (0.2, 0.8)
 #: ... where the current is at least this share of the event's largest.
 DROP_MIN_CURRENT_SHARE = 0.3
 
+#: ... and only when the drop is at least this many times the curve's standard deviation
+#: (a light load's drop is the curve's error, not the resistance's).
+DROP_MIN_Z = 3.0
+
 
 def drop_resistance(curve_points: dict, soc_start: float, soc_end: float, ocv: OcvCurve,
                     cells: int, direction: int) -> tuple[float | None, list | None]:
@@ -770,7 +774,8 @@ def drop_resistance(curve_points: dict, soc_start: float, soc_end: float, ocv: O
 
     Returns
     -------
-    (resistance_ohm, [low, high]) or (None, None) when no point qualifies.
+    (resistance_ohm, [low, high]) or (None, None) when no point qualifies or the drop is
+    less than :data:`DROP_MIN_Z` times the curve's standard deviation.
     """
     q = np.asarray(curve_points.get("charge_Ah") or [], dtype=float)
     v = np.asarray(curve_points.get("voltage_V") or [], dtype=float)
@@ -784,11 +789,11 @@ def drop_resistance(curve_points: dict, soc_start: float, soc_end: float, ocv: O
         return None, None
     soc = soc_start + (soc_end - soc_start) * share[sel]
     drop = direction * (ocv.voltage_at(soc) * cells - v[sel])
+    curve_sd = cells * ocv.sd_at(float(np.median(soc)))
+    if not float(np.median(drop)) > DROP_MIN_Z * curve_sd:
+        return None, None        # a drop the curve's own error could make (a small load)
     values = drop / i[sel]
     r = float(np.median(values))
-    if not r > 0:
-        return None, None
-    curve_sd = cells * ocv.sd_at(float(np.median(soc)))
     spread = 1.4826 * float(np.median(np.abs(values - r))) if values.size >= 3 else 0.0
     half = 1.96 * float(np.hypot(curve_sd / float(np.median(i[sel])), spread))
     return r, [max(0.0, r - half), r + half]

@@ -585,9 +585,8 @@ def _resistances(per_event: list[EventHealth]):
     measured: (values, intervals, basis, events). Resistances read from the open-circuit
     drop (minutes of polarisation in them) only when the events give no other."""
     rows = [(e, e.to_dict()) for e in per_event if not e.outlier and e.efc is not None]
-    sampled = [(e, d) for e, d in rows if e.resistance_ohm is not None
-               and e.resistance_method != DROP_METHOD]
-    if sampled:
+    if any(e.resistance_ohm is not None and e.resistance_method != DROP_METHOD
+           for e, _ in rows):
         rows = [(e, d) for e, d in rows if e.resistance_method != DROP_METHOD]
     ref = [(e, d) for e, d in rows if d.get("resistance_ref_ohm") is not None]
     if ref:
@@ -687,7 +686,7 @@ def resistance_rise(per_event: list[EventHealth] | None, anchor_efc: float, efc
     if not per_event:
         return out
     values, _, _, with_r = _resistances(per_event)
-    by_kind: dict[str, list[tuple[float, float]]] = {}
+    by_kind: dict[tuple, list[tuple[float, float]]] = {}
     for e, r in zip(with_r, values):
         if e.efc > anchor_efc and r and estimate_kind(e) != REFERENCE_KIND:
             by_kind.setdefault((e.kind, e.resistance_method), []).append((float(e.efc), float(r)))
