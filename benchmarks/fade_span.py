@@ -29,7 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import machine_line, table
 from dischargelab.logbook import Logbook
 from dischargelab.logbook.forecast import SOON_FACTOR, SPAN_SOON
-from dischargelab.logbook.results import _forecast, _trend, shared_errors
+from dischargelab.logbook.over_life import _trend, shared_errors
+from dischargelab.logbook.results import _forecast
 from forecast import CELL_C, cycle_of, shared_data
 
 CMU = shared_data() / "cmu_evtol"

@@ -37,7 +37,7 @@ from _lives import make_life
 from _machine import machine_line, table
 from dischargelab.logbook import Logbook
 from dischargelab.logbook.forecast import forecast_capacity
-from dischargelab.logbook.health import flag_outliers, observed_crossing
+from dischargelab.logbook.outliers import flag_outliers, observed_crossing
 from dischargelab.logbook.trend import smooth
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -72,7 +72,7 @@ CMU_LABEL_AH = 3.0
 
 def capacity_now(events) -> tuple[float | None, float | None]:
     """Capacity today [Ah] and its standard deviation as the logbook would have said it
-    when ``events`` were all it held (:func:`dischargelab.logbook.results.capacity_now`,
+    when ``events`` were all it held (:func:`dischargelab.logbook.over_life.capacity_now`,
     as ``Logbook.health`` makes it), read at the last one's EFC."""
     from dischargelab.logbook.results import capacity_now as now_of
 

@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import importlib.util
 import pickle
 import sys
 import time
@@ -207,11 +208,8 @@ def synthetic_log(name: str, changes: dict, seed: int, cache: Path):
 
 
 def pybamm_installed() -> bool:
-    try:
-        import pybamm  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """PyBaMM can be imported (found, not imported: importing it starts a thread)."""
+    return importlib.util.find_spec("pybamm") is not None
 
 
 def pybamm_log(changes: dict, seed: int):
@@ -306,10 +304,10 @@ def summary(name: str, rows: list[dict]) -> str:
             f"{err.mean():+.2f} % |")
 
 
-#: Drift shares tried by the calibration (results.DRIFT_SHARE).
+#: Drift shares tried by the calibration (over_life.DRIFT_SHARE).
 SHARES = np.round(np.arange(0.0, 2.01, 0.05), 2)
 
-#: Hidden fade per unit of resistance rise tried (results.HIDDEN_FADE_PER_RISE).
+#: Hidden fade per unit of resistance rise tried (over_life.HIDDEN_FADE_PER_RISE).
 PER_RISE = np.round(np.arange(0.0, 0.301, 0.01), 2)
 
 
@@ -339,7 +337,7 @@ def calibration(rows: pd.DataFrame) -> None:
     PyBaMM lives, the rest checked at the value in use."""
     if rows.empty or "drift_unit" not in rows:
         return
-    from dischargelab.logbook.results import DRIFT_SHARE, HIDDEN_FADE_PER_RISE
+    from dischargelab.logbook.over_life import DRIFT_SHARE, HIDDEN_FADE_PER_RISE
 
     groups = dict(list(rows.groupby("condition", sort=False)))
     need = {c: needed(g, SHARES, lambda b, v: _held(b, v, 0.0)) for c, g in groups.items()}

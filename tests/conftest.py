@@ -19,6 +19,10 @@ settings.register_profile(
 )
 settings.load_profile("dischargelab")
 
+# PyBaMM (the PyBaMM lives) starts a telemetry thread when imported without this; a thread
+# left beside the suite keeps the fit's fold workers from forking in later tests.
+os.environ.setdefault("PYBAMM_DISABLE_TELEMETRY", "true")
+
 REPO = Path(__file__).resolve().parents[1]
 
 #: No test may run longer than this [s] (the slowest take about a minute on a busy 2-core

@@ -5,6 +5,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import dischargelab as dl
 
@@ -111,8 +112,19 @@ def test_health_matrix_resamples_and_chooses_the_drift_share():
                          "quantile": [1.96] * 3})
     # 0.1 Ah off with 0.01 Ah of its own: the drift must give 0.05 Ah, a share of 0.167,
     # 0.2 on the grid
-    assert matrix.needed_share(rows) == 0.2
-    assert matrix.needed_share(rows.assign(drift_unit=0.0)) == float("inf")
+    def share(blocks, value):
+        return matrix._held(blocks, value, 0.0)
+
+    assert matrix.needed(rows, matrix.SHARES, share) == 0.2
+    assert matrix.needed(rows.assign(drift_unit=0.0), matrix.SHARES, share) == float("inf")
+    # the hidden fade widens the low side only: with the resistance up 60 % and 1 % fade
+    # seen, the 0.1 Ah low block needs 0.05 per rise (sd 0.051 Ah = (0.6 v - 0.01) 3 Ah)
+    hidden = rows.assign(drift_unit=0.0, rise=0.6, seen_fade=0.01)
+    assert matrix.needed(hidden, matrix.PER_RISE, lambda b, v: matrix._held(b, 0.0, v)) \
+        == pytest.approx(0.05)
+    high = hidden.assign(truth_Ah=[3.1, 3.0, 3.01])
+    assert matrix.needed(high, matrix.PER_RISE, lambda b, v: matrix._held(b, 0.0, v)) \
+        == float("inf")
 
 
 def test_health_matrix_says_its_pybamm_conditions_are_skipped_without_pybamm(

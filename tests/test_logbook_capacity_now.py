@@ -1,4 +1,4 @@
-"""Capacity today over a pack's life (results.capacity_over_life / capacity_now): kinds
+"""Capacity today over a pack's life (over_life.capacity_over_life / capacity_now): kinds
 of estimate on one scale, the band widened by the fade since the last full discharge,
 and a routine charge that stops short of full read as such, on an engine-made life."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dischargelab.logbook.health import EventHealth
-from dischargelab.logbook.results import (
+from dischargelab.logbook.over_life import (
     DRIFT_SHARE,
     REFERENCE_KIND,
     capacity_now,
@@ -154,7 +154,7 @@ def _hiding_life(fade_seen: float):
 
 
 def test_a_resistance_that_doubles_while_the_estimates_show_no_fade_widens_the_band():
-    from dischargelab.logbook.results import (
+    from dischargelab.logbook.over_life import (
         HIDDEN_FADE_PER_RISE,
         _scale_notes,
         hidden_fade,
@@ -193,7 +193,7 @@ def test_a_resistance_that_doubles_while_the_estimates_show_no_fade_widens_the_b
 
 def test_open_circuit_drop_resistances_only_when_the_events_give_no_other():
     from dischargelab.logbook.health import DROP_METHOD
-    from dischargelab.logbook.results import resistance_over_life, resistance_rise
+    from dischargelab.logbook.over_life import resistance_over_life, resistance_rise
 
     events = _hiding_life(0.0)
     for e in events[1:]:

@@ -23,13 +23,8 @@ from dischargelab.logbook.forecast import (
     forecast_eol,
     measure_fade,
 )
-from dischargelab.logbook.health import (
-    equivalent_full_cycles,
-    flag_outliers,
-    observed_crossing,
-    pack_health,
-    value_today,
-)
+from dischargelab.logbook.health import equivalent_full_cycles, pack_health
+from dischargelab.logbook.outliers import flag_outliers, observed_crossing, value_today
 from dischargelab.logbook.results import scale_parameters
 from dischargelab.logbook.summarise import knee_ratio, step_resistance, summarise_source
 from lvm_cut import lvm_cut

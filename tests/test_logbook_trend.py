@@ -155,7 +155,7 @@ def test_forecast_after_a_knee_is_finite_centred_and_physical():
 def test_end_of_life_interval_is_calibrated_on_synthetic_lives():
     """Lives with and without knees, forecast from half their life: the 95 % interval holds
     the true crossing in at least 85 % of 40 (the benchmark measures it on more)."""
-    from dischargelab.logbook.health import flag_outliers
+    from dischargelab.logbook.outliers import flag_outliers
 
     gen = lives()
     hits = []
