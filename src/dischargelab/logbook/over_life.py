@@ -181,7 +181,7 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
         notes.insert(0, f"capacity today: the resistance rose {rise:.0%} since "
                      f"{'the last slow full discharge' if tested else 'the first estimate'}"
                      f" but the estimates show less fade than such a rise goes with; its "
-                     f"band includes +-{1.96 * hidden:.1%} for a fade they may not show "
+                     f"band reaches {1.96 * hidden:.1%} lower for a fade they may not show "
                      "(a full discharge from full to empty measures it)")
     if not tested:
         return ["capacity today: no slow full discharge yet; its scale rests on "
