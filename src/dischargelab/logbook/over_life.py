@@ -130,7 +130,8 @@ def resistance_rise(per_event: list[EventHealth] | None, anchor_efc: float, efc
     per kind of event (charges, loads; full discharges left out, measured at another
     current) and way of measuring it, the median of its last :data:`RISE_EVENTS`
     estimates up to ``efc`` over the median of its first ones after ``anchor_efc``, less
-    1; the kind with the most estimates; 0 with fewer than twice as many."""
+    1 (linear between events); the kind with the most estimates; 0 with fewer than twice
+    as many."""
     x = np.atleast_1d(np.asarray(efc, dtype=float))
     out = np.zeros_like(x)
     if not per_event:
@@ -146,11 +147,12 @@ def resistance_rise(per_event: list[EventHealth] | None, anchor_efc: float, efc
     if len(got) < 2 * RISE_EVENTS:
         return out
     start = float(np.median(got[:RISE_EVENTS, 1]))
-    for k, at in enumerate(x):
-        upto = got[got[:, 0] <= at, 1]
-        if upto.size >= 2 * RISE_EVENTS:
-            out[k] = max(0.0, float(np.median(upto[-RISE_EVENTS:])) / start - 1.0)
-    return out
+    n = np.arange(2 * RISE_EVENTS, len(got) + 1)
+    rise = np.array([max(0.0, float(np.median(got[k - RISE_EVENTS:k, 1])) / start - 1.0)
+                     for k in n])
+    at = got[n - 1, 0]
+    # linear between the events (0 before the first that can say), flat after the last
+    return np.where(x >= at[0], np.interp(x, at, rise), 0.0)
 
 
 def hidden_fade(trend: Smoothed, per_event: list[EventHealth] | None, anchor_efc: float,
