@@ -225,3 +225,15 @@ def test_a_pack_model_takes_the_capacity_spread_from_the_band_low_side():
     assert even == pytest.approx(0.1 / 1.96 / 2.9, rel=1e-3)
     # a fade the estimates may not show widens the low side only: the spread follows it
     assert pack([2.5, 3.0])._capacity_sd() == pytest.approx(0.4 / 1.96 / 2.9, rel=1e-3)
+
+
+def test_a_resistance_that_moves_by_less_than_its_scatter_is_not_taken_for_ageing():
+    from dischargelab.logbook.over_life import RISE_MIN, _scale_notes, hidden_fade
+
+    events = _hiding_life(0.0)
+    for e in events[1:]:         # 8 % over the life: temperature and charge move it more
+        e.resistance_ohm = e.resistance_ref_ohm = 0.03 * (1 + 0.08 * e.efc / 60)
+    trend = capacity_over_life(events, per_event=events)
+    assert 0.08 < RISE_MIN and hidden_fade(trend, events, 0.0, [60.0])[0] == 0.0
+    assert capacity_now(events, per_event=events).rise == 0.0
+    assert not any("resistance rose" in n for n in _scale_notes(events, trend, events))

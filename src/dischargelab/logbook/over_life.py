@@ -123,6 +123,12 @@ HIDDEN_FADE_PER_RISE = 0.1
 #: at the start (after the last slow full discharge) with as many at the end.
 RISE_EVENTS = 3
 
+#: A rise smaller than this is not taken for ageing: temperature and state of charge move
+#: a pack's resistance by 10-20 % between events (Plett 2015, ch. 2), more than the rise
+#: of a fresh pack's first EFC (the DJI M100 flights: 8 %); the rises the hidden fade was
+#: chosen on are 40-150 %.
+RISE_MIN = 0.2
+
 
 def resistance_rise(per_event: list[EventHealth] | None, anchor_efc: float, efc
                     ) -> np.ndarray:
@@ -160,12 +166,13 @@ def hidden_fade(trend: Smoothed, per_event: list[EventHealth] | None, anchor_efc
     """Standard deviation [share of the capacity] of a fade the estimates may not show:
     ``per_rise`` times the resistance's rise since ``anchor_efc`` (:func:`resistance_rise`
     of ``per_event``), less the fade the capacity trend shows since then (0 when it shows
-    as much)."""
+    as much, or the rise is less than :data:`RISE_MIN`)."""
     x = np.asarray(efc, dtype=float)
     level = trend.at(x)[0]
     start = float(trend.at(anchor_efc)[0][0])
     seen = np.clip((start - level) / start, 0.0, None)
-    return np.clip(per_rise * resistance_rise(per_event, anchor_efc, x) - seen, 0.0, None)
+    rise = resistance_rise(per_event, anchor_efc, x)
+    return np.where(rise >= RISE_MIN, np.clip(per_rise * rise - seen, 0.0, None), 0.0)
 
 
 def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
@@ -241,8 +248,9 @@ def drift_unit(trend: Smoothed, anchor_efc: float, efc) -> np.ndarray:
 
 @dataclass
 class CapacityNow:
-    """Capacity today [Ah] with the parts of its spread (the drift apart, so a benchmark
-    can choose :data:`DRIFT_SHARE`)."""
+    """Capacity today [Ah] with the parts of its spread (the drift and the resistance's
+    ``rise`` apart, 0 below :data:`RISE_MIN`, so a benchmark can choose
+    :data:`DRIFT_SHARE` and :data:`HIDDEN_FADE_PER_RISE`)."""
 
     value_Ah: float
     trend_sd_Ah: float
@@ -272,9 +280,10 @@ def capacity_now(with_cap: list[EventHealth], per_event: list[EventHealth] | Non
     mean, sd = trend.at(x)
     start = float(trend.at(anchor)[0][0])
     unit = float(drift_unit(trend, anchor, [x])[0])
+    rise = float(resistance_rise(per_event, anchor, [x])[0])
     return CapacityNow(value_Ah=float(mean[0]), trend_sd_Ah=float(sd[0]), drift_unit_Ah=unit,
                        quantile=trend.quantile,
-                       rise=float(resistance_rise(per_event, anchor, [x])[0]),
+                       rise=rise if rise >= RISE_MIN else 0.0,
                        seen_fade=max(0.0, (start - float(mean[0])) / start))
 
 
