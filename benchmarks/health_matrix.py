@@ -67,6 +67,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from _machine import machine_line  # noqa: E402
 from dischargelab.logbook import Logbook  # noqa: E402
+from dischargelab.logbook.over_life import CapacityNow  # noqa: E402
 from dischargelab.logbook.results import DEFAULT_EOL, build_health, capacity_now  # noqa: E402
 from health_from_use import CMU, blocks_of, cut_copy, find_tests, load_avg  # noqa: E402
 
@@ -378,14 +379,14 @@ def calibration(rows: pd.DataFrame) -> None:
 
 
 def _band(got: pd.DataFrame, share: float, per_rise: float):
-    """Each block's 95 % band at ``share`` and ``per_rise`` (as results.CapacityNow: the
-    hidden fade on the low side only)."""
-    rise = got["rise"] if "rise" in got else 0.0
-    seen = got["seen_fade"] if "seen_fade" in got else 0.0
-    hidden = np.clip(per_rise * rise - seen, 0.0, None) * got["now_Ah"]
-    sd = np.hypot(got["trend_sd"], share * got["drift_unit"])
-    return (got["now_Ah"] - got["quantile"] * np.hypot(sd, hidden),
-            got["now_Ah"] + got["quantile"] * sd)
+    """Each block's 95 % band at ``share`` and ``per_rise`` (over_life.CapacityNow's)."""
+    now = CapacityNow(value_Ah=got["now_Ah"].to_numpy(float),
+                      trend_sd_Ah=got["trend_sd"].to_numpy(float),
+                      drift_unit_Ah=got["drift_unit"].to_numpy(float),
+                      quantile=got["quantile"].to_numpy(float),
+                      rise=got["rise"].to_numpy(float) if "rise" in got else 0.0,
+                      seen_fade=got["seen_fade"].to_numpy(float) if "seen_fade" in got else 0.0)
+    return now.interval95(share, per_rise)
 
 
 def main(argv=None) -> None:

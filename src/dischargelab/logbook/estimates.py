@@ -631,13 +631,20 @@ def widen(capacity_Ah: float, interval95: list, extra_share: float) -> list:
 
 # --------------------------------------------------------------------------- resistance
 
+def robust_sd(values, centre: float | None = None) -> float:
+    """Standard deviation from the median absolute deviation about ``centre`` (default
+    the median): ``1.4826 MAD``, a normal's sd, robust to a few wild values."""
+    v = np.asarray(values, dtype=float)
+    c = float(np.median(v)) if centre is None else centre
+    return 1.4826 * float(np.median(np.abs(v - c)))
+
+
 def sample_noise(x) -> float:
     """Sample noise from second differences (robust: MAD), same units as ``x``."""
     x = np.asarray(x, dtype=float)
     if x.size < 5:
         return 0.0
-    d2 = np.diff(x, 2)
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    return robust_sd(np.diff(x, 2)) / float(np.sqrt(6.0))
 
 
 def step_resistance(time_s, voltage_V, current_A, rest: dict | None = None,
@@ -690,8 +697,7 @@ def step_resistance(time_s, voltage_V, current_A, rest: dict | None = None,
     d_i = float(np.median(steps))
     half = 1.96 * np.sqrt(2.0 * sv ** 2 + 2.0 * (r * si) ** 2) / d_i / np.sqrt(arr.size)
     if arr.size >= 3:
-        sd = 1.4826 * float(np.median(np.abs(arr - r)))
-        half = max(half, 1.96 * 1.2533 * sd / np.sqrt(arr.size))
+        half = max(half, 1.96 * 1.2533 * robust_sd(arr, r) / np.sqrt(arr.size))
     return r, [max(0.0, r - half), r + half]
 
 
@@ -794,7 +800,7 @@ def drop_resistance(curve_points: dict, soc_start: float, soc_end: float, ocv: O
         return None, None        # a drop the curve's own error could make (a small load)
     values = drop / i[sel]
     r = float(np.median(values))
-    spread = 1.4826 * float(np.median(np.abs(values - r))) if values.size >= 3 else 0.0
+    spread = robust_sd(values, r) if values.size >= 3 else 0.0
     half = 1.96 * float(np.hypot(curve_sd / float(np.median(i[sel])), spread))
     return r, [max(0.0, r - half), r + half]
 

@@ -458,9 +458,10 @@ def charge_figures(time_s, voltage_V, current_A, *, cells: int | None = None) ->
     hold = TAPER_HOLD_CELL_V * (cells or 1)
     vmax = float(np.max(v))
     low = TAPER_SHARE * median_i
-    last_held = int(np.flatnonzero(v >= vmax - hold)[-1])
-    held_i = float(np.mean(i[max(0, last_held - 2):last_held + 1]))
-    taper = bool(t.size >= 3 and median_i > 0 and held_i < low
+    held = np.flatnonzero(v >= vmax - hold)     # none when a voltage is not a number
+    last_held = int(held[-1]) if held.size else -1
+    taper = bool(t.size >= 3 and median_i > 0 and held.size
+                 and np.mean(i[max(0, last_held - 2):last_held + 1]) < low
                  and np.all(i[last_held + 1:] < low))
     return {"charged_Ah": q, "duration_s": float(t[-1] - t[0]) if t.size else 0.0,
             "mean_current_A": float(q * 3600.0 / (t[-1] - t[0])) if t.size > 1 and t[-1] > t[0]

@@ -584,8 +584,7 @@ def _resistance(e: dict, h: EventHealth, ctx: PackContext) -> None:
         current_A=e.get("mean_current_A"))
     h.resistance_ref_ohm, h.resistance_ref_interval95 = r, interval
     if r is not None:
-        h.notes.append(f"resistance from {h.resistance_method or 'load steps'}; at reference "
-                       f"conditions {how}")
+        h.notes.append(f"resistance from {h.resistance_method}; at reference conditions {how}")
 
 
 #: How a resistance from :func:`drop_resistance` is named.

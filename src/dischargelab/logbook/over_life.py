@@ -34,16 +34,14 @@ def _resistances(per_event: list[EventHealth]):
     """Each event's resistance at reference conditions when the events give it, else as
     measured: (values, intervals, basis, events). Resistances read from the open-circuit
     drop (minutes of polarisation in them) only when the events give no other."""
-    rows = [(e, e.to_dict()) for e in per_event if not e.outlier and e.efc is not None]
-    if any(e.resistance_ohm is not None and e.resistance_method != DROP_METHOD
-           for e, _ in rows):
-        rows = [(e, d) for e, d in rows if e.resistance_method != DROP_METHOD]
-    ref = [(e, d) for e, d in rows if d.get("resistance_ref_ohm") is not None]
+    rows = [e for e in per_event if not e.outlier and e.efc is not None]
+    if any(e.resistance_ohm is not None and e.resistance_method != DROP_METHOD for e in rows):
+        rows = [e for e in rows if e.resistance_method != DROP_METHOD]
+    ref = [e for e in rows if e.resistance_ref_ohm is not None]
     if ref:
-        return ([d["resistance_ref_ohm"] for _, d in ref],
-                [d.get("resistance_ref_interval95") for _, d in ref], "reference conditions",
-                [e for e, _ in ref])
-    got = [e for e, _ in rows if e.resistance_ohm is not None]
+        return ([e.resistance_ref_ohm for e in ref],
+                [e.resistance_ref_interval95 for e in ref], "reference conditions", ref)
+    got = [e for e in rows if e.resistance_ohm is not None]
     return ([e.resistance_ohm for e in got], [e.resistance_interval95 for e in got],
             "as measured", got)
 
@@ -168,11 +166,24 @@ def hidden_fade(trend: Smoothed, per_event: list[EventHealth] | None, anchor_efc
     of ``per_event``), less the fade the capacity trend shows since then (0 when it shows
     as much, or the rise is less than :data:`RISE_MIN`)."""
     x = np.asarray(efc, dtype=float)
-    level = trend.at(x)[0]
-    start = float(trend.at(anchor_efc)[0][0])
-    seen = np.clip((start - level) / start, 0.0, None)
-    rise = resistance_rise(per_event, anchor_efc, x)
+    return hidden_share(resistance_rise(per_event, anchor_efc, x),
+                        seen_fade(trend, anchor_efc, x)[1], per_rise)
+
+
+def hidden_share(rise, seen, per_rise: float = HIDDEN_FADE_PER_RISE):
+    """``per_rise`` times the resistance's ``rise`` less the ``seen`` fade (shares; 0 when
+    negative or the rise is less than :data:`RISE_MIN`): the rule of :func:`hidden_fade`,
+    on numbers or arrays."""
+    rise = np.asarray(rise, dtype=float)
     return np.where(rise >= RISE_MIN, np.clip(per_rise * rise - seen, 0.0, None), 0.0)
+
+
+def seen_fade(trend: Smoothed, anchor_efc: float, efc) -> tuple[np.ndarray, np.ndarray]:
+    """The trend's level at ``efc`` [unit] and its fade since ``anchor_efc`` (a share, 0
+    where it rose)."""
+    level = trend.at(np.asarray(efc, dtype=float))[0]
+    start = float(trend.at(anchor_efc)[0][0])
+    return level, np.clip((start - level) / start, 0.0, None)
 
 
 def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
@@ -239,10 +250,9 @@ def drift_unit(trend: Smoothed, anchor_efc: float, efc) -> np.ndarray:
     """The fade since ``anchor_efc`` times the capacity at ``efc`` [Ah] (0 before it): the
     trend's own fade, or :data:`FADE_FLOOR_PER_EFC` per EFC when that is more."""
     x = np.asarray(efc, dtype=float)
-    level, _ = trend.at(x)
-    start = float(trend.at(anchor_efc)[0][0])
+    level, fade = seen_fade(trend, anchor_efc, x)
     since = np.clip(x - anchor_efc, 0.0, None)
-    fade = np.maximum((start - level) / start, FADE_FLOOR_PER_EFC * since)
+    fade = np.maximum(fade, FADE_FLOOR_PER_EFC * since)
     return np.where(since > 0, fade * level, 0.0)
 
 
@@ -250,7 +260,8 @@ def drift_unit(trend: Smoothed, anchor_efc: float, efc) -> np.ndarray:
 class CapacityNow:
     """Capacity today [Ah] with the parts of its spread (the drift and the resistance's
     ``rise`` apart, 0 below :data:`RISE_MIN`, so a benchmark can choose
-    :data:`DRIFT_SHARE` and :data:`HIDDEN_FADE_PER_RISE`)."""
+    :data:`DRIFT_SHARE` and :data:`HIDDEN_FADE_PER_RISE`; numbers, or arrays of many
+    blocks)."""
 
     value_Ah: float
     trend_sd_Ah: float
@@ -260,10 +271,11 @@ class CapacityNow:
     seen_fade: float = 0.0
 
     def interval95(self, drift_share: float = DRIFT_SHARE,
-                   per_rise: float = HIDDEN_FADE_PER_RISE) -> list[float]:
-        hidden = max(0.0, per_rise * self.rise - self.seen_fade) * self.value_Ah
-        sd = float(np.hypot(self.trend_sd_Ah, drift_share * self.drift_unit_Ah))
-        return [self.value_Ah - self.quantile * float(np.hypot(sd, hidden)),
+                   per_rise: float = HIDDEN_FADE_PER_RISE) -> list:
+        """``[low, high]``: the hidden fade (:func:`hidden_share`) on the low side only."""
+        hidden = hidden_share(self.rise, self.seen_fade, per_rise) * self.value_Ah
+        sd = np.hypot(self.trend_sd_Ah, drift_share * self.drift_unit_Ah)
+        return [self.value_Ah - self.quantile * np.hypot(sd, hidden),
                 self.value_Ah + self.quantile * sd]
 
 
@@ -278,13 +290,11 @@ def capacity_now(with_cap: list[EventHealth], per_event: list[EventHealth] | Non
     x = max(e.efc for e in with_cap)
     anchor = _anchor(with_cap)
     mean, sd = trend.at(x)
-    start = float(trend.at(anchor)[0][0])
-    unit = float(drift_unit(trend, anchor, [x])[0])
     rise = float(resistance_rise(per_event, anchor, [x])[0])
-    return CapacityNow(value_Ah=float(mean[0]), trend_sd_Ah=float(sd[0]), drift_unit_Ah=unit,
-                       quantile=trend.quantile,
-                       rise=rise if rise >= RISE_MIN else 0.0,
-                       seen_fade=max(0.0, (start - float(mean[0])) / start))
+    return CapacityNow(value_Ah=float(mean[0]), trend_sd_Ah=float(sd[0]),
+                       drift_unit_Ah=float(drift_unit(trend, anchor, [x])[0]),
+                       quantile=trend.quantile, rise=rise if rise >= RISE_MIN else 0.0,
+                       seen_fade=float(seen_fade(trend, anchor, [x])[1][0]))
 
 
 #: The kind of estimate whose scale capacity is given on: a slow full discharge's coulomb

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .estimates import LEARNED_CURVE_SD_CELL_V, OcvCurve
+from .estimates import LEARNED_CURVE_SD_CELL_V, OcvCurve, robust_sd
 
 #: Standard deviation of a voltage placed on the reference curve, per cell [V]:
 #: relaxation left after a rest, temperature and ageing since the reference.
@@ -237,7 +237,7 @@ def rest_drop(event: dict, rests: list[tuple[float, float]]) -> tuple[float, flo
     if drops.size < REST_DROP_MIN:
         return None
     mid = float(np.median(drops))
-    return max(mid, 0.0), 1.4826 * float(np.median(np.abs(drops - mid)))
+    return max(mid, 0.0), robust_sd(drops, mid)
 
 
 def checked_drop(ordered: list[dict], position: int, event: dict, cells: int,

@@ -152,20 +152,16 @@ class Smoothed:
     offsets: dict = field(default_factory=dict)
     low_extra_sd: np.ndarray | None = None
 
-    def low_sd(self, efc=None) -> np.ndarray:
-        """Standard deviation of the low side at ``efc`` (default :attr:`efc`) [unit]."""
-        if efc is None:
-            sd, x = self.level_sd, self.efc
-        else:
-            x = np.atleast_1d(np.asarray(efc, dtype=float))
-            sd = self.at(x)[1]
+    def _low_extra(self, efc) -> np.ndarray:
+        """:attr:`low_extra_sd` at ``efc`` [unit] (0 without it)."""
         if self.low_extra_sd is None:
-            return sd
-        return np.hypot(sd, np.interp(x, self.efc, self.low_extra_sd))
+            return np.zeros_like(efc)
+        return np.interp(efc, self.efc, self.low_extra_sd)
 
     def band(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper 95 % band at :attr:`efc`."""
-        return (self.level - self.quantile * self.low_sd(),
+        low_sd = np.hypot(self.level_sd, self._low_extra(self.efc))
+        return (self.level - self.quantile * low_sd,
                 self.level + self.quantile * self.level_sd)
 
     def at(self, efc) -> tuple[np.ndarray, np.ndarray]:
@@ -187,7 +183,8 @@ class Smoothed:
         """Value at ``efc`` with its 95 % interval ``[low, high]``."""
         mean, sd = self.at(efc)
         m, s = float(mean[0]), float(sd[0])
-        return m, [m - self.quantile * float(self.low_sd(efc)[0]), m + self.quantile * s]
+        low_s = float(np.hypot(s, self._low_extra(np.atleast_1d(float(efc)))[0]))
+        return m, [m - self.quantile * low_s, m + self.quantile * s]
 
     def to_dict(self, points: int | None = None) -> dict:
         """``{"efc", "value", "sd", "lo", "hi"}`` lists (value, its standard deviation and
