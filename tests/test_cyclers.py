@@ -289,7 +289,8 @@ def test_ec_lab_text_export_with_decimal_commas_reads_like_the_mpr(cyclers, tmp_
     data = BioLogic.MPRfile(str(mpr)).data
     table = pd.DataFrame({"Ns": data["Ns"], "time/s": data["time/s"], "Ewe/V": data["Ewe/V"],
                           "<I>/mA": data["control/V/mA"], "cycle number": data["half cycle"] // 2,
-                          "Q charge/discharge/mA.h": data["Q charge/discharge/mA.h"]})
+                          "Q charge/discharge/mA.h": data["Q charge/discharge/mA.h"],
+                          "Temperature/°C": 24.5})
     header = ["EC-Lab ASCII FILE", "Nb header lines : 120"] + \
         [f"setting {k} : {k},5" for k in range(117)]
     body = table.to_csv(sep="\t", index=False, float_format="%.7g").replace(".", ",")
@@ -301,3 +302,92 @@ def test_ec_lab_text_export_with_decimal_commas_reads_like_the_mpr(cyclers, tmp_
     assert first_text["number"] == first_binary["number"]
     assert first_text["charge_Ah"] == pytest.approx(first_binary["charge_Ah"], rel=1e-5)
     assert "voltage trend" in text.meta["sign_source"]
+    assert text.frame["temperature_C"].iloc[0] == pytest.approx(24.5)   # Latin-1's degree
+
+
+def _clock(seconds) -> list[str]:
+    s = np.asarray(seconds, dtype=float)
+    return [f"{int(x // 3600):02d}:{int(x % 3600 // 60):02d}:{x % 60:06.3f}" for x in s]
+
+
+def _neware_layouts(tester, pause_s: float) -> dict[str, pd.DataFrame]:
+    """The records of ``tester`` in Neware BTS record exports (a step time that restarts
+    every step, mA, discharge negative), the clock ``pause_s`` late from step 4 on."""
+    f = tester.frame
+    runs = np.concatenate(([0], np.cumsum(np.diff(f["step_index"].to_numpy()) != 0)))
+    start = pd.Series(runs).map(f.groupby(runs)["time_s"].first()).to_numpy()
+    step_s = f["time_s"].to_numpy() - start
+    late = np.where(runs >= 3, pause_s, 0.0)
+    real = (pd.Timestamp(tester.meta["start_time"])
+            + pd.to_timedelta(f["time_s"] + late, unit="s")).dt.strftime("%Y-%m-%d %H:%M:%S")
+    current_mA = -f["current_A"] * 1000
+    state = np.where(f["current_A"] > 1e-6, "CC_DChg",
+                     np.where(f["current_A"] < -1e-6, "CCCV_Chg", "Rest"))
+    return {
+        "bts": pd.DataFrame({"Cycle ID": f["cycle_index"], "Step ID": f["step_index"],
+                             "Record ID": np.arange(1, len(f) + 1),
+                             "Time(h:min:s.ms)": _clock(step_s), "Voltage(V)": f["voltage_V"],
+                             "Current(mA)": current_mA, "Realtime": real}),
+        "relative": pd.DataFrame({"Record Index": np.arange(1, len(f) + 1), "Status": state,
+                                  "Cycle": f["cycle_index"], "Step": f["step_index"],
+                                  "Relative Time(h:min:s.ms)": _clock(step_s),
+                                  "Absolute Time": real, "Cur(mA)": current_mA,
+                                  "Voltage(V)": f["voltage_V"]}),
+        "no clock": pd.DataFrame({"Cycle ID": f["cycle_index"], "Step ID": f["step_index"],
+                                  "Time(h:min:s.ms)": _clock(step_s),
+                                  "Voltage(V)": f["voltage_V"], "Current(mA)": current_mA}),
+        "hours": pd.DataFrame({"Date and Time": real, "Cycle Number": f["cycle_index"],
+                               "Step Type": f["step_index"],
+                               "Run Time (h)": (f["time_s"] + late) / 3600,
+                               "Current (A)": -f["current_A"],
+                               "Potential (V)": f["voltage_V"]}),
+    }
+
+
+@pytest.mark.parametrize("layout", ["bts", "relative", "no clock", "hours"])
+def test_exports_with_a_step_time_or_a_clock_only_read_the_same_steps(cyclers, tmp_path,
+                                                                      layout):
+    """Neware BTS exports carry the step's time (``Time(h:min:s.ms)``, restarting every
+    step) and a date-time, no test time: the test time is added up over the steps, a pause
+    the clock shows kept; a numbered ``Step Type`` is the step."""
+    from dischargelab.logbook.summarise import summarise_source
+
+    source = cyclers / "neware/TestFile.nda"
+    original = read_tester(source)
+    pause_s = 3600.0
+    path = tmp_path / f"{layout.replace(' ', '_')}.csv"
+    _neware_layouts(original, pause_s)[layout].to_csv(path, index=False)
+    assert detect_tester(path) == "text"
+    tester = read_tester(path)
+    assert [s["kind"] for s in tester.steps] == [s["kind"] for s in original.steps]
+    assert [s["charge_Ah"] for s in tester.steps] == pytest.approx(
+        [s["charge_Ah"] for s in original.steps], rel=CAPACITY_TOLERANCE, abs=1e-9)
+    gap = tester.steps[3]["start_s"] - tester.steps[2]["end_s"]
+    if layout == "no clock":
+        assert gap < 1.0 and any("not known" in n for n in tester.meta["notes"])
+    else:
+        assert gap == pytest.approx(pause_s, abs=2.0)
+    events = [e["kind"] for e in summarise_source(source, keep_raw=False).events]
+    assert [e["kind"] for e in summarise_source(path, keep_raw=False).events] == events
+
+
+def test_a_chinese_export_in_gb18030_reads_the_same_steps(cyclers, tmp_path):
+    """A Chinese tester's export: headers in Chinese with full-width brackets, state words
+    (恒流放电 / 恒流恒压充电 / 搁置), a step time and an absolute time, GB 18030 bytes."""
+    original = read_tester(cyclers / "neware/TestFile.nda")
+    bts = _neware_layouts(original, 0.0)["relative"]
+    words = {"CC_DChg": "恒流放电", "CCCV_Chg": "恒流恒压充电", "Rest": "搁置"}
+    table = pd.DataFrame({"记录序号": bts["Record Index"], "循环号": bts["Cycle"],
+                          "工步号": bts["Step"], "工步类型": bts["Status"].map(words),
+                          "时间（h:min:s.ms）": bts["Relative Time(h:min:s.ms)"],
+                          "绝对时间": bts["Absolute Time"], "电流（mA）": bts["Cur(mA)"],
+                          "电压（V）": bts["Voltage(V)"]})
+    path = tmp_path / "chinese_export.csv"
+    path.write_bytes(table.to_csv(index=False).encode("gb18030"))
+    assert detect_tester(path) == "text"
+    tester = read_tester(path)
+    assert "the state column" in tester.meta["sign_source"]
+    assert [s["kind"] for s in tester.steps] == [s["kind"] for s in original.steps]
+    assert [s["charge_Ah"] for s in tester.steps] == pytest.approx(
+        [s["charge_Ah"] for s in original.steps], rel=CAPACITY_TOLERANCE, abs=1e-9)
+    assert tester.meta["start_time"] == original.meta["start_time"]

@@ -69,7 +69,7 @@ def detect_tester(path) -> str | None:
     import zipfile
 
     from .arbin import is_access
-    from .exports import is_tester_table, is_xlsx, text_header
+    from .exports import decode_text, is_tester_table, is_xlsx, text_header
 
     path = Path(path)
     try:
@@ -96,7 +96,7 @@ def detect_tester(path) -> str | None:
         return None
     if b"\x00" in head[:4096]:
         return None
-    text = head.decode("utf-8", errors="replace").lstrip("\ufeff")
+    text = decode_text(head)
     lines = text.splitlines()
     return "text" if text_header(lines[:-1] if len(head) == 65536 else lines) else None
 

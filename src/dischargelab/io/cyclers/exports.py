@@ -8,7 +8,12 @@ Time (s)``, ``TestTime``; ``Current(A)``, ``Amps``, ``I/mA``). A column is given
 cycle and step numbers, a state column (charge / discharge / rest), the
 tester's charge and discharge counters, a per-step capacity counter,
 temperature and date-time. A table is a tester table when it has time, voltage,
-current and a cycle or step number.
+current and a cycle or step number. Chinese testers' headers (电压, 电流, 工步号,
+循环号, 测试时间...) read the same, their files in UTF-8 or GB 18030.
+
+Time: a test time, else a date-time column. A time that restarts at every step
+(Neware BTS's ``Time(h:min:s.ms)``, ``Relative Time``) is added up over the steps, a
+pause between steps taken from the date-time column where there is one.
 
 Maccor text: a few preamble lines, then a tab-separated header (``Rec#  Cyc#
 Step  TestTime  StepTime  Amp-hr  Watt-hr  Amps  Volts  State ...``); the
@@ -32,7 +37,10 @@ from .steps import TesterRecords
 
 #: Unit as written -> (scale, offset) to the role's unit, by quantity.
 UNITS = {
-    "time": {"s": 1.0, "sec": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0, "hr": 3600.0},
+    "time": {"s": 1.0, "sec": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0, "hr": 3600.0,
+             # a clock written out (Neware's ``Time(h:min:s.ms)``): parsed as text
+             "h:min:s.ms": 1.0, "h:min:s": 1.0, "hh:mm:ss": 1.0, "hh:mm:ss.ms": 1.0,
+             "hh:mm:ss.sss": 1.0, "h:mm:ss": 1.0},
     "voltage": {"v": 1.0, "mv": 1e-3},
     "current": {"a": 1.0, "ma": 1e-3, "ua": 1e-6, "µa": 1e-6, "μa": 1e-6},
     "capacity": {"ah": 1.0, "a.h": 1.0, "mah": 1e-3, "ma.h": 1e-3, "uah": 1e-6, "µah": 1e-6,
@@ -42,24 +50,30 @@ UNITS = {
 
 #: Role -> (quantity, names without unit, best first).
 ROLES = {
-    "time_s": ("time", ("test time", "testtime", "total time", "test", "time", "elapsed time",
-                        "test time s")),
+    "time_s": ("time", ("test time", "testtime", "total time", "test", "run time", "time",
+                        "elapsed time", "test time s", "relative time", "step time",
+                        "测试时间", "总时间", "时间", "相对时间", "工步时间")),
     "voltage_V": ("voltage", ("voltage", "volts", "ewe", "ecell", "cell voltage", "potential",
-                              "u", "v")),
-    "current_A": ("current", ("current", "amps", "cell current", "i", "<i>", "amp")),
+                              "u", "v", "电压")),
+    "current_A": ("current", ("current", "amps", "cell current", "i", "<i>", "amp", "cur",
+                              "电流")),
     "cycle_index": (None, ("cycle index", "cycle", "cyc#", "cyc", "cycle number", "cycle id",
-                           "cycle no", "cycle c")),
-    "step_index": (None, ("step index", "step", "step number", "step id", "step no", "ns")),
-    "state": (None, ("state", "status", "md", "step type", "step name", "mode")),
+                           "cycle no", "cycle c", "循环号", "循环序号", "循环")),
+    "step_index": (None, ("step index", "step", "step number", "step id", "step no", "ns",
+                          "工步号", "工步序号", "工步")),
+    "state": (None, ("state", "status", "md", "step type", "step name", "mode", "工步类型",
+                     "工步状态", "状态")),
     "tester_charge_Ah": ("capacity", ("charge capacity", "chg capacity", "charge cap",
-                                      "q charge", "chg cap")),
+                                      "q charge", "chg cap", "充电容量")),
     "tester_discharge_Ah": ("capacity", ("discharge capacity", "dchg capacity",
-                                         "discharge cap", "q discharge", "dchg cap")),
-    "tester_step_Ah": ("capacity", ("amp hr", "amp-hr", "capacity", "ah", "cap")),
+                                         "discharge cap", "q discharge", "dchg cap",
+                                         "放电容量")),
+    "tester_step_Ah": ("capacity", ("amp hr", "amp-hr", "capacity", "ah", "cap", "容量")),
     "temperature_C": ("temperature", ("temperature", "temp", "aux temperature", "t1",
-                                      "aux temperature 1", "cell temperature")),
+                                      "aux temperature 1", "cell temperature", "温度")),
     "datetime": (None, ("date time", "datetime", "dpt time", "timestamp", "realtime",
-                        "date")),
+                        "absolute time", "date and time", "real time", "system time",
+                        "date", "绝对时间", "系统时间", "实际时间", "日期")),
 }
 
 _BRACKET = re.compile(r"^(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]\s*$")
@@ -72,7 +86,7 @@ PLAUSIBLE_C = (-60.0, 150.0)
 def split_header(name: str) -> tuple[str, str | None]:
     """``"Current(mA)"`` -> ``("current", "ma")``; ``"Q charge/discharge/mA.h"`` ->
     ``("q charge/discharge", "ma.h")``; ``"Cyc#"`` -> ``("cyc#", None)``."""
-    text = str(name).strip().lstrip("\ufeff")
+    text = str(name).strip().lstrip("\ufeff").replace("（", "(").replace("）", ")")
     unit = None
     match = _BRACKET.match(text)
     if match and match.group(1):
@@ -130,9 +144,11 @@ def _scale(quantity: str | None, unit: str | None) -> float | None:
 
 
 def is_tester_table(names: list[str]) -> bool:
-    """Time, voltage, current and a cycle or step number among the column names."""
+    """Time (test, step or clock time), voltage, current and a cycle or step number among
+    the column names."""
     roles = find_roles(names)
-    return all(r in roles for r in ("time_s", "voltage_V", "current_A")) and (
+    return all(r in roles for r in ("voltage_V", "current_A")) and (
+        "time_s" in roles or "datetime" in roles) and (
         "cycle_index" in roles or "step_index" in roles)
 
 
@@ -193,7 +209,7 @@ def read_text_export(path, text: str | None = None) -> TesterRecords:
     """A tester's text export (Arbin CSV, Maccor text, others) as :class:`TesterRecords`."""
     path = Path(path)
     if text is None:
-        text = path.read_bytes().decode("utf-8", errors="replace")
+        text = decode_text(path.read_bytes())
     lines = text.splitlines()
     found = text_header(lines)
     if found is None:
@@ -214,6 +230,22 @@ def read_text_export(path, text: str | None = None) -> TesterRecords:
     meta = {"format": f"{vendor}-text" if vendor else "tester-text", "preamble": preamble,
             "reader": "dischargelab's tester-table reader (columns by name and unit)"}
     return tester_records(table, records, path.name, meta)
+
+
+def decode_text(data: bytes) -> str:
+    """A text export's characters: UTF-8, else GB 18030 when it reads Chinese (电压, 电流:
+    Chinese testers' exports), else Latin-1 (EC-Lab's ``°C``); a UTF-8 character cut at
+    the end of ``data`` is left out."""
+    try:
+        return data.decode("utf-8").lstrip("\ufeff")
+    except UnicodeDecodeError as exc:
+        if exc.start >= len(data) - 3:
+            return data[:exc.start].decode("utf-8").lstrip("\ufeff")
+    try:
+        text = data.decode("gb18030")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+    return text if "电" in text else data.decode("latin-1")   # 电压 / 电流: Chinese
 
 
 def _decimal(rows: list[str], delimiter: str) -> str:
@@ -332,12 +364,34 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
         unit = split_header(names[k])[1]
         if unit:
             units[role] = unit
+    if "step_index" not in out and "state" in out and not out["state"].astype(bool).any():
+        numbers = pd.to_numeric(table.iloc[:, roles["state"][0]], errors="coerce")
+        if numbers.notna().all():   # a "Step Type" column of numbers: the step's number
+            out["step_index"] = numbers.to_numpy()
+            notes.append(f"{column_map.pop('state')!r} holds numbers: read as the step number")
+            out = out.drop(columns="state")
     for role in ("cycle_index", "step_index"):
         if role not in out:
             out[role] = 0
             notes.append(f"no {role.replace('_', ' ')} column: every record counted as "
                          f"{role.split('_')[0]} 0")
         out[role] = out[role].fillna(0).astype(np.int64)
+    clock = (_clock_seconds(table.iloc[:, roles["datetime"][0]]) if "datetime" in roles
+             else None)
+    if "time_s" not in out:
+        if clock is None:
+            raise DataError(f"{name}: the date-time column {column_map['datetime']!r} does "
+                            "not parse as dates and times, and no test time column is given")
+        out["time_s"] = clock
+        notes.append(f"test time from the date-time column {column_map['datetime']!r} "
+                     "(no test time column)")
+    elif restarts_each_step(out["time_s"].to_numpy(dtype=float), _runs(out)):
+        out["time_s"] = test_time_from_steps(out["time_s"].to_numpy(dtype=float), _runs(out),
+                                             clock)
+        notes.append(f"{column_map['time_s']!r} restarts at every step: test time "
+                     + ("added up over the steps, with the pauses the date-time column shows"
+                        if clock is not None else "added up over the steps (a pause between "
+                        "two steps is not known without a date-time column)"))
     if "datetime" in roles:
         start = _start_time(table.iloc[:, roles["datetime"][0]], out.get("time_s"))
         if start:
@@ -348,16 +402,19 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
 
 def state_of(column: pd.Series) -> np.ndarray:
     """``"charge"``, ``"discharge"``, ``"rest"`` or ``""`` for each state value
-    (Maccor ``C``/``D``/``R``, Neware ``CC_DChg``/``CCCV_Chg``/``Rest``, words)."""
+    (Maccor ``C``/``D``/``R``, Neware ``CC_DChg``/``CCCV_Chg``/``Rest``, words; Chinese
+    exports' 恒流放电 / 恒流恒压充电 / 搁置)."""
     text = column.astype(str).str.strip().str.lower()
     out = np.full(len(text), "", dtype=object)
     values = text.to_numpy(dtype=object)
     for k, value in enumerate(values):
-        if value in ("d",) or "dchg" in value or "disch" in value or value.startswith("dis"):
+        if value in ("d",) or "dchg" in value or "disch" in value or value.startswith("dis") \
+                or "放电" in value:
             out[k] = "discharge"
-        elif value in ("c",) or "chg" in value or value.startswith("charg"):
+        elif value in ("c",) or "chg" in value or value.startswith("charg") or "充电" in value:
             out[k] = "charge"
-        elif value in ("r",) or value.startswith(("rest", "ocv", "pause")):
+        elif value in ("r",) or value.startswith(("rest", "ocv", "pause")) or value in (
+                "搁置", "静置"):
             out[k] = "rest"
     return out
 
@@ -376,6 +433,75 @@ def _seconds(column: pd.Series, scale: float, name: str) -> np.ndarray:
         return seconds.to_numpy(dtype=float)
     raise DataError(f"{name}: the test time column holds {str(text.iloc[0])!r}, neither "
                     "seconds nor a clock time")
+
+
+def _runs(out: pd.DataFrame) -> np.ndarray:
+    """Run number of each record: a run is one (cycle, step) pair."""
+    keys = out[["cycle_index", "step_index"]].to_numpy()
+    return np.concatenate(([0], np.cumsum(np.any(keys[1:] != keys[:-1], axis=1))))
+
+
+def restarts_each_step(time_s: np.ndarray, runs: np.ndarray) -> bool:
+    """A step time: it goes back, and only where a step starts, to near zero."""
+    back = np.flatnonzero(np.diff(time_s) < 0) + 1
+    if back.size == 0:
+        return False
+    starts = np.flatnonzero(np.diff(runs) != 0) + 1
+    first = np.concatenate(([0], starts))
+    span = np.nanmax(time_s) if np.isfinite(time_s).any() else 0.0
+    return bool(np.isin(back, starts).all()
+                and np.nanmedian(time_s[first]) <= 0.01 * max(span, 1.0))
+
+
+#: A date-time column's resolution [s]: a step's start by the clock later than its start by
+#: the step times by more than this is a pause between the steps.
+CLOCK_RESOLUTION_S = 2.0
+
+#: Test time [s] between a step's last record and the next step's first record written at
+#: step time 0 (the tester writes both at the change).
+STEP_CHANGE_S = 1e-3
+
+
+def test_time_from_steps(step_s: np.ndarray, runs: np.ndarray,
+                         clock_s: np.ndarray | None) -> np.ndarray:
+    """Test time [s] from a step time that restarts at every step.
+
+    A step starts where the step before ended (its step time counted from there); a
+    date-time column that puts its first record more than :data:`CLOCK_RESOLUTION_S`
+    later shows a pause between them, kept.
+    """
+    starts = np.concatenate(([0], np.flatnonzero(np.diff(runs) != 0) + 1))
+    stops = np.concatenate((starts[1:], [len(step_s)]))
+    out = np.empty_like(step_s, dtype=float)
+    for a, b in zip(starts, stops):
+        first = step_s[a] if a == 0 else out[a - 1] + max(step_s[a], STEP_CHANGE_S)
+        if a and clock_s is not None and np.isfinite(clock_s[a]) and np.isfinite(clock_s[0]):
+            by_clock = clock_s[a] - clock_s[0] + step_s[0]
+            if by_clock > first + CLOCK_RESOLUTION_S:
+                first = by_clock
+        out[a:b] = step_s[a:b] - step_s[a] + first
+    return out
+
+
+def _clock_seconds(column: pd.Series) -> np.ndarray | None:
+    """Seconds since the first date-time of a date-time column, or None when under 90 %
+    of it parses (text, UNIX seconds or Excel days)."""
+    values = pd.to_numeric(column, errors="coerce")
+    if values.notna().mean() > 0.9:
+        x = values.to_numpy(dtype=float)
+        first = x[np.isfinite(x)][0]
+        if 1e9 < first < 4.2e9:
+            return x - first
+        if 20000 < first < 80000:
+            return (x - first) * 86400.0
+        return None
+    with warnings.catch_warnings():   # pandas' format inference warning is not the user's
+        warnings.simplefilter("ignore", UserWarning)
+        stamps = pd.to_datetime(column.astype(str), errors="coerce")
+    if stamps.notna().mean() <= 0.9:
+        return None
+    seconds = (stamps - stamps.dropna().iloc[0]).dt.total_seconds()
+    return seconds.to_numpy(dtype=float)
 
 
 def _start_time(column: pd.Series, time_s) -> str | None:

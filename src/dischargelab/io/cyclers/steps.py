@@ -237,7 +237,7 @@ def step_table(frame: pd.DataFrame, records: np.ndarray, bounds) -> list[dict]:
     steps = []
     for number, (a, b) in enumerate(bounds, start=1):
         kind = _kind(i[a:b], None if state is None else state[a:b], rest_level)
-        lead = 0.0 if a == 0 else i[a] * (t[a] - t[a - 1])   # the step starts after row a-1
+        lead = 0.0 if a == 0 else i[a] * _lead_s(t, a, b)   # the step starts after row a-1
         moved = (float(np.sum(0.5 * (i[a + 1:b] + i[a:b - 1]) * np.diff(t[a:b]))) + lead) / 3600
         steps.append({
             "number": number, "cycle": int(frame["cycle_index"].iat[a]),
@@ -253,6 +253,14 @@ def step_table(frame: pd.DataFrame, records: np.ndarray, bounds) -> list[dict]:
         })
     _discharge_flags(steps)
     return steps
+
+
+def _lead_s(t: np.ndarray, a: int, b: int) -> float:
+    """Time [s] the step's first current ran before its first record: since the record
+    before, at most the step's longest sample interval (a pause between steps is not run)."""
+    inside = np.diff(t[a:b])
+    gap = float(t[a] - t[a - 1])
+    return min(gap, float(np.max(inside))) if inside.size else gap
 
 
 def _kind(i: np.ndarray, state, rest_level: float) -> str:
