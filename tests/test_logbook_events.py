@@ -124,6 +124,25 @@ def test_relaxation_of_a_short_rest_uses_a_prior_wider_than_a_fit():
     assert r["half95_V"] >= r["left_V"]
 
 
+def test_a_fit_over_a_rest_shorter_than_the_load_keeps_the_diffusion_it_cannot_see():
+    """After a 1,100 s load the diffusion overpotential relaxes as sqrt(t + T) - sqrt(t):
+    60 s of it fitted (its slope flattened by cooling) leaves most of it unseen; the
+    reading now carries the prior's share, and a rest longer than the load is unchanged."""
+    from dischargelab.logbook.estimates import shorter_than_load
+
+    load_s, v_inf, loaded = 1100.0, 3.75, 3.53
+    t = np.arange(1.0, 61.0)
+    # 50 mV still to relax at 60 s; the ohmic jump from 3.53 V already seen; cooling
+    v = v_inf - 0.0019 * (np.sqrt(t + load_s) - np.sqrt(t)) - 0.0001 * t
+    fitted = relaxation(t, v, +1, loaded_V=loaded)
+    assert fitted["method"] == "fit" and fitted["relaxed_V"] + fitted["half95_V"] < v_inf
+    reading = dict(fitted, since_load_s=float(t[-1]))
+    short = shorter_than_load(reading, load_s, loaded, +1)
+    assert short["relaxed_V"] - short["half95_V"] < v_inf < short["relaxed_V"] + short["half95_V"]
+    assert short["method"] == "fit, shorter than the load"
+    assert shorter_than_load(reading, 50.0, loaded, +1) is reading
+
+
 # --------------------------------------------------------------------------- charge
 
 def _charge_starts(phases, *, current=3.0, dt=166.5, step_V=0.09, rise_V=0.055, seed=0):

@@ -227,6 +227,35 @@ def relaxation(time_since_s, voltage_V, direction: int, *, loaded_V: float | Non
     return out
 
 
+def shorter_than_load(reading: dict, load_s: float, loaded_V: float | None,
+                      direction: int) -> dict:
+    """A fitted rest reading taken sooner after a load than the load lasted, with at least
+    what :func:`relaxation`'s prior leaves: ``RELAX_PRIOR_SHARE`` of the recovery seen,
+    scaled by ``sqrt(RELAX_PRIOR_T_S / t)``, twice that as its 95 % half width.
+
+    A rest shorter than the load shows only the fast part of the relaxation: after a load
+    of ``T`` the diffusion overpotential still relaxes as ``sqrt(t + T) - sqrt(t)``
+    (Weppner and Huggins 1977), over the load's own time scale, and the ``t dV/dt`` of a
+    fit over ``t << T`` (or a slope that self-heating's cooling turns flat) says little
+    of it. Readings that are not fits, or rests longer than the load, are returned as
+    they are.
+    """
+    t = reading.get("since_load_s")
+    if (reading.get("method") != "fit" or t is None or loaded_V is None or direction == 0
+            or not t < load_s):
+        return reading
+    last = float(reading["voltage_V"])
+    recovery = max(0.0, direction * (last - float(loaded_V)))
+    prior = RELAX_PRIOR_SHARE * recovery * np.sqrt(RELAX_PRIOR_T_S / max(float(t), 1.0))
+    left = float(reading.get("left_V") or 0.0)
+    half = float(reading.get("half95_V") or 0.0)
+    if abs(left) >= prior and half >= 2.0 * prior:
+        return reading
+    left = direction * max(abs(left), prior)
+    return dict(reading, relaxed_V=last + left, left_V=left, half95_V=max(half, 2.0 * prior),
+                method="fit, shorter than the load")
+
+
 def _end_slope(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
     """Slope of the voltage over the last third of a rest [V/s], its standard error, and
     the time it holds at (the stretch's mean time) [s] (least squares, >= 3 samples)."""

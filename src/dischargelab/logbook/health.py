@@ -85,6 +85,7 @@ from .estimates import (
     charge_start_corrections,
     drop_resistance,
     resistance_at_reference,
+    shorter_than_load,
     soc_reading,
     systematic_share,
     widen,
@@ -458,13 +459,18 @@ def _full_after(charge: dict | None, n_cells: int, full_cell_V: float) -> bool:
 
 
 def _soon_after(reading: dict, e: dict) -> dict:
-    """A rest reading taken soon after a load, its interval widened by the polarisation the
-    load may still hold when the rest was too short to fit its relaxation:
+    """A rest reading taken soon after a load: a fitted one shorter than the load carries
+    what its relaxation may still hold (:func:`~.estimates.shorter_than_load`); one too
+    short to fit has its interval widened by the polarisation the load may still hold:
     :data:`LOADED_END_SHARE` of the resistive drop at the load's mean current, fading as
     ``sqrt(SOON_S / t)`` after :data:`SOON_S`."""
     since = reading.get("since_load_s")
     r = e.get("resistance_ohm")
-    if since is None or r is None or reading.get("method") == "fit":
+    if reading.get("method") == "fit":
+        direction = {"discharge": 1, "charge": -1}.get(e.get("kind"), 0)
+        return shorter_than_load(reading, float(e.get("duration_s") or 0.0),
+                                 e.get("end_voltage_V"), direction)
+    if since is None or r is None:
         return reading
     load = abs(float(e.get("mean_current_A") or 0.0))
     extra = 1.96 * LOADED_END_SHARE * float(r) * load * np.sqrt(SOON_S / max(since, SOON_S))
