@@ -391,3 +391,16 @@ def test_a_chinese_export_in_gb18030_reads_the_same_steps(cyclers, tmp_path):
     assert [s["charge_Ah"] for s in tester.steps] == pytest.approx(
         [s["charge_Ah"] for s in original.steps], rel=CAPACITY_TOLERANCE, abs=1e-9)
     assert tester.meta["start_time"] == original.meta["start_time"]
+
+
+def test_an_excel_97_workbook_says_to_save_it_as_xlsx(capsys, tmp_path):
+    """Landt's and older Neware exports are .xls (an OLE2 file): one line says what to do,
+    from the tester reader, the discharge reader and the logbook."""
+    path = tmp_path / "landt.xls"
+    path.write_bytes(b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1" + bytes(range(256)) * 8)
+    with pytest.raises(DataError, match="save it as .xlsx or CSV"):
+        read_tester(path)
+    code, out, err = run(capsys, "fit", path)
+    assert code == 2 and "Excel 97-2003 workbook" in err and "Traceback" not in err
+    code, out, err = run(capsys, "steps", path)
+    assert code == 2 and "Excel 97-2003 workbook" in err

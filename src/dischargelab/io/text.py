@@ -30,6 +30,17 @@ _TIME_VALUE = re.compile(r"^(\d+:\d{2}:\d{2}(\.\d*)?|\d{4}-\d{2}-\d{2}[T ]\d{1,2
 _COMMENT_PREFIXES = ("#", "//", "%")
 
 
+
+#: First bytes of an OLE2 compound file: an Excel 97-2003 ``.xls`` workbook (Landt and older
+#: Neware exports), among others.
+OLE2_MAGIC = b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1"
+
+
+def excel97_message(name: str) -> str:
+    """What to do with an Excel 97-2003 workbook, which no reader here opens."""
+    return (f"{name} is an Excel 97-2003 workbook (.xls, or another OLE2 file): open it in "
+            "Excel or LibreOffice and save it as .xlsx or CSV, which dischargelab reads")
+
 def load_text(path) -> tuple[str, dict]:
     """Read a text file into one string.
 
@@ -63,6 +74,8 @@ def load_text(path) -> tuple[str, dict]:
             info = {"encoding": encoding, "bom": True}
             break
     else:
+        if raw.startswith(OLE2_MAGIC):
+            raise DataError(excel97_message(path.name))
         if b"\x00" in raw[:4096]:
             raise DataError(f"{path.name} is a binary file, not text data (CSV, TSV, .lvm, log)")
         info = {"encoding": "utf-8", "bom": False}

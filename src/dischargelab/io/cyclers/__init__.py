@@ -161,6 +161,11 @@ def read_tester(path, kind: str | None = None, sign: str = "auto") -> TesterFile
         from .exports import read_text_export
         raw = read_text_export(path)
     else:
+        from ..text import OLE2_MAGIC, excel97_message
+
+        with open(path, "rb") as fh:
+            if fh.read(len(OLE2_MAGIC)) == OLE2_MAGIC:
+                raise DataError(excel97_message(path.name))
         raise DataError(f"{path.name} is not a battery tester file this version reads (Neware "
                         ".nda/.ndax, BioLogic .mpr, Arbin .res/.csv/.xlsx, Maccor text)")
     tester = finish(raw, path.name, sign)
