@@ -17,7 +17,6 @@ from dischargelab.logbook.estimates import (
     counted_charge,
     drop_resistance,
     regression_resistance,
-    relaxation,
     resistance_at_reference,
     sampling_figures,
     soc_reading,
@@ -26,6 +25,7 @@ from dischargelab.logbook.estimates import (
 )
 from dischargelab.logbook.events import MIN_IDLE_A, charge_figures, idle_threshold, split_log
 from dischargelab.logbook.health import order_events
+from dischargelab.logbook.relaxation import relaxation, shorter_than_load
 from dischargelab.ocv import ocv_from_soc
 
 # --------------------------------------------------------------------------- splitting
@@ -128,8 +128,6 @@ def test_a_fit_over_a_rest_shorter_than_the_load_keeps_the_diffusion_it_cannot_s
     """After a 1,100 s load the diffusion overpotential relaxes as sqrt(t + T) - sqrt(t):
     60 s of it fitted (its slope flattened by cooling) leaves most of it unseen; the
     reading now carries the prior's share, and a rest longer than the load is unchanged."""
-    from dischargelab.logbook.estimates import shorter_than_load
-
     load_s, v_inf, loaded = 1100.0, 3.75, 3.53
     t = np.arange(1.0, 61.0)
     # 50 mV still to relax at 60 s; the ohmic jump from 3.53 V already seen; cooling

@@ -184,7 +184,7 @@ def test_a_rest_after_a_mission_holds_where_it_relaxes_in_its_interval(shared_da
     (the central value lies 6-9 mV below them: the tail is slower than diffusion there)."""
     import pandas as pd
 
-    from dischargelab.logbook.estimates import relaxation
+    from dischargelab.logbook.relaxation import relaxation
 
     frame = pd.read_csv(shared_data / "cmu_evtol" / "VAH27.csv")
     t, v = frame["time_s"].to_numpy(), frame["voltage_V"].to_numpy()

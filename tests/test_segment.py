@@ -46,6 +46,24 @@ def test_detect_sign_uses_voltage_not_magnitude():
     assert sign == -1
 
 
+@pytest.mark.parametrize("file_sign", [1, -1])
+def test_detect_sign_of_a_flight_from_a_take_off_burst_to_a_light_hover(file_sign):
+    """A 4S flight over the flat middle of a LiPo curve: 20 s at 45 A, then a hover at
+    22-38 A (gusts every 30 s) for 8 minutes; the drop at the burst's current exceeds the
+    0.3 V fall of the open-circuit voltage over the flight, so the last loaded voltage
+    lies above the first. The voltage still falls with the charge moved at any current."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 500.0, 0.5)
+    i = np.where(t < 20, 45.0, 30.0)
+    for start in np.arange(20.0, 500.0, 30.0):
+        i[(t >= start) & (t < start + 30)] = 30.0 * rng.uniform(0.75, 1.25)
+    q = np.cumsum(i) * 0.5 / 3600
+    v = 15.2 - 0.3 * q / q[-1] - 0.03 * i
+    assert v[-1] > v[0]
+    sign, evidence = detect_sign(t, file_sign * i, v)
+    assert sign == file_sign, evidence
+
+
 def test_detect_sign_without_trend_uses_majority():
     t = np.arange(50.0)
     sign, evidence = detect_sign(t, np.full(50, 2.0), np.full(50, 3.7))

@@ -142,10 +142,7 @@ def detect_sign(time_s, current_A, voltage_V) -> tuple[int, str]:
         for start, stop in runs(loaded & (np.sign(i) == sign)):
             if stop - start < MIN_SEGMENT_ROWS:
                 continue
-            steps = np.diff(v[start:stop])
-            # a jump of more than VOLTAGE_JUMP_FRACTION is a pack swap, not a trend
-            steps = steps[np.abs(steps) <= VOLTAGE_JUMP_FRACTION * np.abs(v[start:stop - 1])]
-            dv = float(steps.sum())
+            dv = _trend_V(t[start:stop], np.abs(i[start:stop]), v[start:stop])
             if abs(dv) <= tolerance_V:
                 continue
             vote = -np.sign(dv) * sign  # +1: positive current is discharge
@@ -162,6 +159,28 @@ def detect_sign(time_s, current_A, voltage_V) -> tuple[int, str]:
     sign = 1 if charge >= 0 else -1
     return sign, ("no clear voltage trend; the current is mostly "
                   + ("positive" if sign > 0 else "negative"))
+
+
+def _trend_V(t: np.ndarray, i: np.ndarray, v: np.ndarray) -> float:
+    """The voltage change [V] a loaded run's charge explains: ``v = a + b q + c |i|``
+    fitted by least squares over each stretch between jumps (a jump of more than
+    :data:`VOLTAGE_JUMP_FRACTION` is a pack swap, not a trend), ``b q`` summed. The
+    ``c |i|`` term takes the drop that follows the current's level, so a run that starts
+    at a take-off burst and ends at a light hover still falls with its charge."""
+    jumps = np.flatnonzero(np.abs(np.diff(v)) > VOLTAGE_JUMP_FRACTION * np.abs(v[:-1])) + 1
+    total = 0.0
+    for a, b in zip(np.concatenate(([0], jumps)), np.concatenate((jumps, [v.size]))):
+        if b - a < MIN_SEGMENT_ROWS:
+            continue
+        q = np.concatenate(([0.0], np.cumsum(0.5 * (i[a + 1:b] + i[a:b - 1])
+                                             * np.diff(t[a:b]))))
+        if q[-1] <= 0:
+            continue
+        level = i[a:b] - i[a:b].mean()
+        columns = [np.ones(b - a), q / q[-1]] + ([level] if np.ptp(level) > 0 else [])
+        coef = np.linalg.lstsq(np.column_stack(columns), v[a:b], rcond=None)[0]
+        total += float(coef[1])
+    return total
 
 
 def load_floor(current_A) -> float:

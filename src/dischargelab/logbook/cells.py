@@ -4,7 +4,7 @@ Where a log measures each cell (INA3221 CSV, ArduPilot BCL, Betaflight, LogView:
 columns ``cell1_V``, ``cell2_V``, ...), each event gets (:func:`cell_figures`):
 
 * the cells' rest voltages before and after the load (relaxed as the pack's are,
-  :func:`dischargelab.logbook.estimates.relaxation`) and their spread;
+  :func:`dischargelab.logbook.relaxation.relaxation`) and their spread;
 * each cell's sag (rest voltage before the load minus its lowest loaded voltage)
   and its resistance from the load steps (the pack's steps, the cell's voltage);
 * the cells whose resistance or sag stands off the others' median (by
@@ -30,7 +30,8 @@ import re
 
 import numpy as np
 
-from .estimates import capacity_between_rests, relaxation, step_resistance
+from .estimates import capacity_between_rests, step_resistance
+from .relaxation import relaxation
 
 #: A cell's resistance stands off when it is this many times the others' median ...
 OFF_RESISTANCE_RATIO = 1.3

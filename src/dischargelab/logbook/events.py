@@ -24,7 +24,7 @@ whole life of a cell. :func:`split_log` cuts its rows into events:
 
 :func:`rest_reading` gives a rest's reading for the events on either side: its
 voltage at the end, how far it has relaxed and what it relaxes to
-(:func:`dischargelab.logbook.estimates.relaxation`), its idle current and
+(:func:`dischargelab.logbook.relaxation.relaxation`), its idle current and
 temperature. :func:`charge_figures` gives a charge's: charge moved and whether it
 ended in a constant-voltage taper (full, as the charger defines it).
 
@@ -47,7 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .cells import cell_columns, cell_figures
-from .estimates import counted_charge, relaxation, sampling_figures, step_resistance
+from .estimates import counted_charge, sampling_figures, step_resistance
+from .relaxation import relaxation
 
 #: Event kinds.
 KINDS = ("discharge", "flight", "charge", "rest", "gap")
@@ -421,7 +422,7 @@ def rest_reading(time_s, voltage_V, current_A, *, load_end_s: float | None = Non
         ``since_load_s`` (time from the load to the reading, None without a load),
         ``current_A`` (idle current at the reading: the mean of the samples whose
         voltage it reads), ``temperature_C``, and the keys of
-        :func:`~dischargelab.logbook.estimates.relaxation` (``voltage_V``,
+        :func:`~dischargelab.logbook.relaxation.relaxation` (``voltage_V``,
         ``relaxed_V``, ``left_V``, ``half95_V``, ``method``).
     """
     t = np.asarray(time_s, dtype=float)

@@ -85,7 +85,6 @@ from .estimates import (
     charge_start_corrections,
     drop_resistance,
     resistance_at_reference,
-    shorter_than_load,
     soc_reading,
     systematic_share,
     widen,
@@ -105,6 +104,7 @@ from .references import (
     rate_kinds,
     run_to_empty_capacity,
 )
+from .relaxation import shorter_than_load
 
 #: A discharge starts full when its rest voltage reads at least this state of charge.
 FULL_SOC = 0.9
@@ -460,7 +460,7 @@ def _full_after(charge: dict | None, n_cells: int, full_cell_V: float) -> bool:
 
 def _soon_after(reading: dict, e: dict) -> dict:
     """A rest reading taken soon after a load: a fitted one shorter than the load carries
-    what its relaxation may still hold (:func:`~.estimates.shorter_than_load`); one too
+    what its relaxation may still hold (:func:`~.relaxation.shorter_than_load`); one too
     short to fit has its interval widened by the polarisation the load may still hold:
     :data:`LOADED_END_SHARE` of the resistive drop at the load's mean current, fading as
     ``sqrt(SOON_S / t)`` after :data:`SOON_S`."""
