@@ -193,6 +193,16 @@ def _key(*parts) -> str:
     return hashlib.sha256(repr(parts).encode()).hexdigest()[:12]
 
 
+def _events_code() -> str:
+    """A hash of the code that turns a log into events (the readers and the logbook): a
+    logbook cached by an older version is built again."""
+    src = ROOT / "src" / "dischargelab"
+    digest = hashlib.sha256()
+    for path in sorted([*src.glob("io/**/*.py"), *src.glob("logbook/*.py")]):
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
 def synthetic_log(name: str, changes: dict, seed: int, cache: Path):
     """(log frame, tests) of one synthetic condition, cached by its spec."""
     import synthetic_life as sl
@@ -248,7 +258,7 @@ def real_log(cell: str, period, cv):
 def logbook_of(frame: pd.DataFrame, label: str, cache: Path, first: bool = True) -> Path:
     """A logbook holding the log with every test but the first cut out (``first`` false:
     every test, and the pack given its label capacity and chemistry), cached."""
-    db = cache / (f"lb_{_key(label, len(frame), float(frame['voltage_V'].sum()))}"
+    db = cache / (f"lb_{_key(label, len(frame), float(frame['voltage_V'].sum()), _events_code())}"
                   f"{'' if first else '_label'}.sqlite")
     if db.exists():
         return db
