@@ -298,3 +298,30 @@ def synthetic_life(spec: LifeSpec | None = None) -> Life:
 
 __all__ = ["GENERATOR_VERSION", "cell_ocv", "LifeSpec", "Life", "synthetic_life", "capacity_at",
            "parameters", "MISSION"]
+
+
+def flight_log(path, loads, *, capacity_Ah: float, cells: int, chemistry: str = "li-ion",
+               before_s: float = 120.0, after_s: float = 60.0, seed: int = 3,
+               sample_s: float = 1.0, ambient_C: float = 25.0,
+               temperature: bool = False) -> float:
+    """One flight of a fresh pack written as a logger would (``time_s``, pack
+    ``voltage_V``, ``current_A`` discharge positive, every ``sample_s``; the cell's
+    ``temperature_C`` if ``temperature``): a rest of ``before_s`` from full, the ``loads``
+    (``(current_A, duration_s)`` each), and the log ending ``after_s`` after landing.
+    Returns the cell's capacity [Ah] (the truth)."""
+    spec = LifeSpec(capacity_Ah=capacity_Ah, ocv_wiggle_V=0.008, seed=seed,
+                    chemistry=chemistry, ambient_C=ambient_C, season_C=0.0)
+    p = parameters(spec, 0.0)
+    log = _Logger(spec)
+    log.rest(before_s, p, ambient_C)
+    log.go([Step("current", a, duration_s=d) for a, d in loads], p, ambient_C)
+    log.go([Step("rest", duration_s=after_s)], p, ambient_C)
+    s = log.series()
+    t = np.arange(0.0, s["time_s"][-1], sample_s)
+    frame = pd.DataFrame({"time_s": t,
+                          "voltage_V": cells * np.interp(t, s["time_s"], s["voltage_V"]),
+                          "current_A": np.interp(t, s["time_s"], s["current_A"])})
+    if temperature:
+        frame["temperature_C"] = np.interp(t, s["time_s"], s["temperature_C"])
+    frame.to_csv(path, index=False)
+    return float(p["C_Ah"])

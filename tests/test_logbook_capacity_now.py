@@ -88,27 +88,13 @@ def test_a_routine_charge_to_4_0_v_is_not_full_and_the_band_holds_the_next_test(
     assert low <= life.tests[1][2] <= high
 
 
-def _hover_log(path, tail_s: float, chemistry: str = "li-ion"):
+def _hover_log(path, tail_s: float, chemistry: str = "li-ion", temperature: bool = True):
     """A 3S 12 Ah pack (the engine's ``ecm`` cell) rested full, hovered at 27 A to 30 %
     and logged ``tail_s`` after landing, one sample a second."""
-    import pandas as pd
-
     import synthetic_life as sl
-    from dischargelab.engine import Step
 
-    spec = sl.LifeSpec(capacity_Ah=12.0, ocv_wiggle_V=0.008, seed=3, chemistry=chemistry)
-    p = sl.parameters(spec, 0.0)
-    log = sl._Logger(spec)
-    log.rest(120.0, p, 25.0)
-    log.go([Step("current", 27.0, duration_s=0.7 * 12 * 3600 / 27)], p, 25.0)
-    log.go([Step("rest", duration_s=tail_s)], p, 25.0)
-    s = log.series()
-    t = np.arange(0.0, s["time_s"][-1], 1.0)
-    pd.DataFrame({"time_s": t, "voltage_V": 3 * np.interp(t, s["time_s"], s["voltage_V"]),
-                  "current_A": np.interp(t, s["time_s"], s["current_A"]),
-                  "temperature_C": np.interp(t, s["time_s"], s["temperature_C"])}
-                 ).to_csv(path, index=False)
-    return float(p["C_Ah"])
+    return sl.flight_log(path, [(27.0, 0.7 * 12 * 3600 / 27)], capacity_Ah=12.0, cells=3,
+                         chemistry=chemistry, after_s=tail_s, temperature=temperature)
 
 
 @pytest.mark.parametrize("chemistry", [None, "li-ion"])
@@ -137,7 +123,7 @@ def test_a_landing_logged_for_less_time_than_the_flight_took_keeps_the_truth_in_
     show yet, with no chemistry, cells or label given."""
     from dischargelab.logbook import Logbook
 
-    truth = _hover_log(tmp_path / "hover.csv", tail_s, chemistry)
+    truth = _hover_log(tmp_path / "hover.csv", tail_s, chemistry, temperature=False)
     with Logbook(tmp_path / "lb.sqlite") as lb:
         lb.add(tmp_path / "hover.csv", pack="quad")
         flight = next(e for e in lb.health("quad").events if e.capacity_Ah is not None)

@@ -64,6 +64,33 @@ def test_detect_sign_of_a_flight_from_a_take_off_burst_to_a_light_hover(file_sig
     assert sign == file_sign, evidence
 
 
+def test_a_flight_whose_loaded_voltage_ends_above_its_take_off_is_read(tmp_path):
+    """A minute's climb at 45 A, then a hover at 22-28 A on the flat of a LiPo curve, a
+    rest before and after: the loaded voltage ends 0.7 V above the climb's. Read as one
+    discharge (its sign found, and not refused as a voltage that rises)."""
+    import pandas as pd
+
+    import dischargelab as dl
+
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 500.0, 0.5)
+    i = np.where(t < 60, 45.0, 25.0)
+    for start in np.arange(60.0, 500.0, 30.0):
+        i[(t >= start) & (t < start + 30)] = 25.0 * rng.uniform(0.9, 1.1)
+    q = np.cumsum(i) * 0.5 / 3600
+    v = 15.2 - 0.2 * q / q[-1] - 0.045 * i
+    assert np.median(v[-100:]) > np.median(v[:100]) + 0.5
+    rest = np.arange(1.0, 31.0)
+    frame = pd.DataFrame({"time_s": np.concatenate((rest - 31.0, t, 500.0 + rest)),
+                          "voltage_V": np.concatenate((np.full(30, 15.2), v,
+                                                       np.full(30, 15.0))),
+                          "current_A": np.concatenate((np.zeros(30), i, np.zeros(30)))})
+    frame.to_csv(tmp_path / "flight.csv", index=False)
+    for sign in ("auto", "positive"):
+        d = dl.read(tmp_path / "flight.csv", sign=sign)
+        assert d.current_A.max() == pytest.approx(45.0) and d.time_s[-1] > 490
+
+
 def test_detect_sign_without_trend_uses_majority():
     t = np.arange(50.0)
     sign, evidence = detect_sign(t, np.full(50, 2.0), np.full(50, 3.7))

@@ -142,7 +142,7 @@ def detect_sign(time_s, current_A, voltage_V) -> tuple[int, str]:
         for start, stop in runs(loaded & (np.sign(i) == sign)):
             if stop - start < MIN_SEGMENT_ROWS:
                 continue
-            dv = _trend_V(t[start:stop], np.abs(i[start:stop]), v[start:stop])
+            dv = charge_trend_V(t[start:stop], np.abs(i[start:stop]), v[start:stop])
             if abs(dv) <= tolerance_V:
                 continue
             vote = -np.sign(dv) * sign  # +1: positive current is discharge
@@ -161,7 +161,7 @@ def detect_sign(time_s, current_A, voltage_V) -> tuple[int, str]:
                   + ("positive" if sign > 0 else "negative"))
 
 
-def _trend_V(t: np.ndarray, i: np.ndarray, v: np.ndarray) -> float:
+def charge_trend_V(t: np.ndarray, i: np.ndarray, v: np.ndarray) -> float:
     """The voltage change [V] a loaded run's charge explains: ``v = a + b q + c |i|``
     fitted by least squares over each stretch between jumps (a jump of more than
     :data:`VOLTAGE_JUMP_FRACTION` is a pack swap, not a trend), ``b q`` summed. The
@@ -333,7 +333,8 @@ def voltage_step_rest(voltage_V) -> tuple[bool, str]:
     return False, "no voltage step after the first row"
 
 
-__all__ = ["detect_sign", "find_segments", "choose_segment", "voltage_step_rest", "runs",
+__all__ = ["detect_sign", "charge_trend_V", "find_segments", "choose_segment",
+           "voltage_step_rest", "runs",
            "Segment", "SegmentSearch", "IDLE_FRACTION", "MIN_SEGMENT_ROWS", "SENTINEL_ABS",
            "SOC_JUMP_PCT", "VOLTAGE_JUMP_FRACTION", "GAP_FACTOR", "REST_STEP_FACTOR",
            "MIN_LOAD_A"]
