@@ -46,19 +46,27 @@ def test_detect_sign_uses_voltage_not_magnitude():
     assert sign == -1
 
 
+def _burst_flight(burst_s: float, hover_A: float, gust: float, fall_V: float,
+                  resistance_ohm: float):
+    """(t, i, v) of a 4S flight over 500 s: ``burst_s`` at 45 A, then a hover at
+    ``hover_A`` +- ``gust`` (a new level every 30 s); the open-circuit voltage falls by
+    ``fall_V`` with the charge moved, the loaded voltage ``resistance_ohm`` x i below."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 500.0, 0.5)
+    i = np.where(t < burst_s, 45.0, hover_A)
+    for start in np.arange(burst_s, 500.0, 30.0):
+        i[(t >= start) & (t < start + 30)] = hover_A * rng.uniform(1 - gust, 1 + gust)
+    q = np.cumsum(i) * 0.5 / 3600
+    return t, i, 15.2 - fall_V * q / q[-1] - resistance_ohm * i
+
+
 @pytest.mark.parametrize("file_sign", [1, -1])
 def test_detect_sign_of_a_flight_from_a_take_off_burst_to_a_light_hover(file_sign):
     """A 4S flight over the flat middle of a LiPo curve: 20 s at 45 A, then a hover at
     22-38 A (gusts every 30 s) for 8 minutes; the drop at the burst's current exceeds the
     0.3 V fall of the open-circuit voltage over the flight, so the last loaded voltage
     lies above the first. The voltage still falls with the charge moved at any current."""
-    rng = np.random.default_rng(4)
-    t = np.arange(0.0, 500.0, 0.5)
-    i = np.where(t < 20, 45.0, 30.0)
-    for start in np.arange(20.0, 500.0, 30.0):
-        i[(t >= start) & (t < start + 30)] = 30.0 * rng.uniform(0.75, 1.25)
-    q = np.cumsum(i) * 0.5 / 3600
-    v = 15.2 - 0.3 * q / q[-1] - 0.03 * i
+    t, i, v = _burst_flight(20.0, 30.0, 0.25, 0.3, 0.03)
     assert v[-1] > v[0]
     sign, evidence = detect_sign(t, file_sign * i, v)
     assert sign == file_sign, evidence
@@ -72,13 +80,7 @@ def test_a_flight_whose_loaded_voltage_ends_above_its_take_off_is_read(tmp_path)
 
     import dischargelab as dl
 
-    rng = np.random.default_rng(4)
-    t = np.arange(0.0, 500.0, 0.5)
-    i = np.where(t < 60, 45.0, 25.0)
-    for start in np.arange(60.0, 500.0, 30.0):
-        i[(t >= start) & (t < start + 30)] = 25.0 * rng.uniform(0.9, 1.1)
-    q = np.cumsum(i) * 0.5 / 3600
-    v = 15.2 - 0.2 * q / q[-1] - 0.045 * i
+    t, i, v = _burst_flight(60.0, 25.0, 0.1, 0.2, 0.045)
     assert np.median(v[-100:]) > np.median(v[:100]) + 0.5
     rest = np.arange(1.0, 31.0)
     frame = pd.DataFrame({"time_s": np.concatenate((rest - 31.0, t, 500.0 + rest)),
