@@ -336,6 +336,14 @@ def _neware_layouts(tester, pause_s: float) -> dict[str, pd.DataFrame]:
         "no clock": pd.DataFrame({"Cycle ID": f["cycle_index"], "Step ID": f["step_index"],
                                   "Time(h:min:s.ms)": _clock(step_s),
                                   "Voltage(V)": f["voltage_V"], "Current(mA)": current_mA}),
+        "digatron": pd.DataFrame({"Step": f["step_index"],
+                                  "Status": np.select([f["current_A"] > 1e-6,
+                                                       f["current_A"] < -1e-6],
+                                                      ["DCH", "CHA"], "PAU"),
+                                  "Prog Time": _clock(f["time_s"] + late),
+                                  "Step Time": _clock(step_s), "Cycle": f["cycle_index"],
+                                  "Voltage": f["voltage_V"],
+                                  "Current": np.abs(f["current_A"])}),
         "hours": pd.DataFrame({"Date and Time": real, "Cycle Number": f["cycle_index"],
                                "Step Type": f["step_index"],
                                "Run Time (h)": (f["time_s"] + late) / 3600,
@@ -344,12 +352,13 @@ def _neware_layouts(tester, pause_s: float) -> dict[str, pd.DataFrame]:
     }
 
 
-@pytest.mark.parametrize("layout", ["bts", "relative", "no clock", "hours"])
+@pytest.mark.parametrize("layout", ["bts", "relative", "no clock", "digatron", "hours"])
 def test_exports_with_a_step_time_or_a_clock_only_read_the_same_steps(cyclers, tmp_path,
                                                                       layout):
     """Neware BTS exports carry the step's time (``Time(h:min:s.ms)``, restarting every
     step) and a date-time, no test time: the test time is added up over the steps, a pause
-    the clock shows kept; a numbered ``Step Type`` is the step."""
+    the clock shows kept; a numbered ``Step Type`` is the step; Digatron's program time,
+    its unsigned current and its ``DCH``/``CHA``/``PAU`` states."""
     from dischargelab.logbook.summarise import summarise_source
 
     source = cyclers / "neware/TestFile.nda"

@@ -50,7 +50,8 @@ UNITS = {
 
 #: Role -> (quantity, names without unit, best first).
 ROLES = {
-    "time_s": ("time", ("test time", "testtime", "total time", "test", "run time", "time",
+    "time_s": ("time", ("test time", "testtime", "total time", "test", "run time",
+                        "prog time", "time",
                         "elapsed time", "test time s", "relative time", "step time",
                         "测试时间", "总时间", "时间", "相对时间", "工步时间")),
     "voltage_V": ("voltage", ("voltage", "volts", "ewe", "ecell", "cell voltage", "potential",
@@ -402,18 +403,20 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
 
 def state_of(column: pd.Series) -> np.ndarray:
     """``"charge"``, ``"discharge"``, ``"rest"`` or ``""`` for each state value
-    (Maccor ``C``/``D``/``R``, Neware ``CC_DChg``/``CCCV_Chg``/``Rest``, words; Chinese
+    (Maccor ``C``/``D``/``R``, Neware ``CC_DChg``/``CCCV_Chg``/``Rest``, Digatron
+    ``DCH``/``CHA``/``PAU``, words; Chinese
     exports' 恒流放电 / 恒流恒压充电 / 搁置)."""
     text = column.astype(str).str.strip().str.lower()
     out = np.full(len(text), "", dtype=object)
     values = text.to_numpy(dtype=object)
     for k, value in enumerate(values):
-        if value in ("d",) or "dchg" in value or "disch" in value or value.startswith("dis") \
-                or "放电" in value:
+        if value in ("d", "dch") or "dchg" in value or "disch" in value \
+                or value.startswith("dis") or "放电" in value:
             out[k] = "discharge"
-        elif value in ("c",) or "chg" in value or value.startswith("charg") or "充电" in value:
+        elif value in ("c", "cha") or "chg" in value or value.startswith("charg") \
+                or "充电" in value:
             out[k] = "charge"
-        elif value in ("r",) or value.startswith(("rest", "ocv", "pause")) or value in (
+        elif value in ("r", "pau") or value.startswith(("rest", "ocv", "pause")) or value in (
                 "搁置", "静置"):
             out[k] = "rest"
     return out
