@@ -21,6 +21,7 @@ Prints both tables and the machine.
 
 from __future__ import annotations
 
+import argparse
 import sys
 import tempfile
 import time
@@ -48,12 +49,12 @@ def _logbook(folder: Path, told: str, cells: int, chemistry: str):
     return lb
 
 
-def hover_rows() -> list[list]:
+def hover_rows(chemistries=CHEMISTRIES) -> list[list]:
     """One hover to 30 % per chemistry, cells, tail and what the user told."""
     import synthetic_life as sl
 
     rows = []
-    for chemistry in CHEMISTRIES:
+    for chemistry in chemistries:
         for cells in (3, 6):
             for tail_s in (36.0, 100.0):
                 for told in TOLD:
@@ -80,12 +81,12 @@ def hover_rows() -> list[list]:
     return rows
 
 
-def sequence_rows(n_flights: int = 8, seed: int = 7) -> list[list]:
+def sequence_rows(n_flights: int = 8, seed: int = 7, chemistries=CHEMISTRIES) -> list[list]:
     """Eight partial flights of a 4S 5 Ah pack per chemistry and what the user told."""
     import synthetic_life as sl
 
     rows = []
-    for chemistry in CHEMISTRIES:
+    for chemistry in chemistries:
         for told in TOLD:
             rng = np.random.default_rng(seed)
             with tempfile.TemporaryDirectory() as tmp:
@@ -127,16 +128,23 @@ def _markdown(head: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--flights", type=int, default=8, help="flights in the sequence")
+    parser.add_argument("--chemistries", nargs="+", default=list(CHEMISTRIES),
+                        choices=CHEMISTRIES, help="the cells' chemistries")
+    args = parser.parse_args(argv)
     start = time.perf_counter()
     print("# One hover to 30 % of a 12 Ah pack (27 A, 19 min), logged 36 or 100 s after "
           "landing\n")
     print(_markdown(["chemistry", "cells", "log after landing [s]", "told", "capacity [Ah]",
-                     "estimate [Ah]", "error", "95 % band", "band holds"], hover_rows()))
-    print("\n# Eight partial flights of a 4S 5 Ah pack, each from full to 25-50 % left\n")
+                     "estimate [Ah]", "error", "95 % band", "band holds"],
+                    hover_rows(args.chemistries)))
+    print(f"\n# {args.flights} partial flights of a 4S 5 Ah pack, each from full to 25-50 % "
+          "left\n")
     print(_markdown(["chemistry", "told", "read as discharges", "bands hold", "today [Ah]",
                      "error", "95 % band", "band holds", "EFC (truth)", "forecast"],
-                    sequence_rows()))
+                    sequence_rows(args.flights, chemistries=args.chemistries)))
     print(f"\n{machine_line()}; {time.perf_counter() - start:.0f} s")
 
 
