@@ -126,10 +126,15 @@ def test_a_landing_logged_for_less_time_than_the_flight_took_keeps_the_truth_in_
     truth = _hover_log(tmp_path / "hover.csv", tail_s, chemistry, temperature=False)
     with Logbook(tmp_path / "lb.sqlite") as lb:
         lb.add(tmp_path / "hover.csv", pack="quad")
-        flight = next(e for e in lb.health("quad").events if e.capacity_Ah is not None)
+        health = lb.health("quad")
+        flight = next(e for e in health.events if e.capacity_Ah is not None)
     low, high = flight.capacity_interval95
     assert low < truth < high
     assert flight.capacity_Ah == pytest.approx(truth, rel=0.15)
+    assert any("1 of its 1 estimate(s) end on a rest shorter than the flight" in n
+               for n in health.notes), health.notes
+    assert any(n.startswith(f"the log ends {tail_s - 0.5:.0f} s after a 19-minute load")
+               for n in flight.notes), flight.notes
 
 
 def test_a_chemistry_not_known_carries_both_curves_in_the_reading():

@@ -104,7 +104,10 @@ from .references import (
     rate_kinds,
     run_to_empty_capacity,
 )
-from .relaxation import shorter_than_load
+from .relaxation import SHORT_REST_METHOD, shorter_than_load
+
+#: Said of an estimate whose rest after the load was shorter than the load.
+SHORT_REST_NOTE = "the relaxation still to come is carried in the interval"
 
 #: A discharge starts full when its rest voltage reads at least this state of charge.
 FULL_SOC = 0.9
@@ -414,7 +417,13 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     if ends_full:
         soc_b, sd_b = 1.0, FULL_SOC_SD
     else:
-        soc_b, sd_b = soc_reading(curve, _soon_after(after, e), n_cells, resistance_ohm=r)
+        read_after = _soon_after(after, e)
+        soc_b, sd_b = soc_reading(curve, read_after, n_cells, resistance_ohm=r)
+        if read_after.get("method") == SHORT_REST_METHOD:
+            h.notes.append(f"the log ends {read_after['since_load_s']:.0f} s after a "
+                           f"{float(e['duration_s']) / 60:.0f}-minute load: {SHORT_REST_NOTE}"
+                           " (a log that runs on after landing for as long as the flight "
+                           "measures it)")
     h.soc_start, h.soc_end = soc_a, soc_b
     q = float(details.get("counted_Ah") or 0.0)
     q_sd = float(details.get("counted_sd_Ah") or 0.0)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .health import DROP_METHOD, EventHealth
+from .health import DROP_METHOD, SHORT_REST_NOTE, EventHealth
 from .trend import Smoothed
 
 
@@ -186,6 +186,17 @@ def seen_fade(trend: Smoothed, anchor_efc: float, efc) -> tuple[np.ndarray, np.n
     return level, np.clip((start - level) / start, 0.0, None)
 
 
+def _short_rest_notes(with_cap: list[EventHealth]) -> list[str]:
+    """A line when estimates read a rest the log cut short of the load's length."""
+    short = [e for e in with_cap if any(SHORT_REST_NOTE in n for n in e.notes)]
+    if not short:
+        return []
+    return [f"capacity today: {len(short)} of its {len(with_cap)} estimate(s) end on a rest "
+            "shorter than the flight before it (the log stops soon after landing); the "
+            "relaxation still to come widens them (a log that runs on for as long as the "
+            "flight after landing narrows it)"]
+
+
 def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
                  per_event: list[EventHealth] | None = None) -> list[str]:
     """Lines on what capacity today's scale rests on, when it is not a recent slow full
@@ -194,7 +205,7 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
     last = max(e.efc for e in with_cap)
     anchor = _anchor(with_cap)
     tested = any(estimate_kind(e) == REFERENCE_KIND for e in with_cap)
-    notes = _unseen_depth_notes(with_cap, anchor, tested)
+    notes = _unseen_depth_notes(with_cap, anchor, tested) + _short_rest_notes(with_cap)
     hidden = float(hidden_fade(trend, per_event, anchor, [last])[0])
     if hidden > 0.0025:
         rise = float(resistance_rise(per_event, anchor, [last])[0])

@@ -125,6 +125,10 @@ def relaxation(time_since_s, voltage_V, direction: int, *, loaded_V: float | Non
     return out
 
 
+#: The ``method`` of a reading :func:`shorter_than_load` changed.
+SHORT_REST_METHOD = "fit, shorter than the load"
+
+
 def shorter_than_load(reading: dict, load_s: float, loaded_V: float | None,
                       direction: int) -> dict:
     """A fitted rest reading taken sooner after a load than the load lasted, with at least
@@ -151,7 +155,7 @@ def shorter_than_load(reading: dict, load_s: float, loaded_V: float | None,
         return reading
     left = direction * max(abs(left), prior)
     return dict(reading, relaxed_V=last + left, left_V=left, half95_V=max(half, 2.0 * prior),
-                method="fit, shorter than the load")
+                method=SHORT_REST_METHOD)
 
 
 def _end_slope(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
@@ -166,4 +170,5 @@ def _end_slope(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
     return float(slope), se, float(np.mean(t[-k:]))
 
 
-__all__ = ["relaxation", "shorter_than_load", "RELAX_TAIL", "RELAX_PRIOR_SHARE"]
+__all__ = ["relaxation", "shorter_than_load", "SHORT_REST_METHOD", "RELAX_TAIL",
+           "RELAX_PRIOR_SHARE"]
