@@ -141,6 +141,21 @@ def test_a_fit_over_a_rest_shorter_than_the_load_keeps_the_diffusion_it_cannot_s
     assert shorter_than_load(reading, 50.0, loaded, +1) is reading
 
 
+@pytest.mark.parametrize("kind", ["discharge", "flight"])
+def test_a_flight_logs_landing_read_soon_gets_the_same_rule_as_a_discharge(kind):
+    """A flight read from a flight log is a discharge to the rest after it: its fitted rest
+    60 s after a 1,100 s flight takes the prior's share, upwards."""
+    from dischargelab.logbook.health import _soon_after
+    from dischargelab.logbook.relaxation import SHORT_REST_METHOD
+
+    t = np.arange(1.0, 61.0)
+    reading = dict(relaxation(t, 3.70 + 0.0 * t, +1, loaded_V=3.53), since_load_s=60.0)
+    event = {"kind": kind, "duration_s": 1100.0, "end_voltage_V": 3.53,
+             "resistance_ohm": 0.03, "mean_current_A": 20.0}
+    read = _soon_after(reading, event)
+    assert read["method"] == SHORT_REST_METHOD and read["relaxed_V"] > reading["relaxed_V"]
+
+
 # --------------------------------------------------------------------------- charge
 
 def _charge_starts(phases, *, current=3.0, dt=166.5, step_V=0.09, rise_V=0.055, seed=0):

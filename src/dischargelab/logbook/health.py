@@ -476,7 +476,7 @@ def _soon_after(reading: dict, e: dict) -> dict:
     since = reading.get("since_load_s")
     r = e.get("resistance_ohm")
     if reading.get("method") == "fit":
-        direction = {"discharge": 1, "charge": -1}.get(e.get("kind"), 0)
+        direction = -1 if e.get("kind") == "charge" else 1   # discharges and flights: +1
         return shorter_than_load(reading, float(e.get("duration_s") or 0.0),
                                  e.get("end_voltage_V"), direction)
     if since is None or r is None:
