@@ -29,8 +29,6 @@ _NUMBER_START = re.compile(r"^\s*[-+]?[.\d]")
 _TIME_VALUE = re.compile(r"^(\d+:\d{2}:\d{2}(\.\d*)?|\d{4}-\d{2}-\d{2}[T ]\d{1,2}:\d{2}\S*)$")
 _COMMENT_PREFIXES = ("#", "//", "%")
 
-
-
 #: First bytes of an OLE2 compound file: an Excel 97-2003 ``.xls`` workbook (Landt and older
 #: Neware exports), among others.
 OLE2_MAGIC = b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1"
@@ -40,6 +38,7 @@ def excel97_message(name: str) -> str:
     """What to do with an Excel 97-2003 workbook, which no reader here opens."""
     return (f"{name} is an Excel 97-2003 workbook (.xls, or another OLE2 file): open it in "
             "Excel or LibreOffice and save it as .xlsx or CSV, which dischargelab reads")
+
 
 def load_text(path) -> tuple[str, dict]:
     """Read a text file into one string.

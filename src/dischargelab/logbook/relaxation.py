@@ -117,12 +117,18 @@ def relaxation(time_since_s, voltage_V, direction: int, *, loaded_V: float | Non
                    method="fit")
         return out
     if loaded_V is not None and t.size and t[-1] > 0:
-        recovery = max(0.0, direction * (last - float(loaded_V)))
-        left = direction * RELAX_PRIOR_SHARE * recovery * np.sqrt(RELAX_PRIOR_T_S
-                                                                  / max(t[-1], 1.0))
+        left = direction * prior_left_V(last, float(loaded_V), float(t[-1]), direction)
         out.update(relaxed_V=last + left, left_V=float(left), half95_V=2.0 * abs(left),
                    method="prior")
     return out
+
+
+def prior_left_V(last_V: float, loaded_V: float, since_s: float, direction: int) -> float:
+    """What the prior says is left to relax [V, unsigned]: :data:`RELAX_PRIOR_SHARE` of the
+    recovery from the last loaded voltage to the last rest reading, scaled by
+    ``sqrt(RELAX_PRIOR_T_S / t)``."""
+    recovery = max(0.0, direction * (last_V - loaded_V))
+    return RELAX_PRIOR_SHARE * recovery * float(np.sqrt(RELAX_PRIOR_T_S / max(since_s, 1.0)))
 
 
 #: The ``method`` of a reading :func:`shorter_than_load` changed.
@@ -132,8 +138,8 @@ SHORT_REST_METHOD = "fit, shorter than the load"
 def shorter_than_load(reading: dict, load_s: float, loaded_V: float | None,
                       direction: int) -> dict:
     """A fitted rest reading taken sooner after a load than the load lasted, with at least
-    what :func:`relaxation`'s prior leaves: ``RELAX_PRIOR_SHARE`` of the recovery seen,
-    scaled by ``sqrt(RELAX_PRIOR_T_S / t)``, twice that as its 95 % half width.
+    what :func:`relaxation`'s prior leaves (:func:`prior_left_V`), twice that as its 95 %
+    half width.
 
     A rest shorter than the load shows only the fast part of the relaxation: after a load
     of ``T`` the diffusion overpotential still relaxes as ``sqrt(t + T) - sqrt(t)``
@@ -147,8 +153,7 @@ def shorter_than_load(reading: dict, load_s: float, loaded_V: float | None,
             or not t < load_s):
         return reading
     last = float(reading["voltage_V"])
-    recovery = max(0.0, direction * (last - float(loaded_V)))
-    prior = RELAX_PRIOR_SHARE * recovery * np.sqrt(RELAX_PRIOR_T_S / max(float(t), 1.0))
+    prior = prior_left_V(last, float(loaded_V), float(t), direction)
     left = float(reading.get("left_V") or 0.0)
     half = float(reading.get("half95_V") or 0.0)
     if abs(left) >= prior and half >= 2.0 * prior:

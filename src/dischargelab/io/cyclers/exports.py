@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ...errors import DataError, require
-from .steps import TesterRecords
+from .steps import TesterRecords, step_bounds
 
 #: Unit as written -> (scale, offset) to the role's unit, by quantity.
 UNITS = {
@@ -379,6 +379,7 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
         out[role] = out[role].fillna(0).astype(np.int64)
     clock = (_clock_seconds(table.iloc[:, roles["datetime"][0]]) if "datetime" in roles
              else None)
+    bounds = step_bounds(out)
     if "time_s" not in out:
         if clock is None:
             raise DataError(f"{name}: the date-time column {column_map['datetime']!r} does "
@@ -386,8 +387,8 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
         out["time_s"] = clock
         notes.append(f"test time from the date-time column {column_map['datetime']!r} "
                      "(no test time column)")
-    elif restarts_each_step(out["time_s"].to_numpy(dtype=float), _runs(out)):
-        out["time_s"] = test_time_from_steps(out["time_s"].to_numpy(dtype=float), _runs(out),
+    elif restarts_each_step(out["time_s"].to_numpy(dtype=float), bounds):
+        out["time_s"] = test_time_from_steps(out["time_s"].to_numpy(dtype=float), bounds,
                                              clock)
         notes.append(f"{column_map['time_s']!r} restarts at every step: test time "
                      + ("added up over the steps, with the pauses the date-time column shows"
@@ -438,21 +439,15 @@ def _seconds(column: pd.Series, scale: float, name: str) -> np.ndarray:
                     "seconds nor a clock time")
 
 
-def _runs(out: pd.DataFrame) -> np.ndarray:
-    """Run number of each record: a run is one (cycle, step) pair."""
-    keys = out[["cycle_index", "step_index"]].to_numpy()
-    return np.concatenate(([0], np.cumsum(np.any(keys[1:] != keys[:-1], axis=1))))
-
-
-def restarts_each_step(time_s: np.ndarray, runs: np.ndarray) -> bool:
-    """A step time: it goes back, and only where a step starts, to near zero."""
+def restarts_each_step(time_s: np.ndarray, bounds: list[tuple[int, int]]) -> bool:
+    """A step time: it goes back, and only where a step starts (``bounds``:
+    :func:`~.steps.step_bounds`), to near zero."""
     back = np.flatnonzero(np.diff(time_s) < 0) + 1
     if back.size == 0:
         return False
-    starts = np.flatnonzero(np.diff(runs) != 0) + 1
-    first = np.concatenate(([0], starts))
+    first = np.array([a for a, _ in bounds])
     span = np.nanmax(time_s) if np.isfinite(time_s).any() else 0.0
-    return bool(np.isin(back, starts).all()
+    return bool(np.isin(back, first[1:]).all()
                 and np.nanmedian(time_s[first]) <= 0.01 * max(span, 1.0))
 
 
@@ -465,18 +460,17 @@ CLOCK_RESOLUTION_S = 2.0
 STEP_CHANGE_S = 1e-3
 
 
-def test_time_from_steps(step_s: np.ndarray, runs: np.ndarray,
+def test_time_from_steps(step_s: np.ndarray, bounds: list[tuple[int, int]],
                          clock_s: np.ndarray | None) -> np.ndarray:
-    """Test time [s] from a step time that restarts at every step.
+    """Test time [s] from a step time that restarts at every step (``bounds``: each
+    step's rows, :func:`~.steps.step_bounds`).
 
     A step starts where the step before ended (its step time counted from there); a
     date-time column that puts its first record more than :data:`CLOCK_RESOLUTION_S`
     later shows a pause between them, kept.
     """
-    starts = np.concatenate(([0], np.flatnonzero(np.diff(runs) != 0) + 1))
-    stops = np.concatenate((starts[1:], [len(step_s)]))
     out = np.empty_like(step_s, dtype=float)
-    for a, b in zip(starts, stops):
+    for a, b in bounds:
         first = step_s[a] if a == 0 else out[a - 1] + max(step_s[a], STEP_CHANGE_S)
         if a and clock_s is not None and np.isfinite(clock_s[a]) and np.isfinite(clock_s[0]):
             by_clock = clock_s[a] - clock_s[0] + step_s[0]
