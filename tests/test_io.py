@@ -421,6 +421,18 @@ def test_lvm_excerpt_from_tests_data():
     assert frame["current_A"].iloc[0] == pytest.approx(2.5855)
 
 
+def test_lvm_clock_is_the_segments_not_the_runs(shared_data):
+    """A rig writing one file per cycle repeats the run's start in every file header;
+    the segment header dates the file's own first sample (cycles 500 and 510 of cell C:
+    one header time, ten cycles apart)."""
+    from dischargelab.logbook.summarise import _start_time
+
+    folder = shared_data / "samsung30q_ageing_cellC"
+    starts = [_start_time(read_discharge(folder / f"DischargeCycle{c}.txt")[1])[:16]
+              for c in (500, 510)]
+    assert starts == ["2024-08-25T12:48", "2024-08-27T03:49"]
+
+
 LVM_TEMPLATE = """LabVIEW Measurement\t
 Writer_Version\t2
 Separator\tTab

@@ -62,6 +62,22 @@ def test_what_tells_two_flights_apart(both):
     assert duplicates.same_event(e, shifted(e, start_time=None))
 
 
+def test_a_run_from_storage_is_not_an_older_cells_full_discharge(shared_data, tmp_path):
+    """Cycle 510 of cell C run from a storage charge 15 % down moves, undated and
+    unnumbered, the charge of cycle 660's full discharge (0.1 %) over as long at the same
+    current; its energy is 0.6 % less."""
+    from lvm_cut import lvm_storage
+
+    folder = shared_data / "samsung30q_ageing_cellC"
+    store = tmp_path / "storage.txt"
+    lvm_storage(folder / "DischargeCycle510.txt", store, 0.15, dated=False)
+    mine = duplicates.content(summarise_source(store, keep_raw=False).events)
+    full = duplicates.content(summarise_source(folder / "DischargeCycle660.txt",
+                                               keep_raw=False).events)
+    assert mine[0]["discharged_Ah"] == pytest.approx(full[0]["discharged_Ah"], rel=0.002)
+    assert not duplicates.same_content(mine, full)
+
+
 @pytest.mark.parametrize("name, expected", [
     ("raw_20-01-21_tab3_2020_01_21_20_55.txt", datetime(2020, 1, 21, 20, 55)),
     ("flight-20240501-134502.csv", datetime(2024, 5, 1, 13, 45, 2)),

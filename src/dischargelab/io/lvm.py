@@ -4,8 +4,9 @@ An ``.lvm`` file starts with ``LabVIEW Measurement``, then header blocks of
 ``key<TAB>value`` lines, each ending with ``***End_of_Header***``. The data
 follow a line starting with ``X_Value`` that names the channels (often just
 ``Untitled``, ``Untitled 1``...); a file may hold several segments, each with
-its own header block. Reference: National Instruments, "Specification for the
-LabVIEW Measurement File (.lvm)".
+its own header block. The clock time of the data is the first segment's ``Date``
+and ``Time`` (the file header's when it has none). Reference: National
+Instruments, "Specification for the LabVIEW Measurement File (.lvm)".
 
 Channel names such as ``Untitled 1`` say nothing, so the meaning of the columns
 comes from ``--columns``. When a ``Description`` line lists the columns (``time,
@@ -66,15 +67,21 @@ def read_lvm(text: str, path_name: str, *, delimiter=None) -> SourceTable:
     """
     lines, numbers = content_lines(text)
     header: dict[str, str] = {}
+    segment: dict[str, str] = {}
     x_value_at = None
+    ends = 0
     for k, line in enumerate(lines):
         if line.startswith("X_Value"):
             x_value_at = k
             break
         key, _, value = line.partition("\t")
         key = key.strip()
-        if key and key != END_OF_HEADER and key not in header:
+        if key == END_OF_HEADER:
+            ends += 1
+        elif key and ends == 0 and key not in header:
             header[key] = value.strip()
+        elif key in ("Date", "Time") and ends == 1 and key not in segment:
+            segment[key] = value.split("\t")[0].strip()
     if x_value_at is None:
         raise DataError(f"{path_name}: LabVIEW file without an 'X_Value' line before the data; "
                         "save it with the X column or export it as CSV")
@@ -94,11 +101,15 @@ def read_lvm(text: str, path_name: str, *, delimiter=None) -> SourceTable:
             skipped += 1
     if not body:
         raise DataError(f"{path_name}: LabVIEW file has a header but no data rows")
-    meta = {
-        "format": "lvm",
-        "lvm_header": {k: header[k] for k in ("Date", "Time", "Operator", "Description",
-                                               "Separator", "Decimal_Separator") if k in header},
-    }
+    kept: dict[str, str] = {k: header[k] for k in ("Date", "Time", "Operator", "Description",
+                                                   "Separator", "Decimal_Separator")
+                            if k in header}
+    if segment.get("Date") and segment.get("Time"):
+        # the segment's own date and time are those of its first sample; the file
+        # header's are when logging began, and a test rig writing one file per cycle
+        # repeats them in every file of a run
+        kept.update(Date=segment["Date"], Time=segment["Time"])
+    meta = {"format": "lvm", "lvm_header": kept}
     if skipped:
         meta["lvm_skipped_header_lines"] = skipped
     lvm_names = [n.strip() for n in lines[x_value_at].split(delimiter)]
