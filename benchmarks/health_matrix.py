@@ -34,8 +34,9 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   resampled to 30 s and 60 s (interpolated between the logged samples, 166.5 s apart),
   and with the routine charges ending at 4.0 V: every voltage of the routine moved to
   the state of charge a 4.0 V constant-voltage end leaves (the cell's own curve, from
-  its latest C/5 test, over the charge not put in, at each sample's state of charge
-  counted from the charge's end), the tests untouched; its blocks end at the first test
+  its latest C/5 test's samples at its full current, over the charge not put in, at
+  each sample's state of charge counted from the charge's end), the tests and the
+  4.2 V charge before each untouched; its blocks end at the first test
   after a mission that the shift takes below the cutoff (a cell charged to 4.0 V would
   have stopped there, which a shift cannot show). And with every test cut out, the pack
   given only its label capacity (3.0 Ah) and chemistry: no full discharge sets the scale.
@@ -152,7 +153,8 @@ def routine_cv(frame: pd.DataFrame, tests: list[dict], cv_cell_V: float,
     between two tests, every voltage moves down by the cell's own curve's drop (the
     earlier test's C/5 discharge, whose resistive drop cancels in a difference) between
     the state of charge counted from the last charge's end and that less the share a
-    ``cv_cell_V`` end leaves out. The tests (and their charges) keep their voltages."""
+    ``cv_cell_V`` end leaves out. The tests (and their charges, before and after) keep
+    their voltages."""
     t = frame["time_s"].to_numpy(float)
     i = frame["current_A"].to_numpy(float)
     v = frame["voltage_V"].to_numpy(float).copy()
@@ -161,15 +163,26 @@ def routine_cv(frame: pd.DataFrame, tests: list[dict], cv_cell_V: float,
         a, b = test["start"], test["stop"]
         q = np.r_[0.0, np.cumsum(np.diff(t[a:b]) * 0.5 * (i[a + 1:b] + i[a:b - 1]))] / 3600
         soc = 1.0 - q / q[-1]
-        curve = (soc[::-1], v[a:b][::-1], float(q[-1]))
+        # only the samples at the test's full current: one taken as the current was
+        # still rising sits up to 60 mV above the loaded curve, and a shift read from it
+        # would move a whole block's voltages by that much
+        steady = np.abs(i[a:b] - np.median(i[a:b])) <= 0.05 * abs(np.median(i[a:b]))
+        curve = (soc[steady][::-1], v[a:b][steady][::-1], float(q[-1]))
         # the share left out: where the curve lies (full - cv) below its start
-        top = float(np.median(v[a:b][:3]))
+        top = float(np.median(v[a:b][steady][:3]))
         short = 1.0 - float(np.interp(top - (full_cell_V - cv_cell_V), curve[1], curve[0]))
         curves.append((curve, short))
     in_test = np.zeros(t.size, bool)
     which = np.zeros(t.size, int)
     for k, test in enumerate(tests):
-        in_test[max(test["start"] - 1, 0):test["cut_stop"]] = True
+        # the test, and the charge to 4.2 V before it with the rest between (a capacity
+        # test starts full whatever the routine charges stop at)
+        first = max(test["start"] - 1, 0)
+        while first > 0 and i[first - 1] >= -0.02:
+            first -= 1
+        while first > 0 and i[first - 1] < -0.02:
+            first -= 1
+        in_test[first:test["cut_stop"]] = True
         which[test["start"]:] = k
     dq = np.r_[0.0, np.diff(t) * 0.5 * (i[1:] + i[:-1]) / 3600.0]
     removed = 0.0

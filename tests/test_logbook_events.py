@@ -387,12 +387,24 @@ def test_undated_files_follow_what_the_pack_had_when_they_were_added():
     dated = [_ev(2, start="2024-05-01T10:00:00", cycle=1),
              _ev(3, start="2024-05-02T10:00:00", cycle=10),
              _ev(4, start="2024-05-03T10:00:00", cycle=20)]
-    first_undated = _ev(1, cycle=510)                       # added before everything
+    first_undated = _ev(1)                                  # added before everything
     later_undated = [_ev(5, cycle=30), _ev(6), _ev(6, idx=1)]  # added after the three
     dated_later = _ev(7, start="2024-05-02T12:00:00")         # dated: at its time
     got = order_events([*later_undated, dated_later, *dated, first_undated])
     assert [(e["source_id"], e["idx"]) for e in got] == [
         (1, 0), (2, 0), (3, 0), (7, 0), (4, 0), (5, 0), (6, 0), (6, 1)]
+
+
+def test_an_undated_numbered_file_goes_where_its_number_says_among_numbered_dated_ones():
+    """A cycle file saved without its clock time, among dated cycle files: placed after
+    the dated one of the highest number below its own, whenever it was added."""
+    dated = [_ev(2, start="2024-05-01T10:00:00", cycle=1),
+             _ev(3, start="2024-05-02T10:00:00", cycle=100),
+             _ev(4, start="2024-05-03T10:00:00", cycle=200)]
+    for added_first in (True, False):
+        undated = _ev(1 if added_first else 5, cycle=110)
+        got = order_events([undated, *dated] if added_first else [*dated, undated])
+        assert [e["cycle"] for e in got] == [1, 100, 110, 200]
 
 
 def test_files_sharing_a_date_or_added_together_undated_follow_their_cycle_numbers():

@@ -129,11 +129,14 @@ def test_partial_discharges_cut_at_60_percent_within_3_percent(shared_data, tmp_
     assert reference == pytest.approx(health[0].capacity_Ah)
 
 
-@pytest.mark.parametrize("dated", [True, False])
+@pytest.mark.parametrize("dated, down", [(True, 0.45), (False, 0.45), (True, 0.2)],
+                         ids=["dated-3.8V", "undated-3.8V", "dated-4.08V"])
 def test_partials_from_a_storage_charge_or_a_fresh_rest_within_3_percent(shared_data, tmp_path,
-                                                                        dated):
-    """A discharge from a storage charge (a rest near 3.8 V) run to the cutoff, and one
-    from a full charge whose rest still reads 40 mV high, against the full integral."""
+                                                                        dated, down):
+    """A discharge from a storage charge (a rest near 3.8 V, or near 4.08 V, which a
+    generic curve reads at 90 % and more: not full, since it delivered less than the full
+    discharge after it) run to the cutoff, and one from a full charge whose rest still
+    reads 40 mV high, against the full integral."""
     from lvm_cut import lvm_storage
 
     events, truth = [], {}
@@ -142,7 +145,7 @@ def test_partials_from_a_storage_charge_or_a_fresh_rest_within_3_percent(shared_
     for k, c in enumerate((110, 210, 310)):
         path = shared_data / CELL_C / f"DischargeCycle{c:03d}.txt"
         store = tmp_path / f"storage_{c}.txt"
-        truth[store.name] = lvm_storage(path, store, 0.45, dated)
+        truth[store.name] = lvm_storage(path, store, down, dated)
         fresh = tmp_path / f"fresh_{c}.txt"
         truth[fresh.name] = lvm_cut(path, fresh, 0.6, dated)
         lines = fresh.read_text().splitlines(keepends=True)
@@ -160,7 +163,40 @@ def test_partials_from_a_storage_charge_or_a_fresh_rest_within_3_percent(shared_
         assert h.capacity_Ah == pytest.approx(truth[name], rel=0.03), name
         lo, hi = h.capacity_interval95
         assert lo < truth[name] < hi
-    assert got["storage_110.txt"].soc_start == pytest.approx(0.55, abs=0.03)
+    assert got["storage_110.txt"].soc_start == pytest.approx(1.0 - down, abs=0.03)
+    assert not any(h.full for h in got.values())
+
+
+@pytest.mark.parametrize("name, dated", [("storage_110.txt", True),
+                                         ("DischargeCycle110.txt", False)],
+                         ids=["dated-unnumbered", "undated-numbered"])
+def test_a_storage_run_between_two_numbered_cycles(shared_data, tmp_path, name, dated):
+    """Cycles 100 and 200 of cell C and, between them, a run from a storage charge 15 %
+    down (dated without a cycle number, or numbered without a clock time), as a user adds
+    them: the run sits between them, is not a full discharge and says so, the 99 cycles
+    between the numbered ones still count, and the resistance's band stays positive."""
+    from dischargelab.logbook import Logbook
+    from dischargelab.logbook.health import NOT_FULL_NOTE
+    from lvm_cut import lvm_storage
+
+    folder = shared_data / CELL_C
+    store = tmp_path / name
+    truth = lvm_storage(folder / "DischargeCycle110.txt", store, 0.15, dated)
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.add([folder / "DischargeCycle100.txt", folder / "DischargeCycle200.txt", store],
+               pack="C")
+        health = lb.health("C")
+    run = next(e for e in health.events if e.source == store.name)
+    assert not run.full and run.notes[0].startswith(NOT_FULL_NOTE)
+    assert run.capacity_Ah == pytest.approx(truth, rel=0.03)
+    # placed between the two by its clock time, or by its number among numbered ones
+    assert [e.source for e in health.events] == ["DischargeCycle100.txt", name,
+                                                "DischargeCycle200.txt"]
+    if dated:   # unnumbered: the 99 cycles between 100 and 200 count, the run one of them
+        efc = [e.efc for e in health.events]
+        per_cycle = 2.7 / health.reference_capacity_Ah
+        assert efc[-1] - efc[0] == pytest.approx(100 * per_cycle, rel=0.05)
+    assert health.today["resistance_interval95"][0] >= 0.0
 
 
 # --------------------------------------------------------------------------- forecast

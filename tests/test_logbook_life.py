@@ -121,6 +121,35 @@ def test_a_long_log_through_the_logbook_gives_its_events_and_their_capacities(sh
 
 
 @pytest.mark.slow
+def test_a_discharge_after_a_charge_that_stopped_short_is_not_full(tmp_path):
+    """The short life with its test's charge held at 4.1 V instead of 4.2 V: the rest reads
+    90 % and more on the generic curve, but the charge before it ended below the full
+    voltage, so the test is read from its rest (not counted as the capacity, 6 % below
+    what it delivers from a full charge), and capacity today's band holds that."""
+    from dataclasses import replace
+
+    from dischargelab.logbook import Logbook
+    from synthetic_life import LifeSpec, synthetic_life
+
+    spec = LifeSpec(cycles=2, test_every=10, test_C=1.0, rest_s=600.0, mission_dt_s=10.0,
+                    cv_step_s=60.0, test_cv_V=4.1)
+    life = synthetic_life(spec)
+    path = tmp_path / "bms_log.csv"
+    life.frame.to_csv(path, index=False)
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.add(path, pack="cell")
+        health = lb.health("cell")
+    assert not any(e.full for e in health.events)
+    test = max(health.events, key=lambda e: e.discharged_Ah)
+    truth = synthetic_life(replace(spec, test_cv_V=4.2)).tests[0][2]   # from a full charge
+    assert test.discharged_Ah < 0.95 * truth
+    assert "the charge before it stopped short of full" in " ".join(test.notes)
+    # read from its rest, not its count (the generic curve reads the 4.1 V end at 96 %)
+    assert test.soc_start < 1.0 and test.capacity_Ah > 1.04 * test.discharged_Ah
+    lo, hi = health.today["capacity_interval95"]
+    assert lo < truth < hi
+
+
 def test_a_capacity_test_inside_a_long_log_is_refitted(short_life, tmp_path):
     from dischargelab.logbook import Logbook
 

@@ -249,8 +249,11 @@ def health_cmd(name, eol, plot_path, force, db, as_json):
 
 
 def _health_row(e) -> list:
+    from ..logbook.health import NOT_FULL_NOTE
+
     d = e.to_dict()
-    note = "outlier" if e.outlier else (d.get("capacity_note") or "")
+    not_full = NOT_FULL_NOTE if any(n.startswith(NOT_FULL_NOTE) for n in e.notes) else ""
+    note = "outlier" if e.outlier else (d.get("capacity_note") or not_full)
     return [e.source, (e.start or "-").replace("T", " "), d.get("kind") or "-",
             _num(e.discharged_Ah), _num(e.capacity_Ah), _interval(e.capacity_interval95, 3),
             _num(e.resistance_ohm, 1, 1000), _num(d.get("resistance_ref_ohm"), 1, 1000),

@@ -29,6 +29,8 @@ from __future__ import annotations
 
 from datetime import datetime
 
+from .order import parse_clock
+
 #: Relative agreement of durations, charges, voltages and currents.
 REL_TOL = 0.005
 #: Relative agreement of sample counts (at least one sample either way).
@@ -56,13 +58,9 @@ def _close(a, b, name: str) -> bool:
 
 
 def _clock(text) -> datetime | None:
-    if not text:
-        return None
-    try:
-        stamp = datetime.fromisoformat(str(text))
-    except ValueError:
-        return None
-    return stamp.replace(tzinfo=None)
+    """The wall-clock time as written (its offset dropped: the offsets are compared)."""
+    stamp = parse_clock(text)
+    return None if stamp is None else stamp.replace(tzinfo=None)
 
 
 def _same_clock(a, b) -> bool:

@@ -8,7 +8,8 @@ the database.
   their time. A file without one is placed by the order in which it was added: after
   everything the pack held when it came (never before the pack's first event); files
   without a clock time added one after the other keep that order, or the order of the
-  cycle numbers in their names when they all carry one. Files sharing one clock time
+  cycle numbers in their names when they all carry one, placed among the dated events
+  by those numbers when the dated ones carry numbers too. Files sharing one clock time
   are ordered by the cycle number in their names. Within a file, its own order.
 * **Full discharge.** A discharge that reaches the steep end of its voltage curve
   (``reaches_knee``) from a rest voltage at or above :data:`FULL_SOC` of the
@@ -17,6 +18,10 @@ the database.
   the resistive drop). Its capacity is the charge it delivered (coulomb counting);
   the 95 % interval covers where between its last two samples the cutoff was crossed
   (not the current sensor's gain error, which shifts every capacity of the pack alike).
+  Not full after all (:func:`demote_part_charged`): the charge before its rest stopped
+  short of full, or, no charge logged, it delivered clearly less than a full discharge
+  later in the pack's life (a storage charge a generic curve reads at 90 %); it is read
+  as a run to empty.
 * **Between two rests** (discharges, flights, missions and charges with a rest on
   either side). Capacity = charge counted between the two rest readings / the change
   in state of charge they read through the pack's open-circuit voltage
@@ -50,7 +55,8 @@ the database.
   :data:`FIRST_ESTIMATES` capacity estimates). The charge moved is the discharged
   charge (discharges, flights, missions, capacity tests), or the charged charge when
   the pack has only charges logged. Cycles between two logged cycle numbers are
-  counted with the mean of their neighbours' charge.
+  counted with the mean of their neighbours' charge (an unnumbered event between them
+  is one of them, counted as itself).
 * **Cells** (:mod:`.cells`): per-cell figures, the weakest cell's share of the
   capacity between two rests, and a drift flag over the pack's events.
 * **Outliers.** An over- or undercharged cycle shows as a capacity off the local
@@ -71,7 +77,6 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 
 import numpy as np
 
@@ -89,13 +94,16 @@ from .estimates import (
     systematic_share,
     widen,
 )
+from .order import later_in_life, order_events, source_of
 from .outliers import flag_outliers
 from .references import (
+    FULL_START_SHARE,
     RELAXED_S,
     SETTLE_S,
     VOLTAGE_SD_CELL_V,
     ReferenceCurve,
     checked_drop,
+    comparable_runs,
     curve_match,
     is_slow,
     learned_curve,
@@ -105,6 +113,9 @@ from .references import (
     run_to_empty_capacity,
 )
 from .relaxation import SHORT_REST_METHOD, shorter_than_load
+
+#: Said of a discharge from a rest near full that was not full after all.
+NOT_FULL_NOTE = "not full: started part-charged"
 
 #: Said of an estimate whose rest after the load was shorter than the load.
 SHORT_REST_NOTE = "the relaxation still to come is carried in the interval"
@@ -217,57 +228,6 @@ class EventHealth:
                    capacity_systematic=data.get("capacity_systematic"))
 
 
-# --------------------------------------------------------------------------- order
-
-def _stamp(text) -> datetime | None:
-    """A clock time as a naive UTC datetime (None when missing or unreadable)."""
-    if not text:
-        return None
-    try:
-        stamp = datetime.fromisoformat(str(text))
-    except ValueError:
-        return None
-    if stamp.tzinfo is not None:
-        stamp = stamp.astimezone(UTC).replace(tzinfo=None)
-    return stamp
-
-
-def _source_of(e: dict):
-    return e.get("source_id") if e.get("source_id") is not None else e.get("id") or 0
-
-
-def order_events(events: list[dict]) -> list[dict]:
-    """Events in the pack's life order (see the module docstring)."""
-    by_source: dict = {}
-    for e in events:
-        by_source.setdefault(_source_of(e), []).append(e)
-    horizon = datetime.min
-    keyed = []
-    undated_groups: dict = {}
-    for sid in sorted(by_source):
-        evs = sorted(by_source[sid], key=lambda e: (e.get("idx") or e.get("index") or 0,
-                                                    e.get("id") or 0))
-        stamps = [_stamp(e.get("start_time")) for e in evs]
-        if any(s is not None for s in stamps):
-            last = next(s for s in stamps if s is not None)
-            for e, s in zip(evs, stamps):
-                last = s if s is not None else last
-                keyed.append(((last, 0, -1 if e.get("cycle") is None else e["cycle"], sid,
-                               e.get("idx") or 0), e))
-            horizon = max(horizon, max(s for s in stamps if s is not None))
-        else:
-            undated_groups.setdefault(horizon, []).append((sid, evs))
-    for at, group in undated_groups.items():
-        cycles = [evs[0].get("cycle") for _, evs in group]
-        by_cycle = all(c is not None for c in cycles)
-        for rank, (sid, evs) in enumerate(group):
-            order = cycles[rank] if by_cycle else rank
-            for e in evs:
-                keyed.append(((at, 1, order, sid, e.get("idx") or 0), e))
-    keyed.sort(key=lambda item: item[0])
-    return [e for _, e in keyed]
-
-
 # --------------------------------------------------------------------------- classification
 
 def pack_cells(event: dict, cells: int | None, chemistry: str | None) -> int:
@@ -291,13 +251,13 @@ def _cell_counts(ordered: list[dict], cells: int | None, chemistry: str | None) 
     by_source: dict = {}
     for e in ordered:
         if not e.get("cells"):
-            by_source.setdefault(_source_of(e), []).append(e)
+            by_source.setdefault(source_of(e), []).append(e)
     inferred = {}
     for sid, evs in by_source.items():
         top = max((max((e.get("curve") or {}).get("voltage_V") or [0.0]),
                    e.get("rest_voltage_V") or 0.0, e.get("end_voltage_V") or 0.0) for e in evs)
         inferred[sid] = pack_cells({"rest_voltage_V": top}, None, chemistry)
-    return [int(e["cells"]) if e.get("cells") else inferred[_source_of(e)] for e in ordered]
+    return [int(e["cells"]) if e.get("cells") else inferred[source_of(e)] for e in ordered]
 
 
 def starts_full(event: dict, cells: int, chemistry: str | None) -> bool:
@@ -357,19 +317,22 @@ def equivalent_full_cycles(ordered: list[dict], reference_Ah: float) -> np.ndarr
     logged, the charged charge does.
     """
     charges = not any(e.get("kind", "discharge") in ("discharge", "flight") for e in ordered)
-    total, out, prev = 0.0, [], None
+    total, out, prev, between = 0.0, [], None, 0
     for e in ordered:
         q = moved_charge(dict(e, kind=e.get("kind", "discharge")), charges)
         cycle = e.get("cycle")
         if cycle is not None:
             if prev is None and cycle > 1:
-                total += (cycle - 1) * q
-            elif prev is not None and prev[0] is not None and cycle > prev[0] + 1:
-                total += (cycle - prev[0] - 1) * 0.5 * (q + prev[1])
+                total += max(cycle - 1 - between, 0) * q
+            elif prev is not None and cycle > prev[0] + 1:
+                # an unnumbered event between two numbered ones (a storage run, a flight)
+                # is one of the cycles between them, counted as itself
+                total += max(cycle - prev[0] - 1 - between, 0) * 0.5 * (q + prev[1])
+            prev, between = (cycle, q), 0
+        elif q > 0:
+            between += 1
         total += q
         out.append(total / reference_Ah)
-        if q > 0 or cycle is not None:
-            prev = (cycle, q)
     return np.array(out, dtype=float)
 
 
@@ -675,6 +638,50 @@ def _context(ordered: list[dict], health: list[EventHealth], cells, chemistry, m
                        curves=curves, prior=prior, full_cell_V=full_cell, label_Ah=label_Ah)
 
 
+def demote_part_charged(ordered: list[dict], out: list[EventHealth], counts: list[int],
+                        ctx: PackContext) -> int:
+    """Take back "full" from the discharges that started part-charged (a rest at 90 % or
+    more of a generic curve is only a candidate; a 30Q cell's storage charge at 4.08 V
+    reads 91 %, and a cell 300 cycles older rests there full): the charge before the rest
+    ended short of full (no taper at the full voltage), or, no charge logged, it delivered
+    more than :data:`~.references.FULL_START_SHARE` less than the next full discharge in
+    the pack's life at its rate and temperature (a capacity does not grow with age), by
+    their clock times, else their cycle numbers (:func:`.order.later_in_life`; an undated,
+    unnumbered file is placed only by when it was added, and not checked). They are read
+    again as runs to empty. Returns how many were taken back."""
+    taken = 0
+    fulls = [k for k, h in enumerate(out) if h.full]
+    for k in reversed(fulls):
+        e, h = ordered[k], out[k]
+        after = ((e.get("details") or {}).get("rest_before") or {}).get("after_charge")
+        if after is not None:
+            if not _full_after(after, counts[k], ctx.full_cell_V):
+                _not_full(h, "the charge before it stopped short of full")
+                taken += 1
+            continue
+        gaps = [(gap, j) for j in fulls if j != k and out[j].full
+                and comparable_runs(e, ordered[j])
+                and (gap := later_in_life(e, ordered[j])) is not None]
+        if not gaps:
+            continue
+        later = min(gaps)[1]
+        mine, theirs = float(h.capacity_Ah or 0.0), float(out[later].capacity_Ah or 0.0)
+        if mine >= (1.0 - FULL_START_SHARE) * theirs:
+            continue
+        _not_full(h, f"it delivered {1.0 - mine / theirs:.0%} less than {out[later].source},"
+                  " a full discharge later in the pack's life (a capacity does not grow with "
+                  "age)")
+        taken += 1
+    return taken
+
+
+def _not_full(h: EventHealth, why: str) -> None:
+    h.full = False
+    h.capacity_Ah = h.capacity_interval95 = h.capacity_method = None
+    h.soc_start = h.soc_end = None
+    h.notes.append(f"{NOT_FULL_NOTE}: {why}")
+
+
 def highest_rest_cell_V(ordered: list[dict], cells: int | None, chemistry: str | None
                         ) -> float | None:
     """The highest rest voltage per cell the pack's events show [V] (the rest before each
@@ -762,6 +769,13 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
     ctx.start_added_Ah = {k: a for k, a in zip(charges, added) if a is not None}
     if ctx.chemistry != chemistry:
         counts = _cell_counts(ordered, cells, ctx.chemistry)
+    if demote_part_charged(ordered, out, counts, ctx):
+        for h in out:
+            if h.full:
+                h.capacity_method = "coulomb count"
+        rate_kinds(ordered, out)
+        ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah, read)
+        ctx.start_added_Ah = {k: a for k, a in zip(charges, added) if a is not None}
     for k, (e, h) in enumerate(zip(ordered, out)):
         n_cells = counts[k]
         if not h.full:
@@ -812,4 +826,5 @@ __all__ = ["EventHealth", "pack_health", "infer_chemistry",
            "order_events", "equivalent_full_cycles",
            "partial_capacity", "matched_capacity", "curve_match", "learned_curve", "full_capacity",
            "ReferenceCurve", "starts_full", "ends_empty", "is_full", "FULL_SOC", "EMPTY_SOC",
+           "NOT_FULL_NOTE", "demote_part_charged",
            "VOLTAGE_SD_CELL_V", "MIN_SWING"]

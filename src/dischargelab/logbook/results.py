@@ -554,6 +554,9 @@ def build_health(row: dict, events: list[dict], model: dict | None, eol: float) 
                      capacity_from=_sources(with_cap, capacity_trend.influence))
     if resistance_trend is not None:
         value, interval = resistance_trend.interval95(today["efc"])
+        # a resistance is positive: a band from two or three events (a t with one or two
+        # degrees of freedom) must not reach below zero
+        interval = [max(interval[0], 0.0), interval[1]]
         today.update(resistance_ohm=value, resistance_interval95=interval,
                      resistance_from=_sources(with_r, resistance_trend.influence))
     forecast = None
