@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..cell import charge_from_current
 from ..errors import DataError
 
 IDLE_FRACTION = 0.2
@@ -172,8 +173,7 @@ def charge_trend_V(t: np.ndarray, i: np.ndarray, v: np.ndarray) -> float:
     for a, b in zip(np.concatenate(([0], jumps)), np.concatenate((jumps, [v.size]))):
         if b - a < MIN_SEGMENT_ROWS:
             continue
-        q = np.concatenate(([0.0], np.cumsum(0.5 * (i[a + 1:b] + i[a:b - 1])
-                                             * np.diff(t[a:b]))))
+        q = charge_from_current(t[a:b], i[a:b])
         if q[-1] <= 0:
             continue
         level = i[a:b] - i[a:b].mean()

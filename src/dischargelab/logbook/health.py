@@ -763,19 +763,15 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
             out = _classify(ordered, counts, read[0])
     rate_kinds(ordered, out)
     ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah, read)
+    if ctx.chemistry != chemistry:
+        counts = _cell_counts(ordered, cells, ctx.chemistry)
+    if demote_part_charged(ordered, out, counts, ctx):
+        rate_kinds(ordered, out)
+        ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah, read)
     charges = [k for k, e in enumerate(ordered) if e.get("kind") == "charge"]
     added = charge_start_corrections([((ordered[k].get("details") or {}).get("charge") or {})
                                       .get("start") for k in charges])
     ctx.start_added_Ah = {k: a for k, a in zip(charges, added) if a is not None}
-    if ctx.chemistry != chemistry:
-        counts = _cell_counts(ordered, cells, ctx.chemistry)
-    if demote_part_charged(ordered, out, counts, ctx):
-        for h in out:
-            if h.full:
-                h.capacity_method = "coulomb count"
-        rate_kinds(ordered, out)
-        ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah, read)
-        ctx.start_added_Ah = {k: a for k, a in zip(charges, added) if a is not None}
     for k, (e, h) in enumerate(zip(ordered, out)):
         n_cells = counts[k]
         if not h.full:

@@ -4,6 +4,7 @@ much later in the life one event is than another."""
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from datetime import UTC, datetime
 
 
@@ -56,6 +57,7 @@ def order_events(events: list[dict]) -> list[dict]:
     # after the dated one of the highest number below it
     numbered = sorted((int(e["cycle"]), key[0]) for key, e in keyed
                       if e.get("cycle") is not None)
+    numbers = [c for c, _ in numbered]
     for at, group in undated_groups.items():
         cycles = [evs[0].get("cycle") for _, evs in group]
         by_cycle = all(c is not None for c in cycles)
@@ -64,8 +66,8 @@ def order_events(events: list[dict]) -> list[dict]:
             for e in evs:
                 place = at
                 if by_cycle and numbered and e.get("cycle") is not None:
-                    below = [stamp for c, stamp in numbered if c <= int(e["cycle"])]
-                    place = below[-1] if below else numbered[0][1]
+                    below = bisect_right(numbers, int(e["cycle"]))
+                    place = numbered[below - 1][1] if below else numbered[0][1]
                 keyed.append(((place, 1, order, sid, e.get("idx") or 0), e))
     keyed.sort(key=lambda item: item[0])
     return [e for _, e in keyed]

@@ -301,15 +301,17 @@ def rate_kinds(ordered: list[dict], out: list) -> None:
     cutoff beside C/5 capacity tests): they deliver less by the rate-capacity effect, and
     their coulomb count is a kind of estimate of its own. Their currents are compared (a
     test at the same current on an aged pack is the same test, however much less it
-    delivers)."""
+    delivers). The others are a plain coulomb count (marked again when the pack's set of
+    full discharges changes)."""
     rates = {k: float(ordered[k].get("mean_current_A") or 0.0)
              for k, h in enumerate(out) if h.full and h.capacity_Ah}
     if not rates:
         return
     slowest = min(rates.values())
     for k, rate in rates.items():
-        if rate > (1.0 + SAME_RATE_SHARE) * slowest:
-            out[k].capacity_method = "coulomb count at a high rate"
+        out[k].capacity_method = ("coulomb count at a high rate"
+                                  if rate > (1.0 + SAME_RATE_SHARE) * slowest
+                                  else "coulomb count")
 
 
 __all__ = ["ReferenceCurve", "partial_capacity", "rate_kinds", "curve_match",
