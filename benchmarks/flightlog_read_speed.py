@@ -37,10 +37,10 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from _machine import machine_line  # noqa: E402
+from _machine import machine_line, shared_data  # noqa: E402
 from flightlog_synth import DataFlashWriter, ULogWriter  # noqa: E402
 
-LOGS = ROOT.parent / "shared" / "data" / "flight_logs"
+LOGS = shared_data() / "flight_logs"
 MB = 1_000_000
 
 _CHILD = r"""

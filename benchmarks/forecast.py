@@ -34,23 +34,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _lives import make_life
-from _machine import machine_line, table
+from _machine import machine_line, shared_data, table
 from dischargelab.logbook import Logbook
 from dischargelab.logbook.forecast import forecast_capacity
 from dischargelab.logbook.outliers import flag_outliers, observed_crossing
 from dischargelab.logbook.trend import smooth
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def shared_data() -> Path:
-    """``$DISCHARGELAB_SHARED_DATA``, else the nearest ``shared/data`` above the checkout."""
-    if os.environ.get("DISCHARGELAB_SHARED_DATA"):
-        return Path(os.environ["DISCHARGELAB_SHARED_DATA"])
-    for parent in ROOT.parents:
-        if (parent / "shared" / "data").is_dir():
-            return parent / "shared" / "data"
-    return ROOT.parent / "shared" / "data"
 
 
 CELL_C = shared_data() / "samsung30q_ageing_cellC"

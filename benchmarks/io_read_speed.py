@@ -19,11 +19,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _machine import machine_line
+from _machine import machine_line, shared_data
 from dischargelab.io import read_discharge
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "data"
+SHARED = shared_data()
 COLUMNS = "time_s=0,current_A=1,voltage_V=2,temperature_C=4"
 
 

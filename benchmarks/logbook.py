@@ -30,11 +30,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _machine import machine_line, table
+from _machine import machine_line, shared_data, table
 from dischargelab.logbook import Logbook
 
 ROOT = Path(__file__).resolve().parents[1]
-CELL_C = ROOT.parent / "shared" / "data" / "samsung30q_ageing_cellC"
+CELL_C = shared_data() / "samsung30q_ageing_cellC"
 CUT_SHARE = 0.6
 
 

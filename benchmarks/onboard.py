@@ -30,8 +30,10 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 
+from _machine import shared_data as _shared_data  # noqa: E402
 from ardupilot_replay import lua, replay  # noqa: E402
 from dischargelab import autopilot_script  # noqa: E402
 from dischargelab.engine import Step  # noqa: E402
@@ -99,10 +101,12 @@ REAL_CUTOFF_V = 3.0
 
 
 def shared_data() -> Path:
-    for parent in [HERE, *HERE.parents]:
-        if (parent / "shared" / "data" / SAMSUNG).is_dir():
-            return parent / "shared" / "data"
-    raise SystemExit("../shared/data not found")
+    """The shared real data (:func:`_machine.shared_data`), or exit saying where it was
+    looked for."""
+    data = _shared_data()
+    if not (data / SAMSUNG).is_dir():
+        raise SystemExit(f"{data} not found (set DISCHARGELAB_SHARED_DATA)")
+    return data
 
 
 def real_rows(d, rest_s: float = REST_S):

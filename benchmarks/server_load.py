@@ -50,12 +50,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from _machine import machine_line, table  # noqa: E402
+from _machine import machine_line, shared_data, table  # noqa: E402
 from web_helpers import ServerProcess, multipart  # noqa: E402
 
-SHARED = Path(os.environ.get("DISCHARGELAB_SHARED_DATA") or next(
-    (p / "shared" / "data" for p in ROOT.parents if (p / "shared" / "data").is_dir()),
-    ROOT.parent / "shared" / "data"))
+SHARED = shared_data()
 CELL_C = SHARED / "samsung30q_ageing_cellC"
 #: Cycles of cell C held out of the logbook and uploaded during the run.
 UPLOADED = (600, 610, 620, 630, 640, 650, 660, 664)

@@ -79,7 +79,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import dischargelab as dl  # noqa: E402
-from _machine import machine_line  # noqa: E402
+from _machine import machine_line, shared_data  # noqa: E402
 from dischargelab.discharge import Discharge  # noqa: E402
 from dischargelab.flight import flight_curves  # noqa: E402
 from dischargelab.ocv import ocv_from_soc  # noqa: E402
@@ -324,12 +324,7 @@ def main(argv=None):
     if unknown:
         parser.error(f"--logs: unknown {', '.join(unknown)}; choose from "
                      f"{', '.join(LOG_MODELS)} or 'none'")
-    data = args.data
-    if data is None:
-        for parent in HERE.parents:
-            if (parent / "shared" / "data").is_dir():
-                data = parent / "shared" / "data"
-                break
+    data = args.data if args.data is not None else shared_data()
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)

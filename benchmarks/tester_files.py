@@ -52,17 +52,10 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from _machine import machine_line  # noqa: E402
+from _machine import machine_line, shared_data  # noqa: E402
 from dischargelab.errors import DischargelabError  # noqa: E402
 from dischargelab.io.cyclers import full_discharges, read_tester  # noqa: E402
 from dischargelab.io.flightlog import read_flight_log  # noqa: E402
-
-
-def _default_data() -> Path:
-    for parent in [ROOT, *ROOT.parents]:
-        if (parent / "shared" / "data" / "cyclers").is_dir():
-            return parent / "shared" / "data"
-    return ROOT.parent / "shared" / "data"
 
 
 def tester_table(folder: Path) -> list[str]:
@@ -281,7 +274,7 @@ def tlog_table(folder: Path, scratch: Path) -> list[str]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=_default_data())
+    parser.add_argument("--data", type=Path, default=shared_data())
     args = parser.parse_args(argv)
     print("Battery testers' files: first full discharge, charge by the current vs the "
           "tester's counter\n")
