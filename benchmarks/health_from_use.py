@@ -82,7 +82,7 @@ def capacity_now(events) -> tuple[float | None, float | None]:
     if now is None:
         return None, None
     low, high = now.interval95()
-    return now.value_Ah, (high - low) / (2 * now.quantile)
+    return now.estimate(), (high - low) / (2 * now.quantile)
 
 
 def block_mean(capacity, low, high) -> tuple[float, float]:

@@ -35,7 +35,8 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
   and with the routine charges ending at 4.0 V: every voltage of the routine moved to
   the state of charge a 4.0 V constant-voltage end leaves (the cell's own curve, from
   its latest C/5 test's samples at its full current, over the charge not put in, at
-  each sample's state of charge counted from the charge's end), the tests and the
+  each sample's state of charge counted from the charge's end, each mission's charge
+  taken from the recharge after it: :func:`recharged_counts`), the tests and the
   4.2 V charge before each untouched; its blocks end at the first test
   after a mission that the shift takes below the cutoff (a cell charged to 4.0 V would
   have stopped there, which a shift cannot show). And with every test cut out, the pack
@@ -43,7 +44,9 @@ two tests) the logbook's capacity now is compared with the next test's capacity.
 
 Prints per condition: blocks, capacity now's error against the next test (median and
 largest), blocks within 2 %, the band's coverage of the next test, its median half
-width, and the mean error (bias). ``--rows FILE.csv`` keeps every block.
+width, and the mean error (bias); then how the constants were chosen (the drift share, the
+hidden fade per resistance rise and its spread), each condition left out in turn.
+``--rows FILE.csv`` keeps every block.
 
 References: A. Bills et al., Sci. Data 10, 344 (2023).
 """
@@ -147,6 +150,24 @@ def resample(frame: pd.DataFrame, period_s: float) -> pd.DataFrame:
                          else grid for c in frame.columns})
 
 
+def recharged_counts(t: np.ndarray, i: np.ndarray) -> np.ndarray:
+    """The charge [Ah] each sample moves (trapezoids; positive out), each discharge's samples
+    scaled to the charge the next charge puts back: one sample every 166.5 s does not
+    follow a mission's power steps (its trapezoids miss its charge by up to 40 %), while
+    the recharge's constant current does."""
+    dq = np.r_[0.0, np.diff(t) * 0.5 * (i[1:] + i[:-1]) / 3600.0]
+    state = np.where(i > 0.02, 1, np.where(i < -0.02, -1, 0))
+    edges = np.flatnonzero(np.diff(state)) + 1
+    charges = [(a, b) for a, b in zip(np.r_[0, edges], np.r_[edges, state.size])
+               if state[a] == -1]
+    for (_, since), (a, b) in zip([(0, 0)] + charges, charges):
+        out = np.flatnonzero(dq[since + 1:a] > 0) + since + 1
+        back = -dq[a:b + 1].sum()
+        if out.size and back > 0:
+            dq[out] *= back / dq[out].sum()
+    return dq
+
+
 def routine_cv(frame: pd.DataFrame, tests: list[dict], cv_cell_V: float,
                full_cell_V: float = 4.2) -> pd.DataFrame:
     """The log as if the routine charges had stopped at ``cv_cell_V`` (module docstring):
@@ -184,7 +205,7 @@ def routine_cv(frame: pd.DataFrame, tests: list[dict], cv_cell_V: float,
             first -= 1
         in_test[first:test["cut_stop"]] = True
         which[test["start"]:] = k
-    dq = np.r_[0.0, np.diff(t) * 0.5 * (i[1:] + i[:-1]) / 3600.0]
+    dq = recharged_counts(t, i)
     removed = 0.0
     for k in range(t.size):
         removed = max(removed + dq[k], 0.0)
@@ -308,10 +329,11 @@ def blocks(db: Path, truth: list[dict]) -> list[dict]:
                         "low": None, "high": None, "why": "no estimate"})
             continue
         low, high = now.interval95()
-        out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": now.value_Ah,
+        out.append({"block": k + 1, "truth_Ah": truth[k + 1]["Ah"], "now_Ah": now.estimate(),
+                    "trend_Ah": now.value_Ah,
                     "low": low, "high": high, "why": "", "trend_sd": now.trend_sd_Ah,
                     "drift_unit": now.drift_unit_Ah, "quantile": now.quantile,
-                    "rise": now.rise, "seen_fade": now.seen_fade})
+                    "rise": now.rise, "seen_fade": now.seen_fade, "tested": now.tested})
     return out
 
 
@@ -335,9 +357,15 @@ SHARES = np.round(np.arange(0.0, 2.01, 0.05), 2)
 PER_RISE = np.round(np.arange(0.0, 0.301, 0.01), 2)
 
 
-def _held(got: pd.DataFrame, share: float, per_rise: float) -> pd.Series:
-    """Whether each block's band holds the next test at ``share`` and ``per_rise``."""
-    low, high = _band(got, share, per_rise)
+#: Spreads of the hidden fade tried, as shares of it (over_life.HIDDEN_FADE_SD_SHARE).
+SD_SHARES = np.round(np.arange(0.0, 2.01, 0.1), 2)
+
+
+def _held(got: pd.DataFrame, share: float, per_rise: float,
+          sd_share: float | None = None) -> pd.Series:
+    """Whether each block's band holds the next test at ``share``, ``per_rise`` and
+    ``sd_share`` (default: the one in use)."""
+    low, high = _band(got, share, per_rise, sd_share)
     return (low <= got["truth_Ah"]) & (got["truth_Ah"] <= high)
 
 
@@ -357,11 +385,19 @@ def calibration(rows: pd.DataFrame) -> None:
     """The drift share each condition needs, the share chosen without it (the largest
     the other synthetic conditions need) and the coverage that gives it; each real cell
     checked at the share the other cell needs. Then the hidden fade per resistance rise
-    each condition needs at the share in use, chosen for each PyBaMM life on the other
-    PyBaMM lives, the rest checked at the value in use."""
+    that fits each condition best, and the value chosen without it: the median of the best
+    values of the PyBaMM and real conditions whose resistance rose, that condition (and for a
+    real cell, all of that cell's) left out; the rest checked at the value in use. And the
+    hidden fade's spread each condition needs, chosen for each PyBaMM life as the largest
+    the other PyBaMM lives need."""
     if rows.empty or "drift_unit" not in rows:
         return
-    from dischargelab.logbook.over_life import DRIFT_SHARE, HIDDEN_FADE_PER_RISE
+    from dischargelab.logbook.over_life import (
+        DRIFT_SHARE,
+        HIDDEN_FADE_PER_RISE,
+        HIDDEN_FADE_SD_SHARE,
+        RISE_MIN,
+    )
 
     groups = dict(list(rows.groupby("condition", sort=False)))
     need = {c: needed(g, SHARES, lambda b, v: _held(b, v, 0.0)) for c, g in groups.items()}
@@ -382,34 +418,71 @@ def calibration(rows: pd.DataFrame) -> None:
         chosen = max(others)
         held = _held(groups[c].dropna(subset=["now_Ah"]), chosen, 0.0).mean()
         print(f"| {c} | {n:.2f} | {chosen:.2f} | {held:.0%} |")
-    need = {c: needed(g, PER_RISE, lambda b, v: _held(b, DRIFT_SHARE, v))
-            for c, g in groups.items()}
-    pybamm = [c for c in need if c in PYBAMM]
+    best = {c: _best_per_rise(g.dropna(subset=["now_Ah"])) for c, g in groups.items()}
+    # the conditions that can say: a resistance that rose, a full discharge at the start
+    fits = [c for c, g in groups.items() if (c in PYBAMM or c in REAL)
+            and (g["rise"].fillna(0.0) >= RISE_MIN).any()]
+    pybamm = [c for c in best if c in PYBAMM]
     print(f"\n## The hidden fade per resistance rise (in use: {HIDDEN_FADE_PER_RISE})\n")
-    print("| condition | needs | chosen without it | band holds the test | median half "
-          "width (none / in use) |")
-    print("|---|---|---|---|---|")
-    for c, n in need.items():
+    print("| condition | least error at | chosen without it | within 2 % there | band holds "
+          "the test there | within 2 % (none / in use) |")
+    print("|---|---|---|---|---|---|")
+    for c, b in best.items():
         got = groups[c].dropna(subset=["now_Ah"])
+        # without the condition (and, for a real cell, without any of that cell's)
+        others = [best[o] for o in fits if o != c
+                  and not (c in REAL and o in REAL and REAL[o][0] == REAL[c][0])]
+        chosen = float(np.median(others)) if c in fits and others else HIDDEN_FADE_PER_RISE
+        within = [f"{np.mean(np.abs(_errors(got, v)) <= 2):.0%}"
+                  for v in (0.0, HIDDEN_FADE_PER_RISE)]
+        print(f"| {c}{'' if c in fits else ' (no rise to fit)'} | {b:.2f} | {chosen:.2f} | "
+              f"{np.mean(np.abs(_errors(got, chosen)) <= 2):.0%}"
+              f" | {_held(got, DRIFT_SHARE, chosen).mean():.0%} | {' / '.join(within)} |")
+    need = {c: needed(g, SD_SHARES, lambda b, v: _held(b, DRIFT_SHARE, HIDDEN_FADE_PER_RISE, v))
+            for c, g in groups.items()}
+    print(f"\n## The hidden fade's spread (in use: {HIDDEN_FADE_SD_SHARE} of it)\n")
+    print("| condition | needs | chosen without it | band holds the test there |")
+    print("|---|---|---|---|")
+    for c, n in need.items():
         others = [need[o] for o in pybamm if o != c]
-        chosen = max(others) if c in PYBAMM and others else HIDDEN_FADE_PER_RISE
-        widths = []
-        for v in (0.0, HIDDEN_FADE_PER_RISE):
-            lo, hi = _band(got, DRIFT_SHARE, v)
-            widths.append(f"{np.median(50 * (hi - lo) / got['now_Ah']):.1f} %")
-        print(f"| {c} | {n:.2f} | {chosen:.2f} | {_held(got, DRIFT_SHARE, chosen).mean():.0%}"
-              f" | {' / '.join(widths)} |")
+        chosen = max(others) if c in PYBAMM and others else HIDDEN_FADE_SD_SHARE
+        held = _held(groups[c].dropna(subset=["now_Ah"]), DRIFT_SHARE, HIDDEN_FADE_PER_RISE,
+                     chosen).mean()
+        print(f"| {c} | {n:.2f} | {chosen:.2f} | {held:.0%} |")
 
 
-def _band(got: pd.DataFrame, share: float, per_rise: float):
-    """Each block's 95 % band at ``share`` and ``per_rise`` (over_life.CapacityNow's)."""
-    now = CapacityNow(value_Ah=got["now_Ah"].to_numpy(float),
+def _errors(got: pd.DataFrame, per_rise: float) -> np.ndarray:
+    """Each block's error [%] of capacity today at ``per_rise``."""
+    from dischargelab.logbook.over_life import hidden_share
+
+    tested = got["tested"].to_numpy(bool) if "tested" in got else True
+    taken = np.where(tested, hidden_share(got["rise"].to_numpy(float), per_rise), 0.0)
+    value = got["trend_Ah"] * (1 - taken)
+    return 100 * (value / got["truth_Ah"] - 1).to_numpy(float)
+
+
+def _best_per_rise(got: pd.DataFrame) -> float:
+    """The hidden fade per resistance rise of :data:`PER_RISE` with the least mean
+    absolute error over ``got``'s blocks (the smallest of equals)."""
+    if got.empty:
+        return 0.0
+    return float(min(PER_RISE, key=lambda v: (np.mean(np.abs(_errors(got, v))), v)))
+
+
+def _band(got: pd.DataFrame, share: float, per_rise: float, sd_share: float | None = None):
+    """Each block's 95 % band at ``share``, ``per_rise`` and ``sd_share`` (default: the one
+    in use; over_life.CapacityNow's)."""
+    from dischargelab.logbook.over_life import HIDDEN_FADE_SD_SHARE
+
+    now = CapacityNow(value_Ah=got["trend_Ah"].to_numpy(float),
                       trend_sd_Ah=got["trend_sd"].to_numpy(float),
                       drift_unit_Ah=got["drift_unit"].to_numpy(float),
                       quantile=got["quantile"].to_numpy(float),
                       rise=got["rise"].to_numpy(float) if "rise" in got else 0.0,
-                      seen_fade=got["seen_fade"].to_numpy(float) if "seen_fade" in got else 0.0)
-    return now.interval95(share, per_rise)
+                      seen_fade=got["seen_fade"].to_numpy(float) if "seen_fade" in got else 0.0,
+                      tested=got["tested"].to_numpy(bool) if "tested" in got else True)
+    return now.interval95(share, per_rise,
+                          HIDDEN_FADE_SD_SHARE if sd_share is None else sd_share)
 
 
 def main(argv=None) -> None:

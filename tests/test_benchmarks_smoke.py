@@ -107,7 +107,8 @@ def test_health_matrix_resamples_and_chooses_the_drift_share():
     fine = matrix.resample(frame, 30.0)
     assert np.allclose(np.diff(fine["time_s"]), 30.0)
     assert np.interp(83.25, fine["time_s"], fine["voltage_V"]) == np.float64(3.95)
-    rows = pd.DataFrame({"now_Ah": [3.0, 3.0, 3.0], "truth_Ah": [2.9, 3.0, 3.01],
+    rows = pd.DataFrame({"now_Ah": [3.0, 3.0, 3.0], "trend_Ah": [3.0, 3.0, 3.0],
+                         "truth_Ah": [2.9, 3.0, 3.01],
                          "trend_sd": [0.01] * 3, "drift_unit": [0.3] * 3,
                          "quantile": [1.96] * 3})
     # 0.1 Ah off with 0.01 Ah of its own: the drift must give 0.05 Ah, a share of 0.167,
@@ -117,14 +118,26 @@ def test_health_matrix_resamples_and_chooses_the_drift_share():
 
     assert matrix.needed(rows, matrix.SHARES, share) == 0.2
     assert matrix.needed(rows.assign(drift_unit=0.0), matrix.SHARES, share) == float("inf")
-    # the hidden fade widens the low side only: with the resistance up 60 % and 1 % fade
-    # seen, the 0.1 Ah low block needs 0.05 per rise (sd 0.051 Ah = (0.6 v - 0.01) 3 Ah)
-    hidden = rows.assign(drift_unit=0.0, rise=0.6, seen_fade=0.01)
-    assert matrix.needed(hidden, matrix.PER_RISE, lambda b, v: matrix._held(b, 0.0, v)) \
-        == pytest.approx(0.05)
-    high = hidden.assign(truth_Ah=[3.1, 3.0, 3.01])
-    assert matrix.needed(high, matrix.PER_RISE, lambda b, v: matrix._held(b, 0.0, v)) \
-        == float("inf")
+    # the hidden fade comes off the trend's value: with the resistance up 60 %, blocks
+    # 6 % below their estimates read best at 0.1 per unit of rise, and are held there
+    hidden = rows.assign(trend_Ah=3.0, drift_unit=0.0, rise=0.6, seen_fade=0.01,
+                         truth_Ah=[2.82, 2.82, 2.83])
+    assert matrix._best_per_rise(hidden) == pytest.approx(0.1)
+    assert matrix._held(hidden, 0.0, 0.1).all()
+    assert matrix._best_per_rise(hidden.assign(truth_Ah=3.0)) == 0.0
+
+
+def test_health_matrix_counts_a_mission_by_the_recharge_after_it():
+    matrix = _load("health_matrix")
+    # a mission whose samples miss its charge (trapezoids: 0.5 Ah), then a charge back at
+    # constant current (0.76 Ah): the mission's samples carry what the charge puts back
+    t = np.array([0.0, 1800.0, 3600.0, 3700.0, 5500.0, 7300.0, 7400.0])
+    i = np.array([0.0, 1.0, 0.0, 0.0, -1.0, -1.0, 0.0])
+    dq = matrix.recharged_counts(t, i)
+    back = -dq[dq < 0].sum()
+    assert back == pytest.approx(0.25 + 0.5 + 100 / 7200)
+    assert dq[1:3].sum() == pytest.approx(back)
+    assert dq[1] == pytest.approx(dq[2])
 
 
 def test_health_matrix_says_its_pybamm_conditions_are_skipped_without_pybamm(

@@ -43,6 +43,7 @@ BENCHMARKS = {
     "health_matrix.py": (["--only", "generic curve", "--cycles", "11", "--cache", "{tmp}"],
                          "band holds"),
     "fade_span.py": (["--skip-cmu"], "EFC"),
+    "unseen_fade.py": (["--cells", "VAH27", "--cache", "{tmp}"], "fade the charges miss"),
     "partial_flights.py": (["--flights", "2", "--chemistries", "lipo"], "read as discharges"),
     # with PyBaMM (the `virtual` extra) a short life; without it, says it is skipped
     "pybamm_ocv_drift.py": (["--only", "25 degC", "--cycles", "6", "--cache", "{tmp}"],

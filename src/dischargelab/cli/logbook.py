@@ -207,9 +207,10 @@ def health_cmd(name, eol, plot_path, force, db, as_json):
     voltage follows the current, or its distance to the open-circuit curve), EFC.
     Outliers (over- or undercharged cycles) are flagged and left out of the trends.
     Over the life: the estimates combined by their intervals (a smoother over EFC)
-    into the capacity today with its 95 % interval, and the events it comes from; the
-    interval's low side widens when the resistance rose more than the estimates faded
-    (capacity lost where they cannot see it).
+    into the capacity today with its 95 % interval, and the events it comes from; since
+    the last full discharge, capacity today is taken below the estimates by a tenth of
+    the resistance's relative rise (a 50 % rise: 5 %; lithium lost below the charge they
+    swing through, where they cannot see it), its interval widened for it.
     Ahead: a trend that may bend (fast early fade, a knee) chosen by evidence
     against a straight line, and the EFC of end of life with a 95 % interval from
     simulated futures (knees that have not shown yet included). No end of life until

@@ -404,9 +404,8 @@ class Pack:
         return self._scaled(model)
 
     def _capacity_sd(self) -> float | None:
-        """Relative standard deviation of the capacity today [-], from its 95 % band's
-        low side (the wider one when the estimates may hide a fade; None without a
-        band)."""
+        """Relative standard deviation of the capacity today [-], from the wider side of
+        its 95 % band (None without a band)."""
         band = self.capacity_interval95
         if not self.capacity_Ah or not band or any(b is None for b in band):
             return None

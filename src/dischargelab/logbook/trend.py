@@ -131,9 +131,6 @@ class Smoothed:
     systematic : float
         Standard deviation of the error the estimates share, at the last point [unit]
         (included in ``level_sd``).
-    low_extra_sd : numpy.ndarray or None
-        A further standard deviation of the low side only at each point [unit] (what the
-        estimates can only overstate; carried flat past the last point).
     """
 
     efc: np.ndarray
@@ -150,18 +147,10 @@ class Smoothed:
     quantile: float = Z95
     systematic: float = 0.0
     offsets: dict = field(default_factory=dict)
-    low_extra_sd: np.ndarray | None = None
-
-    def _low_extra(self, efc) -> np.ndarray:
-        """:attr:`low_extra_sd` at ``efc`` [unit] (0 without it)."""
-        if self.low_extra_sd is None:
-            return np.zeros_like(efc)
-        return np.interp(efc, self.efc, self.low_extra_sd)
 
     def band(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper 95 % band at :attr:`efc`."""
-        low_sd = np.hypot(self.level_sd, self._low_extra(self.efc))
-        return (self.level - self.quantile * low_sd,
+        return (self.level - self.quantile * self.level_sd,
                 self.level + self.quantile * self.level_sd)
 
     def at(self, efc) -> tuple[np.ndarray, np.ndarray]:
@@ -183,8 +172,7 @@ class Smoothed:
         """Value at ``efc`` with its 95 % interval ``[low, high]``."""
         mean, sd = self.at(efc)
         m, s = float(mean[0]), float(sd[0])
-        low_s = float(np.hypot(s, self._low_extra(np.atleast_1d(float(efc)))[0]))
-        return m, [m - self.quantile * low_s, m + self.quantile * s]
+        return m, [m - self.quantile * s, m + self.quantile * s]
 
     def to_dict(self, points: int | None = None) -> dict:
         """``{"efc", "value", "sd", "lo", "hi"}`` lists (value, its standard deviation and
@@ -197,9 +185,7 @@ class Smoothed:
                 "sd": self.level_sd[idx].tolist(), "lo": lo[idx].tolist(),
                 "hi": hi[idx].tolist(), "quantile": self.quantile, "drift": self.drift,
                 "nugget": self.nugget, "estimates": self.n, "systematic": self.systematic,
-                "offsets": dict(self.offsets),
-                "low_extra_sd": None if self.low_extra_sd is None
-                else self.low_extra_sd[idx].tolist()}
+                "offsets": dict(self.offsets)}
 
     @classmethod
     def from_dict(cls, d: dict) -> Smoothed:
@@ -215,9 +201,7 @@ class Smoothed:
                    weights=np.ones(0), influence=np.ones(0), n=int(d.get("estimates") or 0),
                    quantile=float(d.get("quantile") or Z95),
                    systematic=float(d.get("systematic") or 0.0),
-                   offsets=dict(d.get("offsets") or {}),
-                   low_extra_sd=None if d.get("low_extra_sd") is None
-                   else np.asarray(d["low_extra_sd"], dtype=float))
+                   offsets=dict(d.get("offsets") or {}))
 
 
 def sd_from_interval(low95, high95) -> np.ndarray:
