@@ -42,12 +42,13 @@ def test_a_cell_losing_lithium_below_its_missions_gets_a_band_that_holds_its_nex
         tmp_path):
     """A PyBaMM cell's missions and charges read the capacity it had (the lithium is lost
     below the charge they swing through); its resistance rises with the SEI, and capacity
-    today's band takes that as the fade the estimates cannot show."""
+    today takes that as the fade the estimates cannot show. 15 cycles: the charges'
+    resistance has risen 25 % (at 10 cycles 12 %, under RISE_MIN: not told from scatter)."""
     from dischargelab.logbook import Logbook
     from dischargelab.logbook.results import capacity_now
     from pybamm_life import PybammLifeSpec, pybamm_life
 
-    life = pybamm_life(PybammLifeSpec(cycles=11, test_every=10, seed=5))
+    life = pybamm_life(PybammLifeSpec(cycles=16, test_every=15, seed=5))
     (_, _, first, _), (start, _, truth, _) = life.tests[:2]
     assert truth < 0.97 * first
     path = tmp_path / "life.csv"
@@ -57,10 +58,12 @@ def test_a_cell_losing_lithium_below_its_missions_gets_a_band_that_holds_its_nex
         lb.add(path, pack="cell")
         health = lb.health("cell")
     value, (low, high) = health.today["capacity_Ah"], health.today["capacity_interval95"]
-    assert value > 1.02 * truth               # the estimates read the capacity it had
     assert low < truth < high
     assert any("resistance rose" in n for n in health.notes)
-    # the estimates' own band, without the resistance's evidence, misses the test
+    # the estimates read the capacity it had: their own band, without the resistance's
+    # evidence, misses the test, and capacity today is taken below them
     events = [e for e in health.events if e.capacity_Ah is not None and not e.outlier
               and e.efc is not None]
-    assert capacity_now(events).interval95()[0] > truth
+    alone = capacity_now(events)
+    assert alone.value_Ah > 1.05 * truth and alone.interval95()[0] > truth
+    assert value < alone.value_Ah - 0.02 * truth
