@@ -106,6 +106,14 @@ def load_avg() -> str:
         return "load average n/a"
 
 
+def current_runs(i: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """Each sample's state (1 discharging, -1 charging, 0 resting: beyond +-0.02 A) and the
+    ``(start, stop)`` rows of each run of one state."""
+    state = np.where(i > 0.02, 1, np.where(i < -0.02, -1, 0))
+    edges = np.flatnonzero(np.diff(state)) + 1
+    return state, list(zip(np.r_[0, edges], np.r_[edges, state.size]))
+
+
 def find_tests(frame: pd.DataFrame, slow_A: float = 1.0, min_s: float = 3000.0) -> list[dict]:
     """Capacity tests in a whole-life log (numpy, independent of the logbook): runs of
     discharge below ``slow_A`` lasting more than ``min_s``; each with its charge (from the
@@ -113,9 +121,7 @@ def find_tests(frame: pd.DataFrame, slow_A: float = 1.0, min_s: float = 3000.0) 
     back and the rest after it)."""
     t = frame["time_s"].to_numpy(float)
     i = frame["current_A"].to_numpy(float)
-    state = np.where(i > 0.02, 1, np.where(i < -0.02, -1, 0))
-    edges = np.flatnonzero(np.diff(state)) + 1
-    runs = list(zip(np.r_[0, edges], np.r_[edges, state.size]))
+    state, runs = current_runs(i)
     # a single sample at a pause inside a slow discharge does not end it
     merged: list[list[int]] = []
     for a, b in runs:

@@ -73,7 +73,14 @@ from _machine import machine_line  # noqa: E402
 from dischargelab.logbook import Logbook  # noqa: E402
 from dischargelab.logbook.over_life import CapacityNow  # noqa: E402
 from dischargelab.logbook.results import DEFAULT_EOL, build_health, capacity_now  # noqa: E402
-from health_from_use import CMU, blocks_of, cut_copy, find_tests, load_avg  # noqa: E402
+from health_from_use import (  # noqa: E402
+    CMU,
+    blocks_of,
+    current_runs,
+    cut_copy,
+    find_tests,
+    load_avg,
+)
 
 #: The base life of the synthetic conditions.
 BASE = dict(cycles=40, test_every=5, sample_hz=1.0, fade_per_efc=3e-3, knee_efc=40.0,
@@ -156,10 +163,8 @@ def recharged_counts(t: np.ndarray, i: np.ndarray) -> np.ndarray:
     follow a mission's power steps (its trapezoids miss its charge by up to 40 %), while
     the recharge's constant current does."""
     dq = np.r_[0.0, np.diff(t) * 0.5 * (i[1:] + i[:-1]) / 3600.0]
-    state = np.where(i > 0.02, 1, np.where(i < -0.02, -1, 0))
-    edges = np.flatnonzero(np.diff(state)) + 1
-    charges = [(a, b) for a, b in zip(np.r_[0, edges], np.r_[edges, state.size])
-               if state[a] == -1]
+    state, runs = current_runs(i)
+    charges = [(a, b) for a, b in runs if state[a] == -1]
     for (_, since), (a, b) in zip([(0, 0)] + charges, charges):
         out = np.flatnonzero(dq[since + 1:a] > 0) + since + 1
         back = -dq[a:b + 1].sum()
@@ -453,12 +458,8 @@ def calibration(rows: pd.DataFrame) -> None:
 
 def _errors(got: pd.DataFrame, per_rise: float) -> np.ndarray:
     """Each block's error [%] of capacity today at ``per_rise``."""
-    from dischargelab.logbook.over_life import hidden_share
-
-    tested = got["tested"].to_numpy(bool) if "tested" in got else True
-    taken = np.where(tested, hidden_share(got["rise"].to_numpy(float), per_rise), 0.0)
-    value = got["trend_Ah"] * (1 - taken)
-    return 100 * (value / got["truth_Ah"] - 1).to_numpy(float)
+    value = _now(got).estimate(per_rise)
+    return 100 * (value / got["truth_Ah"].to_numpy(float) - 1)
 
 
 def _best_per_rise(got: pd.DataFrame) -> float:
@@ -474,15 +475,19 @@ def _band(got: pd.DataFrame, share: float, per_rise: float, sd_share: float | No
     in use; over_life.CapacityNow's)."""
     from dischargelab.logbook.over_life import HIDDEN_FADE_SD_SHARE
 
-    now = CapacityNow(value_Ah=got["trend_Ah"].to_numpy(float),
+    return _now(got).interval95(share, per_rise,
+                                HIDDEN_FADE_SD_SHARE if sd_share is None else sd_share)
+
+
+def _now(got: pd.DataFrame) -> CapacityNow:
+    """The blocks' capacity today with the parts of its spread, as ``blocks`` kept them."""
+    return CapacityNow(value_Ah=got["trend_Ah"].to_numpy(float),
                       trend_sd_Ah=got["trend_sd"].to_numpy(float),
                       drift_unit_Ah=got["drift_unit"].to_numpy(float),
                       quantile=got["quantile"].to_numpy(float),
                       rise=got["rise"].to_numpy(float) if "rise" in got else 0.0,
                       seen_fade=got["seen_fade"].to_numpy(float) if "seen_fade" in got else 0.0,
                       tested=got["tested"].to_numpy(bool) if "tested" in got else True)
-    return now.interval95(share, per_rise,
-                          HIDDEN_FADE_SD_SHARE if sd_share is None else sd_share)
 
 
 def main(argv=None) -> None:

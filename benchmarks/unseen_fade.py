@@ -39,7 +39,7 @@ from _machine import machine_line, table  # noqa: E402
 from dischargelab.logbook import Logbook  # noqa: E402
 from dischargelab.logbook.over_life import REFERENCE_KIND, estimate_kind, resistance_rise  # noqa: E402
 from dischargelab.logbook.results import DEFAULT_EOL, build_health  # noqa: E402
-from health_from_use import blocks_of  # noqa: E402
+from health_from_use import blocks_of, current_runs  # noqa: E402
 from health_matrix import logbook_of, real_log  # noqa: E402
 
 CELLS = ("VAH27", "VAH30")
@@ -50,9 +50,7 @@ def top_rests(frame: pd.DataFrame, full_cell_V: float = 4.19) -> pd.DataFrame:
     reached ``full_cell_V``."""
     i = frame["current_A"].to_numpy(float)
     v = frame["voltage_V"].to_numpy(float)
-    state = np.where(i > 0.02, 1, np.where(i < -0.02, -1, 0))
-    edges = np.flatnonzero(np.diff(state)) + 1
-    runs = list(zip(np.r_[0, edges], np.r_[edges, state.size]))
+    state, runs = current_runs(i)
     rows = [(frame["time_s"].iloc[b - 1], v[b - 1])
             for (pa, pb), (a, b) in zip(runs, runs[1:])
             if state[a] == 0 and state[pa] == -1 and v[pa:pb].max() >= full_cell_V]

@@ -94,7 +94,7 @@ def capacity_over_life(with_cap: list[EventHealth], drift_share: float | None = 
         hidden = hidden_fade(per_event, anchor, trend.efc)
         if hidden.any():
             spread = HIDDEN_FADE_SD_SHARE * hidden * trend.level
-            if REFERENCE_KIND in kinds:
+            if _tested(with_cap):
                 trend.level = trend.level * (1.0 - hidden)
             trend.level_sd = np.hypot(trend.level_sd, spread)
             trend.last_cov = trend.last_cov + np.array([[spread[-1] ** 2, 0.0], [0.0, 0.0]])
@@ -220,11 +220,11 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
     not show."""
     last = max(e.efc for e in with_cap)
     anchor = _anchor(with_cap)
-    tested = any(estimate_kind(e) == REFERENCE_KIND for e in with_cap)
+    tested = _tested(with_cap)
     notes = _unseen_depth_notes(with_cap, anchor, tested) + _short_rest_notes(with_cap)
-    hidden = float(hidden_fade(per_event, anchor, [last])[0])
+    rise = float(resistance_rise(per_event, anchor, [last])[0])
+    hidden = float(hidden_share(rise))
     if hidden > 0.0025:
-        rise = float(resistance_rise(per_event, anchor, [last])[0])
         notes.insert(0, f"capacity today: the resistance rose {rise:.0%} since "
                      f"{'the last slow full discharge' if tested else 'the first estimate'};"
                      f" taken {hidden:.1%} below the estimates for the lithium such a rise "
@@ -266,6 +266,11 @@ def _unseen_depth_notes(with_cap: list[EventHealth], anchor: float, tested: bool
             f"above {min(ends):.0%} state of charge; charge lost below that (lithium lost as "
             "the pack ages empties it first) does not show until a deeper discharge or a "
             "capacity test"]
+
+
+def _tested(with_cap: list[EventHealth]) -> bool:
+    """Whether a slow full discharge sets the scale of ``with_cap``'s estimates."""
+    return any(estimate_kind(e) == REFERENCE_KIND for e in with_cap)
 
 
 def _anchor(with_cap: list[EventHealth]) -> float:
@@ -339,7 +344,7 @@ def capacity_now(with_cap: list[EventHealth], per_event: list[EventHealth] | Non
                        drift_unit_Ah=float(drift_unit(trend, anchor, [x])[0]),
                        quantile=trend.quantile, rise=rise if rise >= RISE_MIN else 0.0,
                        seen_fade=float(seen_fade(trend, anchor, [x])[1][0]),
-                       tested=any(estimate_kind(e) == REFERENCE_KIND for e in with_cap))
+                       tested=_tested(with_cap))
 
 
 #: The kind of estimate whose scale capacity is given on: a slow full discharge's coulomb

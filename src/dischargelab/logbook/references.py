@@ -147,8 +147,7 @@ def partial_capacity(event: dict, ref: ReferenceCurve, cells: int
     half = 1.96 * cap * float(np.hypot(start[1], end[1])) / share
     rate = ""
     if how_end == "last loaded voltage" and end[0] > 1.0 - NEAR_CUTOFF_SHARE and \
-            float(event.get("mean_current_A") or 0.0) > \
-            (1.0 + SAME_RATE_SHARE) * float(ref.event.get("mean_current_A") or np.inf):
+            faster(event.get("mean_current_A"), ref.event.get("mean_current_A")):
         rate = " at a high rate"
     return cap, [cap - half, cap + half], f"reference curve{rate} ({how_start}, {how_end})"
 
@@ -322,8 +321,7 @@ def rate_kinds(ordered: list[dict], out: list) -> None:
         return
     slowest = min(rates.values())
     for k, rate in rates.items():
-        out[k].capacity_method = ("coulomb count at a high rate"
-                                  if rate > (1.0 + SAME_RATE_SHARE) * slowest
+        out[k].capacity_method = ("coulomb count at a high rate" if faster(rate, slowest)
                                   else "coulomb count")
 
 
@@ -337,6 +335,14 @@ __all__ = ["ReferenceCurve", "partial_capacity", "rate_kinds", "curve_match",
 #: A full discharge is laid on a run to empty when their mean currents agree within this
 #: share (the rate moves where a discharge ends).
 SAME_RATE_SHARE = 0.25
+
+
+def faster(current_A, than_A) -> bool:
+    """Whether a mean current [A] is above another by more than :data:`SAME_RATE_SHARE`
+    (False when either is not known)."""
+    if current_A is None or than_A is None:
+        return False
+    return float(current_A) > (1.0 + SAME_RATE_SHARE) * float(than_A)
 
 #: Capacities tried when laying a run to empty on a full discharge, as shares of the
 #: charge the run delivered (from a start at full to one at 10 % charge).
