@@ -220,6 +220,9 @@ def test_a_resistance_that_doubles_takes_the_hidden_fade_off_capacity_today():
     assert high - low > (alone.interval95()[1] - alone.interval95()[0]) + 0.1
     assert capacity_over_life(untested, per_event=untested).interval95(60.0)[0] == \
         pytest.approx(capacity_over_life(untested).interval95(60.0)[0])
+    said = _scale_notes(untested, capacity_over_life(untested, per_event=untested), untested)
+    assert any("resistance rose" in n and "not taken off" in n for n in said)
+    assert not any("below the estimates" in n for n in said)
     # estimates that show some fade miss the same lithium below their swing
     seen = _hiding_life(0.15)
     assert hidden_fade(seen, 0.0, [60.0])[0] == pytest.approx(hidden_fade(events, 0.0,

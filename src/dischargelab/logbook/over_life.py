@@ -225,12 +225,17 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
     rise = float(resistance_rise(per_event, anchor, [last])[0])
     hidden = float(hidden_share(rise))
     if hidden > 0.0025:
-        notes.insert(0, f"capacity today: the resistance rose {rise:.0%} since "
-                     f"{'the last slow full discharge' if tested else 'the first estimate'};"
-                     f" taken {hidden:.1%} below the estimates for the lithium such a rise "
-                     "goes with, lost below the charge they swing through (band +-"
-                     f"{1.96 * HIDDEN_FADE_SD_SHARE * hidden:.1%} for it; a full discharge "
-                     "from full to empty measures it)")
+        band = f"+-{1.96 * HIDDEN_FADE_SD_SHARE * hidden:.1%}"
+        notes.insert(0, f"capacity today: the resistance rose {rise:.0%} since the last slow "
+                     f"full discharge; taken {hidden:.1%} below the estimates for the lithium "
+                     "such a rise goes with, lost below the charge they swing through (band "
+                     f"{band} for it; a full discharge from full to empty measures it)"
+                     if tested else
+                     f"capacity today: the resistance rose {rise:.0%} since the first "
+                     f"estimate; its band carries {band} for the lithium such a rise goes "
+                     "with, lost below the charge the estimates swing through (not taken off "
+                     "while no full discharge sets their scale; one from full to empty "
+                     "measures it)")
     if not tested:
         return ["capacity today: no slow full discharge yet; its scale rests on "
                 f"{len({estimate_kind(e) for e in with_cap})} kind(s) of estimate whose "
