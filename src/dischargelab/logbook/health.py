@@ -763,11 +763,15 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
             out = _classify(ordered, counts, read[0])
     rate_kinds(ordered, out)
     ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah, read)
-    if ctx.chemistry != chemistry:
-        counts = _cell_counts(ordered, cells, ctx.chemistry)
+    counted_as = read[0] if read and read[0] == "lifepo4" else chemistry
+    if ctx.chemistry != counted_as:
+        counts, counted_as = _cell_counts(ordered, cells, ctx.chemistry), ctx.chemistry
     if demote_part_charged(ordered, out, counts, ctx):
         rate_kinds(ordered, out)
         ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah, read)
+        # a full discharge taken back may have been what read the chemistry
+        if ctx.chemistry != counted_as:
+            counts = _cell_counts(ordered, cells, ctx.chemistry)
     charges = [k for k, e in enumerate(ordered) if e.get("kind") == "charge"]
     added = charge_start_corrections([((ordered[k].get("details") or {}).get("charge") or {})
                                       .get("start") for k in charges])

@@ -91,11 +91,11 @@ def capacity_over_life(with_cap: list[EventHealth], drift_share: float | None = 
         extra = share * drift_unit(trend, anchor, trend.efc)
         trend.level_sd = np.sqrt(trend.level_sd ** 2 + extra ** 2)
         trend.last_cov = trend.last_cov + np.array([[extra[-1] ** 2, 0.0], [0.0, 0.0]])
-        hidden = hidden_fade(per_event, anchor, trend.efc)
-        if hidden.any():
-            spread = HIDDEN_FADE_SD_SHARE * hidden * trend.level
-            if _tested(with_cap):
-                trend.level = trend.level * (1.0 - hidden)
+        taken, sd = hidden_parts(hidden_fade(per_event, anchor, trend.efc),
+                                 _tested(with_cap))
+        if sd.any():
+            spread = sd * trend.level
+            trend.level = trend.level * (1.0 - taken)
             trend.level_sd = np.hypot(trend.level_sd, spread)
             trend.last_cov = trend.last_cov + np.array([[spread[-1] ** 2, 0.0], [0.0, 0.0]])
     return trend
@@ -194,6 +194,16 @@ def hidden_share(rise, per_rise: float = HIDDEN_FADE_PER_RISE):
     return np.where(rise >= RISE_MIN, per_rise * rise, 0.0)
 
 
+def hidden_parts(share, tested: bool, sd_share: float = HIDDEN_FADE_SD_SHARE
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """What of a hidden fade ``share`` (:func:`hidden_share`) capacity today takes off the
+    estimates' level, and its standard deviation, both as shares of that level: all of it
+    and ``sd_share`` of it when a slow full discharge sets the scale (``tested``), else
+    nothing and the same spread (:meth:`CapacityNow.estimate` says why)."""
+    share = np.asarray(share, dtype=float)
+    return np.where(tested, share, 0.0), sd_share * share
+
+
 def seen_fade(trend: Smoothed, anchor_efc: float, efc) -> tuple[np.ndarray, np.ndarray]:
     """The trend's level at ``efc`` [unit] and its fade since ``anchor_efc`` (a share, 0
     where it rose)."""
@@ -225,7 +235,7 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
     rise = float(resistance_rise(per_event, anchor, [last])[0])
     hidden = float(hidden_share(rise))
     if hidden > 0.0025:
-        band = f"+-{1.96 * HIDDEN_FADE_SD_SHARE * hidden:.1%}"
+        band = f"+-{1.96 * float(hidden_parts(hidden, tested)[1]):.1%}"
         notes.insert(0, f"capacity today: the resistance rose {rise:.0%} since the last slow "
                      f"full discharge; taken {hidden:.1%} below the estimates for the lithium "
                      "such a rise goes with, lost below the charge they swing through (band "
@@ -318,7 +328,7 @@ class CapacityNow:
         eVTOL cells given their label only: the fade they show is within 0.6 points of the
         tests' on VAH27, 5 points over on VAH30); the hidden fade, fitted on lives with a
         full discharge, is then in the band only."""
-        taken = np.where(self.tested, hidden_share(self.rise, per_rise), 0.0)
+        taken, _ = hidden_parts(hidden_share(self.rise, per_rise), self.tested)
         return self.value_Ah * (1.0 - taken)
 
     def interval95(self, drift_share: float = DRIFT_SHARE,
@@ -326,8 +336,10 @@ class CapacityNow:
                    hidden_sd_share: float = HIDDEN_FADE_SD_SHARE) -> list:
         """``[low, high]`` around :meth:`estimate`: the trend's spread, the drift's and
         ``hidden_sd_share`` of the hidden fade."""
-        hidden = hidden_sd_share * hidden_share(self.rise, per_rise) * self.value_Ah
-        sd = np.hypot(np.hypot(self.trend_sd_Ah, drift_share * self.drift_unit_Ah), hidden)
+        _, hidden = hidden_parts(hidden_share(self.rise, per_rise), self.tested,
+                                 hidden_sd_share)
+        sd = np.hypot(np.hypot(self.trend_sd_Ah, drift_share * self.drift_unit_Ah),
+                      hidden * self.value_Ah)
         centre = self.estimate(per_rise)
         return [centre - self.quantile * sd, centre + self.quantile * sd]
 
