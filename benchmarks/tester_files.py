@@ -70,7 +70,12 @@ def tester_table(folder: Path) -> list[str]:
             rows.append(f"| {path.name} | - | - | - | - | {exc} | | | | |")
             continue
         elapsed = time.perf_counter() - start
-        first = full_discharges(tester.steps)[0]
+        fulls = full_discharges(tester.steps)
+        if not fulls:
+            rows.append(f"| {path.name} | {tester.meta['format']} | | {len(tester.frame)} | "
+                        f"{len(tester.steps)} | no full discharge | | | | {elapsed:.2f} |")
+            continue
+        first = fulls[0]
         diff = 100.0 * (first["charge_Ah"] / first["tester_Ah"] - 1.0)
         rows.append(
             f"| {path.name} | {tester.meta['format']} | {tester.meta['reader'].split(' (')[0]} "

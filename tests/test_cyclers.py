@@ -413,3 +413,115 @@ def test_an_excel_97_workbook_says_to_save_it_as_xlsx(capsys, tmp_path):
     assert code == 2 and "Excel 97-2003 workbook" in err and "Traceback" not in err
     code, out, err = run(capsys, "steps", path)
     assert code == 2 and "Excel 97-2003 workbook" in err
+
+
+def _arbin_layouts(source: pd.DataFrame) -> dict[str, str]:
+    """The shared Arbin CSV's records as other testers' text exports write them."""
+    clock = pd.to_datetime(source["DateTime"], unit="s")
+    hours = source["Test_Time"] // 3600
+    rest = source["Test_Time"] - 3600 * hours
+    total = [f"{int(h):02d}:{int(s // 60):02d}:{s % 60:06.3f}" for h, s in zip(hours, rest)]
+    pec = pd.DataFrame({
+        "Test": 25205, "Cell": 1, "Step": source["Step_Index"], "Cycle": source["Cycle_Index"],
+        "Total Time (Hours in hh:mm:ss.xxx)": total, "Step Time (Seconds)": source["Step_Time"],
+        "Real Time": clock.dt.strftime("%m/%d/%Y %H:%M:%S"), "Voltage (V)": source["Voltage"],
+        "Current (A)": source["Current"],
+        "Charge Capacity (mAh)": source["Charge_Capacity"] * 1000,
+        "Discharge Capacity (mAh)": source["Discharge_Capacity"] * 1000})
+    novonix = pd.DataFrame({
+        "Date and Time": clock.dt.strftime("%Y-%m-%d %I:%M:%S %p"),
+        "Cycle Number": source["Cycle_Index"], "Step Number": source["Step_Index"],
+        "Run Time (h)": source["Test_Time"] / 3600, "Current (A)": source["Current"],
+        "Potential (V)": source["Voltage"]})
+    quoted = "\n".join(['"[Summary]"', '"Cell: 1"'] + [
+        f'"{line}"' for line in novonix.to_csv(index=False).splitlines()])
+    ec_lab = pd.DataFrame({"Ns": source["Step_Index"], "time/s": source["Test_Time"],
+                           "Ewe/V": 0.01 * np.sin(np.arange(len(source))),
+                           "Ewe-Ece/V": source["Voltage"], "<I>/mA": source["Current"] * 1e3,
+                           "cycle number": source["Cycle_Index"]})
+    mpt = "EC-Lab ASCII FILE\nNb header lines : 3\n\n" + ec_lab.to_csv(sep="\t", index=False)
+    return {"pec.csv": "Test Name:,cells\nStart Time:,07/02/2017 14:39:13\n\n"
+                       + pec.to_csv(index=False),
+            "novonix.csv": quoted, "eclab.mpt": mpt}
+
+
+@pytest.mark.parametrize("name", ["pec.csv", "novonix.csv", "eclab.mpt"])
+def test_other_testers_text_exports_read_the_same_steps(cyclers, tmp_path, name):
+    """PEC (a ``Test`` number column, time as ``Hours in hh:mm:ss.xxx``), Novonix (every
+    line wrapped in quotes) and EC-Lab with a reference electrode (``Ewe`` against the
+    reference beside the cell's ``Ewe-Ece``) read the steps of the same records."""
+    source = pd.read_csv(cyclers / "arbin/arbin_example.csv")
+    original = read_tester(cyclers / "arbin/arbin_example.csv")
+    path = tmp_path / name
+    path.write_text(_arbin_layouts(source)[name])
+    assert detect_tester(path) == "text"
+    tester = read_tester(path)
+    assert [s["kind"] for s in tester.steps] == [s["kind"] for s in original.steps]
+    assert [s["charge_Ah"] for s in tester.steps] == pytest.approx(
+        [s["charge_Ah"] for s in original.steps], rel=CAPACITY_TOLERANCE, abs=1e-9)
+    assert tester.frame["voltage_V"].to_numpy() == pytest.approx(source["Voltage"].to_numpy())
+    if name == "pec.csv":
+        assert tester.meta["column_map"]["time_s"].startswith("Total Time")
+        assert tester.meta["start_time"] == original.meta["start_time"]
+
+
+def test_empty_step_columns_and_blank_states_read_with_a_note(cyclers, capsys, tmp_path):
+    """An Arbin CSV whose Step_Index and Cycle_Index are empty (as some converters write
+    them) and a Maccor export with a blank State cell read; nothing crashes."""
+    source = pd.read_csv(cyclers / "arbin/arbin_example.csv")
+    path = tmp_path / "blank_steps.csv"
+    source.assign(Step_Index=np.nan, Cycle_Index=np.nan).to_csv(path, index=False)
+    tester = read_tester(path)
+    assert any("'Step_Index' is empty" in n for n in tester.meta["notes"])
+    code, out, err = run(capsys, "steps", path)
+    assert code == 0 and "Traceback" not in err
+    lines = (cyclers / "maccor/maccor_001.txt").read_text().splitlines()
+    header = lines[3].split("\t")
+    state = header.index("State")
+    fields = lines[10].split("\t")
+    fields[state] = ""
+    lines[10] = "\t".join(fields)
+    maccor = tmp_path / "maccor_blank_state.txt"
+    maccor.write_text("\n".join(lines) + "\n")
+    assert read_tester(maccor).step(7)["charge_Ah"] == pytest.approx(4.544, rel=1e-3)
+
+
+def test_a_time_that_does_not_advance_or_a_clock_without_a_date_is_not_taken(cyclers,
+                                                                                tmp_path):
+    """A constant column read as the time stops the reader with one line; a date-time
+    column holding only the clock gives no start date (it would be the day of reading)."""
+    source = pd.read_csv(cyclers / "arbin/arbin_example.csv")
+    frozen = tmp_path / "frozen.csv"
+    source.assign(Test_Time=12.0).drop(columns=["DateTime"]).to_csv(frozen, index=False)
+    with pytest.raises(DataError, match="stays at 12 s over all .* it is not a time"):
+        read_tester(frozen)
+    clock_only = tmp_path / "clock_only.csv"
+    source.assign(DateTime=pd.to_datetime(source["DateTime"], unit="s").dt.strftime(
+        "%H:%M:%S")).to_csv(clock_only, index=False)
+    assert "start_time" not in read_tester(clock_only).meta
+
+
+def test_pulses_are_not_full_discharges(tmp_path):
+    """Ten-second pulses that each end near the others are not runs to the lower limit."""
+    rows = []
+    for pulse in range(4):
+        rows += [(1 + 3 * pulse, -0.5, 3.40 + 0.001 * k) for k in range(12)]   # charge
+        rows += [(2 + 3 * pulse, 0.5, 3.43 - 0.002 * k) for k in range(10)]    # pulse
+        rows += [(3 + 3 * pulse, 0.0, 3.42)] * 10                             # rest
+    rows = [(float(t), 1, *row) for t, row in enumerate(rows)]
+    path = tmp_path / "pulses.csv"
+    pd.DataFrame(rows, columns=["Test_Time", "Cycle_Index", "Step_Index", "Current",
+                                "Voltage"]).to_csv(path, index=False)
+    tester = read_tester(path)
+    assert sum(s["kind"] == "discharge" for s in tester.steps) == 4
+    assert full_discharges(tester.steps) == []
+
+
+def test_a_folder_takes_ec_lab_text_and_maccor_numbered_files(cyclers, tmp_path):
+    """``logbook add FOLDER`` tries EC-Lab's .mpt and Maccor's .001, .002 files."""
+    from dischargelab.logbook.ingest import list_files
+
+    for name in ("run.mpt", "run.001", "run.017", "notes.md", "photo.png"):
+        (tmp_path / name).write_text("x")
+    files, _ = list_files([tmp_path], pack="p", pack_from=None, recursive=False)
+    assert sorted(f.name for f, _ in files) == ["run.001", "run.017", "run.mpt"]

@@ -117,7 +117,8 @@ def add_cmd(paths, pack, pack_from, recursive, columns, current_A, sign, units,
     each discharge or flight in it becomes an event. A file that cannot be read
     is rejected with one line and the others go in. Folders give their data files
     (.csv .txt .tsv .lvm .log .bin .ulg .bbl .bfl .tlog .dat, and testers' .nda
-    .ndax .mpr .res .xlsx). Exit status 2 when every file was rejected.
+    .ndax .mpr .mpt .res .xlsx and Maccor's .001, .002...). Exit status 2 when
+    every file was rejected.
 
     With --workers N or --scheduler the files are read on Dask workers; this
     process alone writes the database, in batches. Ctrl-C keeps what is done:

@@ -21,12 +21,14 @@ from .common import err, force_option, guard_outputs, json_option, out, print_js
 def steps_cmd(file, sign, plot_path, force, as_json):
     """The steps of a battery tester's file: charge, rest and discharge, as numbered.
 
-    Reads Neware .nda/.ndax, BioLogic .mpr, Arbin .res/.csv/.xlsx and Maccor text
-    exports (found from the content). Each step gets a number (1, 2, ... in the
-    file) that --step takes in fit and validate; the tester's own cycle and step
-    numbers, the kind and control mode, the charge moved by the current and by the
-    tester's counter. "full" marks a discharge from a charge to the lower voltage
-    limit: fit takes the first one at each rate by default.
+    Reads Neware .nda/.ndax, BioLogic .mpr, Arbin .res/.csv/.xlsx, and text
+    exports (Maccor, EC-Lab .mpt, PEC, Novonix and others whose columns name time,
+    voltage, current and a step or cycle), found from the content. Each step gets
+    a number (1, 2, ... in the file) that --step takes in fit and validate; the
+    tester's own cycle and step numbers, the kind and control mode, the charge
+    moved by the current and by the tester's counter. "full" marks a discharge
+    from a charge to the lower voltage limit: fit takes the first one at each
+    rate by default.
 
     \b
     Examples:

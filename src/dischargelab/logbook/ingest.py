@@ -60,9 +60,10 @@ BATCH_BYTES = 64_000_000
 TASK_BYTES = 2_000_000
 TASK_FILES = 8
 
-#: File suffixes taken from folders (a file named on its own is always tried).
+#: File suffixes taken from folders (a file named on its own is always tried), and
+#: Maccor's numbered ones (``.001``, ``.002``...).
 DATA_SUFFIXES = (".csv", ".txt", ".tsv", ".lvm", ".log", ".bin", ".ulg", ".bbl", ".bfl",
-                 ".dat", ".tlog", ".nda", ".ndax", ".mpr", ".res", ".xlsx")
+                 ".dat", ".tlog", ".nda", ".ndax", ".mpr", ".mpt", ".res", ".xlsx")
 
 #: Files in folders whose names start with these are documentation, not data.
 SKIP_PREFIXES = ("license", "copying", "readme", "notice")
@@ -139,8 +140,9 @@ class AddResult:
 
 def _is_data_file(path: Path) -> bool:
     name = path.name.lower()
-    return path.suffix.lower() in DATA_SUFFIXES and not name.startswith(SKIP_PREFIXES) \
-        and not name.startswith(".")
+    suffix = path.suffix.lower()
+    return (suffix in DATA_SUFFIXES or (len(suffix) == 4 and suffix[1:].isdigit())) \
+        and not name.startswith(SKIP_PREFIXES) and not name.startswith(".")
 
 
 def list_files(paths, *, pack: str | None, pack_from: str | None, recursive: bool

@@ -69,7 +69,7 @@ def detect_tester(path) -> str | None:
     import zipfile
 
     from .arbin import is_access
-    from .exports import decode_text, is_tester_table, is_xlsx, text_header
+    from .exports import decode_text, is_tester_table, is_xlsx, table_lines, text_header
 
     path = Path(path)
     try:
@@ -97,7 +97,7 @@ def detect_tester(path) -> str | None:
     if b"\x00" in head[:4096]:
         return None
     text = decode_text(head)
-    lines = text.splitlines()
+    lines = table_lines(text)
     return "text" if text_header(lines[:-1] if len(head) == 65536 else lines) else None
 
 
@@ -167,7 +167,8 @@ def read_tester(path, kind: str | None = None, sign: str = "auto") -> TesterFile
             if fh.read(len(OLE2_MAGIC)) == OLE2_MAGIC:
                 raise DataError(excel97_message(path.name))
         raise DataError(f"{path.name} is not a battery tester file this version reads (Neware "
-                        ".nda/.ndax, BioLogic .mpr, Arbin .res/.csv/.xlsx, Maccor text)")
+                        ".nda/.ndax, BioLogic .mpr, Arbin .res/.csv/.xlsx, or a text export "
+                        "whose header names time, voltage, current and a step or cycle)")
     tester = finish(raw, path.name, sign)
     tester.meta["source"] = str(path)
     return tester

@@ -40,7 +40,8 @@ UNITS = {
     "time": {"s": 1.0, "sec": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0, "hr": 3600.0,
              # a clock written out (Neware's ``Time(h:min:s.ms)``): parsed as text
              "h:min:s.ms": 1.0, "h:min:s": 1.0, "hh:mm:ss": 1.0, "hh:mm:ss.ms": 1.0,
-             "hh:mm:ss.sss": 1.0, "h:mm:ss": 1.0},
+             "hh:mm:ss.sss": 1.0, "h:mm:ss": 1.0,
+             "second": 1.0, "seconds": 1.0, "minutes": 60.0, "hours": 3600.0},
     "voltage": {"v": 1.0, "mv": 1e-3},
     "current": {"a": 1.0, "ma": 1e-3, "ua": 1e-6, "µa": 1e-6, "μa": 1e-6},
     "capacity": {"ah": 1.0, "a.h": 1.0, "mah": 1e-3, "ma.h": 1e-3, "uah": 1e-6, "µah": 1e-6,
@@ -54,8 +55,10 @@ ROLES = {
                         "prog time", "time",
                         "elapsed time", "test time s", "relative time", "step time",
                         "测试时间", "总时间", "时间", "相对时间", "工步时间")),
-    "voltage_V": ("voltage", ("voltage", "volts", "ewe", "ecell", "cell voltage", "potential",
-                              "u", "v", "电压")),
+    # EC-Lab: the cell's voltage (``Ecell``, ``Ewe-Ece``) before the working electrode's
+    # against the reference (``Ewe``), which is the cell's only in a two-electrode set-up
+    "voltage_V": ("voltage", ("voltage", "volts", "ecell", "ewe-ece", "cell voltage", "ewe",
+                              "potential", "u", "v", "电压")),
     "current_A": ("current", ("current", "amps", "cell current", "i", "<i>", "amp", "cur",
                               "电流")),
     "cycle_index": (None, ("cycle index", "cycle", "cyc#", "cyc", "cycle number", "cycle id",
@@ -79,6 +82,8 @@ ROLES = {
 
 _BRACKET = re.compile(r"^(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]\s*$")
 _DAY_CLOCK = re.compile(r"^\s*(?:(\d+)\s*d\s*)?(\d+):(\d{1,2}):(\d{1,2}(?:\.\d*)?)\s*$")
+
+_CLOCK_ONLY = re.compile(r"^\s*\d{1,2}:\d{2}(:\d{2}(\.\d*)?)?\s*([AaPp][Mm])?\s*$")
 
 #: Temperatures outside this range [degC] are not a reading (an unconnected sensor).
 PLAUSIBLE_C = (-60.0, 150.0)
@@ -115,7 +120,8 @@ def find_roles(names: list[str]) -> dict[str, tuple[int, float]]:
         best = None
         for spelling in spellings:
             for k, (base, unit) in enumerate(parsed):
-                if k in taken or base != spelling:
+                if k in taken or base != spelling or (
+                        unit is None and spelling in NEEDS_UNIT.get(role, ())):
                     continue
                 scale = _scale(quantity, unit)
                 if scale is None:
@@ -135,13 +141,24 @@ def find_roles(names: list[str]) -> dict[str, tuple[int, float]]:
 
 
 def _scale(quantity: str | None, unit: str | None) -> float | None:
-    """The scale (offset for temperature) of ``unit``, the default for none, None if foreign."""
+    """The scale (offset for temperature) of ``unit``, the default for none, None if foreign.
+    A time whose unit describes a clock (PEC's ``Hours in hh:mm:ss.xxx``) is read as text."""
     if quantity is None:
         return 1.0 if unit is None else None
     table = UNITS[quantity]
     if unit is None:
         return 0.0 if quantity == "temperature" else 1.0
+    if quantity == "time" and _CLOCK_UNIT.search(unit):
+        return 1.0
     return table.get(unit.replace(" ", ""))
+
+
+#: A time unit that names a clock: ``h:min:s``, ``hh:mm:ss.xxx``.
+_CLOCK_UNIT = re.compile(r"\bh+\s*:\s*m")
+
+#: Column names that hold a role only with a unit: PEC's ``Test`` is the test's number,
+#: Maccor's ``Test (Min)`` its time.
+NEEDS_UNIT = {"time_s": ("test",)}
 
 
 def is_tester_table(names: list[str]) -> bool:
@@ -180,6 +197,17 @@ def text_header(lines: list[str]) -> tuple[int, str] | None:
     return None
 
 
+def table_lines(text: str) -> list[str]:
+    """A text export's lines, each one wrapped whole in double quotes unwrapped (Novonix
+    writes ``"Date and Time,Cycle Number,..."``: read as CSV, one field per line)."""
+    out = []
+    for line in text.splitlines():
+        if len(line) >= 2 and line[0] == line[-1] == '"' and '"' not in line[1:-1]:
+            line = line[1:-1]
+        out.append(line)
+    return out
+
+
 def _words(fields: list[str]) -> int:
     """How many fields are not numbers (a data row has none or few: no header)."""
     count = 0
@@ -201,7 +229,7 @@ def _holds_steps(lines: list[str], delimiter: str) -> bool:
     keys = [table.iloc[:, roles[r][0]] for r in ("cycle_index", "step_index") if r in roles]
     if not keys or len(table) < MIN_RECORDS_PER_STEP:
         return bool(keys)
-    values = pd.concat(keys, axis=1).astype(str).agg("|".join, axis=1).to_numpy()
+    values = pd.concat([_text(key) for key in keys], axis=1).agg("|".join, axis=1).to_numpy()
     runs = 1 + int(np.sum(values[1:] != values[:-1]))
     return len(values) / runs >= MIN_RECORDS_PER_STEP
 
@@ -211,7 +239,7 @@ def read_text_export(path, text: str | None = None) -> TesterRecords:
     path = Path(path)
     if text is None:
         text = decode_text(path.read_bytes())
-    lines = text.splitlines()
+    lines = table_lines(text)
     found = text_header(lines)
     if found is None:
         raise DataError(f"{path.name}: no tester table header (time, voltage, current and a "
@@ -376,6 +404,9 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
             out[role] = 0
             notes.append(f"no {role.replace('_', ' ')} column: every record counted as "
                          f"{role.split('_')[0]} 0")
+        elif out[role].isna().all():
+            notes.append(f"the {role.replace('_', ' ')} column {column_map[role]!r} is empty: "
+                         f"every record counted as {role.split('_')[0]} 0")
         out[role] = out[role].fillna(0).astype(np.int64)
     clock = (_clock_seconds(table.iloc[:, roles["datetime"][0]]) if "datetime" in roles
              else None)
@@ -407,7 +438,7 @@ def state_of(column: pd.Series) -> np.ndarray:
     (Maccor ``C``/``D``/``R``, Neware ``CC_DChg``/``CCCV_Chg``/``Rest``, Digatron
     ``DCH``/``CHA``/``PAU``, words; Chinese
     exports' 恒流放电 / 恒流恒压充电 / 搁置)."""
-    text = column.astype(str).str.strip().str.lower()
+    text = _text(column).str.strip().str.lower()
     out = np.full(len(text), "", dtype=object)
     values = text.to_numpy(dtype=object)
     for k, value in enumerate(values):
@@ -421,6 +452,12 @@ def state_of(column: pd.Series) -> np.ndarray:
                 "搁置", "静置"):
             out[k] = "rest"
     return out
+
+
+def _text(column: pd.Series) -> pd.Series:
+    """A column's values as text, an empty cell as ``""`` (pandas 3 keeps it NaN through
+    ``astype(str)``, pandas 2 writes ``"nan"``)."""
+    return column.astype(object).where(column.notna(), "").astype(str)
 
 
 def _seconds(column: pd.Series, scale: float, name: str) -> np.ndarray:
@@ -514,6 +551,8 @@ def _start_time(column: pd.Series, time_s) -> str | None:
             stamp = pd.Timestamp(x, unit="s")
         elif 20000 < x < 80000:                 # Excel / OLE days
             stamp = pd.Timestamp("1899-12-30") + pd.to_timedelta(x, unit="D")
+    elif _DAY_CLOCK.match(str(value)) or _CLOCK_ONLY.match(str(value)):
+        return None          # a clock without a date (Maccor's DPt Time in some exports)
     else:
         stamp = pd.to_datetime(str(value), errors="coerce")
         if stamp is pd.NaT:
@@ -525,4 +564,5 @@ def _start_time(column: pd.Series, time_s) -> str | None:
 
 
 __all__ = ["read_text_export", "read_xlsx_export", "tester_records", "find_roles",
-           "split_header", "is_tester_table", "text_header", "is_xlsx", "state_of"]
+           "split_header", "is_tester_table", "text_header", "table_lines", "is_xlsx",
+           "state_of"]

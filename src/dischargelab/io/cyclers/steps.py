@@ -161,6 +161,11 @@ def finish(raw: TesterRecords, name: str, sign: str = "auto") -> TesterFile:
         k = int(back[0]) + 1
         raise DataError(f"{name} record {int(records[k])}: test time goes back ({t[k]:g} s after "
                         f"{t[k - 1]:g} s); the file is damaged or holds two tests")
+    if t[-1] <= t[0]:
+        column = (meta.get("column_map") or {}).get("time_s", "time")
+        raise DataError(f"{name}: the test time ({column!r}) stays at {t[0]:g} s over all "
+                        f"{len(t)} records: it is not a time (name the time column in the "
+                        "export, or export the test time in seconds)")
     flip, source = _discharge_sign(frame, sign)
     if flip:
         frame["current_A"] = -frame["current_A"]
@@ -327,10 +332,20 @@ def _discharge_flags(steps: list[dict]) -> None:
             s["after_charge"] = previous is not None and previous["kind"] == "charge" \
                 and s["rows"] >= MIN_STEP_ROWS
             low = s["min_voltage_V"] + LIMIT_SHARE * abs(s["min_voltage_V"])
-            s["to_limit"] = bool(s["end_voltage_V"] <= min(low, floor + LIMIT_SHARE * abs(floor)))
+            # a pulse ends near the file's other pulses, but falls by far less than a run
+            # from full to a limit (the least: LFP's 3.4 -> 2.5 V)
+            falls = s["max_voltage_V"] - s["end_voltage_V"] >= FULL_FALL_SHARE * abs(
+                s["end_voltage_V"])
+            s["to_limit"] = bool(falls and s["end_voltage_V"]
+                                 <= min(low, floor + LIMIT_SHARE * abs(floor)))
         if s["kind"] != "rest" and s["rows"] > 1:
             previous = s
 
+
+#: A discharge to the lower limit falls by at least this share of its end voltage: LFP
+#: from its plateau (~3.3 V) to 2.5 V falls 30 %, an NMC cell from 4.2 V to 2.5 V 70 %,
+#: a 10-second pulse under 1 %.
+FULL_FALL_SHARE = 0.1
 
 #: A discharge step needs this many records to be read as a discharge (a tester's
 #: one-record transition steps are not).
