@@ -437,7 +437,7 @@ def _arbin_layouts(source: pd.DataFrame) -> dict[str, str]:
         f'"{line}"' for line in novonix.to_csv(index=False).splitlines()])
     ec_lab = pd.DataFrame({"Ns": source["Step_Index"], "time/s": source["Test_Time"],
                            "Ewe/V": 0.01 * np.sin(np.arange(len(source))),
-                           "Ewe-Ece/V": source["Voltage"], "<I>/mA": source["Current"] * 1e3,
+                           "Ewe-Ece/V": source["Voltage"], "I/mA": source["Current"] * 1e3,
                            "cycle number": source["Cycle_Index"]})
     mpt = "EC-Lab ASCII FILE\nNb header lines : 3\n\n" + ec_lab.to_csv(sep="\t", index=False)
     return {"pec.csv": "Test Name:,cells\nStart Time:,07/02/2017 14:39:13\n\n"
@@ -525,3 +525,25 @@ def test_a_folder_takes_ec_lab_text_and_maccor_numbered_files(cyclers, tmp_path)
         (tmp_path / name).write_text("x")
     files, _ = list_files([tmp_path], pack="p", pack_from=None, recursive=False)
     assert sorted(f.name for f, _ in files) == ["run.001", "run.017", "run.mpt"]
+
+
+def test_ec_lab_mean_current_over_each_interval_is_counted_over_it(tmp_path):
+    """EC-Lab's ``<I>`` is the mean over the interval before each record (its ``Q``
+    counter sums them): a step's first record, written a moment after the switch, holds a
+    part of the step's current. Counted over the intervals, the steps match the counter;
+    trapezoids over the records miss 5-6 % here."""
+    t = np.r_[0.0, 10.0, 10.0006, 20.0, 30.0, 40.0, 40.0006, 50.0, 60.0, 70.0]
+    mean_mA = np.r_[0.0, 0.0, -0.019, -0.030, -0.030, -0.030, 0.021, 0.030, 0.030, 0.030]
+    q = np.cumsum(np.r_[0.0, np.diff(t)] * mean_mA) / 3600.0   # mAh
+    table = pd.DataFrame({"Ns": [0, 0, 1, 1, 1, 1, 2, 2, 2, 2], "time/s": t,
+                          "Ewe/V": np.linspace(3.4, 3.0, t.size), "<I>/mA": mean_mA,
+                          "cycle number": 0, "(Q-Qo)/mA.h": q})
+    path = tmp_path / "gcpl.mpt"
+    path.write_text("EC-Lab ASCII FILE\nNb header lines : 3\n\n"
+                    + table.to_csv(sep="\t", index=False))
+    tester = read_tester(path)
+    assert [s["kind"] for s in tester.steps] == ["rest", "charge", "discharge"]
+    assert [s["rows"] for s in tester.steps] == [2, 4, 4]
+    for step, (a, b) in zip(tester.steps[1:], ((1, 5), (5, 9))):
+        assert step["charge_Ah"] == pytest.approx(abs(q[b] - q[a]) / 1000, rel=1e-4)
+    assert any("mean current over the interval" in n for n in tester.meta["notes"])

@@ -249,7 +249,9 @@ def step_table(frame: pd.DataFrame, records: np.ndarray, bounds) -> list[dict]:
             "step": int(frame["step_index"].iat[a]), "kind": kind,
             "mode": _mode(i[a:b], v[a:b], kind),
             "first_record": int(records[a]), "last_record": int(records[b - 1]),
-            "rows": b - a, "start_s": float(t[a]), "end_s": float(t[b - 1]),
+            # a file's records (a reader may have added companions: exports.INTERVAL_MEANS)
+            "rows": int(np.unique(records[a:b]).size),
+            "start_s": float(t[a]), "end_s": float(t[b - 1]),
             "duration_s": float(t[b - 1] - t[a]),
             "mean_current_A": float(np.mean(i[a:b])),
             "start_voltage_V": float(v[a]), "end_voltage_V": float(v[b - 1]),
