@@ -315,9 +315,11 @@ def _tester_Ah(frame: pd.DataFrame, a: int, b: int, kind: str) -> float | None:
         return None
     counter = frame[column].to_numpy(dtype=float)
     end = counter[b - 1]
-    before = counter[a - 1] if a > 0 else 0.0
-    # a counter that restarts with the step (or the cycle) counts from 0 there
-    if column == "tester_step_Ah" or a == 0 or counter[a] < before or not np.isfinite(before):
+    # the file's first record: what the counter held there (a file cut from a longer test)
+    before = counter[a - 1] if a > 0 else counter[0]
+    # a counter that restarts with the step (Maccor's Amp-hr) or the cycle counts from 0
+    # there; one that runs on over the test (some Maccor exports) from the step before
+    if counter[a] < before or not np.isfinite(before):
         before = 0.0
     value = end - before
     return float(value) if np.isfinite(value) else None
