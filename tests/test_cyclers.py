@@ -439,7 +439,8 @@ def _arbin_layouts(source: pd.DataFrame) -> dict[str, str]:
                            "Ewe/V": 0.01 * np.sin(np.arange(len(source))),
                            "Ewe-Ece/V": source["Voltage"], "I/mA": source["Current"] * 1e3,
                            "cycle number": source["Cycle_Index"]})
-    mpt = "EC-Lab ASCII FILE\nNb header lines : 3\n\n" + ec_lab.to_csv(sep="\t", index=False)
+    mpt = ("EC-Lab ASCII FILE\nNb header lines : 4\nAcquisition started on : "
+           f"{clock.iloc[0]:%m/%d/%Y %H:%M:%S}\n\n" + ec_lab.to_csv(sep="\t", index=False))
     return {"pec.csv": "Test Name:,cells\nStart Time:,07/02/2017 14:39:13\n\n"
                        + pec.to_csv(index=False),
             "novonix.csv": quoted, "eclab.mpt": mpt}
@@ -462,7 +463,7 @@ def test_other_testers_text_exports_read_the_same_steps(cyclers, tmp_path, name)
     assert tester.frame["voltage_V"].to_numpy() == pytest.approx(source["Voltage"].to_numpy())
     if name == "pec.csv":
         assert tester.meta["column_map"]["time_s"].startswith("Total Time")
-        assert tester.meta["start_time"] == original.meta["start_time"]
+    assert tester.meta["start_time"] == original.meta["start_time"]
 
 
 def test_empty_step_columns_and_blank_states_read_with_a_note(cyclers, capsys, tmp_path):

@@ -258,7 +258,35 @@ def read_text_export(path, text: str | None = None) -> TesterRecords:
     records = np.arange(len(table)) + k + 2   # the file's line numbers
     meta = {"format": f"{vendor}-text" if vendor else "tester-text", "preamble": preamble,
             "reader": "dischargelab's tester-table reader (columns by name and unit)"}
-    return tester_records(table, records, path.name, meta)
+    raw = tester_records(table, records, path.name, meta)
+    if "start_time" not in raw.meta:
+        started = preamble_start(preamble)
+        if started:
+            raw.meta["start_time"], line = started
+            raw.meta["notes"].append(f"start time from the header: {line!r}")
+    return raw
+
+
+#: Header lines above a text export's table that give the test's start: EC-Lab's
+#: ``Acquisition started on : 07/02/2017 14:39:13``, PEC's ``Start Time:,01/08/2026
+#: 17:40:39``, Maccor's ``Date of Test: 01/15/2025``.
+_PREAMBLE_START = re.compile(r"\b(acquisition started on|start time|date of test|test start"
+                             r"(?: time)?|start date)\s*[:,\t]+\s*([^\t,]+)", re.IGNORECASE)
+
+
+def preamble_start(preamble: list[str]) -> tuple[str, str] | None:
+    """(ISO 8601 start, the words it was read from) from a text export's header lines, or
+    None. Dates are read month first, as these testers write them."""
+    for line in preamble:
+        match = _PREAMBLE_START.search(line)
+        if not match:
+            continue
+        with warnings.catch_warnings():   # pandas' format inference warning
+            warnings.simplefilter("ignore", UserWarning)
+            stamp = pd.to_datetime(match.group(2), errors="coerce")
+        if stamp is not pd.NaT and not pd.isna(stamp):
+            return stamp.isoformat(timespec="seconds"), " ".join(match.group(0).split())
+    return None
 
 
 def decode_text(data: bytes) -> str:
