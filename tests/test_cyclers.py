@@ -457,6 +457,8 @@ def test_other_testers_text_exports_read_the_same_steps(cyclers, tmp_path, name)
     path.write_text(_arbin_layouts(source)[name])
     assert detect_tester(path) == "text"
     tester = read_tester(path)
+    assert tester.meta["format"] == {"pec.csv": "pec-text", "novonix.csv": "novonix-text",
+                                     "eclab.mpt": "ec-lab-text"}[name]
     assert [s["kind"] for s in tester.steps] == [s["kind"] for s in original.steps]
     assert [s["charge_Ah"] for s in tester.steps] == pytest.approx(
         [s["charge_Ah"] for s in original.steps], rel=CAPACITY_TOLERANCE, abs=1e-9)

@@ -321,6 +321,13 @@ def _vendor(names: list[str], preamble: list[str]) -> str | None:
     if {"data_point", "test_time", "step_index", "test_time(s)"} & lowered or any(
             str(n).lower().startswith(("test_time", "step_index")) for n in names):
         return "arbin"
+    if any(p.startswith("EC-Lab ASCII FILE") for p in preamble[:1]):
+        return "ec-lab"
+    if any(p.startswith("[Summary]") for p in preamble[:1]) and "step number" in {
+            split_header(n)[0] for n in names}:
+        return "novonix"
+    if any((split_header(n)[1] or "").startswith("hours in hh:mm") for n in names):
+        return "pec"
     return None
 
 
