@@ -5,6 +5,7 @@ column names, units and sheet splits read the same."""
 import json
 import os
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -520,14 +521,23 @@ def test_pulses_are_not_full_discharges(tmp_path):
     assert full_discharges(tester.steps) == []
 
 
-def test_a_folder_takes_ec_lab_text_and_maccor_numbered_files(cyclers, tmp_path):
-    """``logbook add FOLDER`` tries EC-Lab's .mpt and Maccor's .001, .002 files."""
+def test_a_folder_takes_ec_lab_text_and_maccor_numbered_files(cyclers, capsys, tmp_path):
+    """``logbook add FOLDER`` tries EC-Lab's .mpt and Maccor's .001, .002 files, and says
+    which files it did not try."""
     from dischargelab.logbook.ingest import list_files
 
-    for name in ("run.mpt", "run.001", "run.017", "notes.md", "photo.png"):
-        (tmp_path / name).write_text("x")
-    files, _ = list_files([tmp_path], pack="p", pack_from=None, recursive=False)
+    folder = tmp_path / "tests"
+    folder.mkdir()
+    for name in ("run.mpt", "run.001", "run.017", "landt.xls", "photo.png", "README.md",
+                 ".hidden"):
+        (folder / name).write_text("x")
+    files, _, not_tried = list_files([folder], pack="p", pack_from=None, recursive=False)
     assert sorted(f.name for f, _ in files) == ["run.001", "run.017", "run.mpt"]
+    assert sorted(Path(p).name for p in not_tried) == ["landt.xls", "photo.png"]
+    code, out, err = run(capsys, "logbook", "add", folder, "--pack", "p", "--db",
+                         tmp_path / "lb.sqlite")
+    assert "not tried: 2 file(s) in the folders whose type is not a data file's (.xls x1, "\
+        ".png x1)" in out + err and "Traceback" not in err
 
 
 def test_ec_lab_mean_current_over_each_interval_is_counted_over_it(tmp_path):

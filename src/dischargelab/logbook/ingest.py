@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import functools
 import json
+from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -98,6 +99,9 @@ class AddResult:
         ``(file name, why)`` of files skipped because another file of the pack holds the
         same flights or tests in other bytes (a raw log and its export); ``why`` names
         the file kept.
+    not_tried : list of str
+        Files in the folders given whose suffix is not a data file's
+        (:data:`DATA_SUFFIXES`): not read (a file named on its own is).
     """
 
     added: list[str] = field(default_factory=list)
@@ -107,6 +111,7 @@ class AddResult:
     changed: set[str] = field(default_factory=set)
     notes: list[tuple[str, str]] = field(default_factory=list)
     copies: list[tuple[str, str]] = field(default_factory=list)
+    not_tried: list[str] = field(default_factory=list)
     #: Sources this add stored: id -> (file name, events), so a richer copy found later in
     #: the same add replaces its poorer twin.
     stored_now: dict = field(default_factory=dict, repr=False)
@@ -128,6 +133,11 @@ class AddResult:
         out += [f"{name}: already in the logbook" for name in self.skipped]
         out += [f"{name}: skipped: {why}" for name, why in self.copies]
         out += [f"{Path(path).name}: rejected: {reason}" for path, reason in self.rejected]
+        if self.not_tried:
+            kinds = Counter(Path(n).suffix.lower() or "no suffix" for n in self.not_tried)
+            out.append(f"not tried: {len(self.not_tried)} file(s) in the folders whose type is "
+                       f"not a data file's ({', '.join(f'{k} x{v}' for k, v in kinds.items())})"
+                       "; name a file to try it")
         return out
 
     def to_dict(self) -> dict:
@@ -135,6 +145,7 @@ class AddResult:
                 "rejected": [{"path": p, "reason": r} for p, r in self.rejected],
                 "events": int(self.events),
                 "copies": [{"file": f, "reason": r} for f, r in self.copies],
+                "not_tried": list(self.not_tried),
                 "notes": [{"file": f, "note": n} for f, n in self.notes]}
 
 
@@ -146,8 +157,10 @@ def _is_data_file(path: Path) -> bool:
 
 
 def list_files(paths, *, pack: str | None, pack_from: str | None, recursive: bool
-               ) -> tuple[list[tuple[Path, str]], list[tuple[str, str]]]:
-    """``[(file, pack name)]`` for the paths given, and ``[(path, reason)]`` for missing ones."""
+               ) -> tuple[list[tuple[Path, str]], list[tuple[str, str]], list[str]]:
+    """``[(file, pack name)]`` for the paths given, ``[(path, reason)]`` for missing ones,
+    and the paths of the files in folders not taken for their suffix (documentation files
+    and hidden ones aside)."""
     if isinstance(paths, (str, Path)):
         paths = [paths]
     if pack is None and pack_from is None:
@@ -159,21 +172,25 @@ def list_files(paths, *, pack: str | None, pack_from: str | None, recursive: boo
         raise LogbookError(f"pack_from must be one of {', '.join(PACK_FROM)}; got {pack_from!r}")
     if pack is not None and not str(pack).strip():
         raise LogbookError("the pack name is empty")
-    files, missing = [], []
+    files, missing, not_tried = [], [], []
     for given in paths:
         path = Path(given).expanduser()
         if path.is_dir():
             found = path.rglob("*") if recursive else path.glob("*")
             for item in sorted(found):
-                if item.is_file() and _is_data_file(item):
+                if not item.is_file():
+                    continue
+                if _is_data_file(item):
                     files.append(item)
+                elif not item.name.lower().startswith(SKIP_PREFIXES + (".",)):
+                    not_tried.append(str(item))
         elif path.is_file():
             files.append(path)
         else:
             missing.append((str(path), "no such file or folder"))
     named = [(f, str(pack).strip() if pack is not None else f.resolve().parent.name)
              for f in files]
-    return named, missing
+    return named, missing, not_tried
 
 
 def _insert(conn, table):
@@ -368,9 +385,10 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
     from ..fleet import InProcessExecutor
 
     options = check_reader_options(reader_options)
-    files, missing = list_files(paths, pack=pack, pack_from=pack_from, recursive=recursive)
+    files, missing, not_tried = list_files(paths, pack=pack, pack_from=pack_from,
+                                           recursive=recursive)
     schema.check_writable(engine)       # a read-only logbook says so before any file is read
-    result = AddResult(rejected=list(missing))
+    result = AddResult(rejected=list(missing), not_tried=[Path(p).name for p in not_tried])
     total = len(files)
     hashed: dict[str, tuple[Path, str, str]] = {}
     for path, pack_name in files:
