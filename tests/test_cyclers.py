@@ -499,10 +499,13 @@ def test_a_time_that_does_not_advance_or_a_clock_without_a_date_is_not_taken(cyc
     source.assign(Test_Time=12.0).drop(columns=["DateTime"]).to_csv(frozen, index=False)
     with pytest.raises(DataError, match="stays at 12 s over all .* it is not a time"):
         read_tester(frozen)
+    clock = pd.to_datetime(source["DateTime"], unit="s")
     clock_only = tmp_path / "clock_only.csv"
-    source.assign(DateTime=pd.to_datetime(source["DateTime"], unit="s").dt.strftime(
-        "%H:%M:%S")).to_csv(clock_only, index=False)
+    table = source.assign(DateTime=clock.dt.strftime("%H:%M:%S")).to_csv(index=False)
+    clock_only.write_text(table)
     assert "start_time" not in read_tester(clock_only).meta
+    clock_only.write_text(f"Date of Test:,{clock.iloc[0]:%m/%d/%Y}\n" + table)   # its day
+    assert read_tester(clock_only).meta["start_time"] == f"{clock.iloc[0]:%Y-%m-%dT%H:%M:%S}"
 
 
 def test_pulses_are_not_full_discharges(tmp_path):

@@ -461,7 +461,9 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
                         if clock is not None else "added up over the steps (a pause between "
                         "two steps is not known without a date-time column)"))
     if "datetime" in roles:
-        start = _start_time(table.iloc[:, roles["datetime"][0]], out.get("time_s"))
+        day = preamble_start(meta.get("preamble") or [])
+        start = _start_time(table.iloc[:, roles["datetime"][0]], out.get("time_s"),
+                            day[0] if day else None)
         if start:
             meta["start_time"] = start
     records = np.asarray(records)
@@ -601,8 +603,9 @@ def _clock_seconds(column: pd.Series) -> np.ndarray | None:
     return seconds.to_numpy(dtype=float)
 
 
-def _start_time(column: pd.Series, time_s) -> str | None:
-    """ISO 8601 time of test time 0 from a date-time column, when it parses."""
+def _start_time(column: pd.Series, time_s, day: str | None = None) -> str | None:
+    """ISO 8601 time of test time 0 from a date-time column, when it parses; a column of
+    clock times only on ``day`` (ISO 8601, from the file's header), else none."""
     first = column.dropna()
     if first.empty:
         return None
@@ -615,7 +618,10 @@ def _start_time(column: pd.Series, time_s) -> str | None:
         elif 20000 < x < 80000:                 # Excel / OLE days
             stamp = pd.Timestamp("1899-12-30") + pd.to_timedelta(x, unit="D")
     elif _DAY_CLOCK.match(str(value)) or _CLOCK_ONLY.match(str(value)):
-        return None          # a clock without a date (Maccor's DPt Time in some exports)
+        if day is None:      # a clock without a date (Maccor's DPt Time in some exports)
+            return None
+        stamp = pd.to_datetime(f"{pd.Timestamp(day):%Y-%m-%d} {str(value).strip()}",
+                               errors="coerce")
     else:
         stamp = pd.to_datetime(str(value), errors="coerce")
         if stamp is pd.NaT:
