@@ -67,8 +67,10 @@ def read_biologic(path) -> TesterRecords:
             raise DataError(f"{path.name}: no {needed} column in the file (galvani {version} "
                             f"read {', '.join(map(str, data.columns))})")
     notes: list[str] = []
+    # the cell's voltage where a reference electrode was recorded beside it
+    volts = next(n for n in ("Ecell/V", "Ewe-Ece/V", "Ewe/V") if n in data)
     frame = pd.DataFrame({"time_s": data["time/s"].to_numpy(dtype=float),
-                          "voltage_V": data["Ewe/V"].to_numpy(dtype=float)})
+                          "voltage_V": data[volts].to_numpy(dtype=float)})
     mode = _flag(mpr, data, "mode")
     if mode is None:
         mode = np.full(len(data), GALVANOSTATIC)
@@ -94,9 +96,11 @@ def read_biologic(path) -> TesterRecords:
         if name in data:
             frame["temperature_C"] = data[name].to_numpy(dtype=float)
     meta = {"format": "biologic-mpr", "reader": f"galvani {version}", "notes": notes,
-            "column_map": {"time_s": "time/s", "voltage_V": "Ewe/V",
+            "column_map": {"time_s": "time/s", "voltage_V": volts,
                            "step_index": "Ns", "state": "ox/red and mode flags"},
             "units": {"current_A": "mA"}}
+    if "<I>/mA" in data and "I/mA" not in data:
+        meta["current_interval_mean"] = "<I>/mA"   # counted over each interval (steps.finish)
     stamp = getattr(mpr, "timestamp", None)
     if isinstance(stamp, datetime):
         meta["start_time"] = stamp.isoformat(timespec="seconds")

@@ -466,36 +466,16 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
                             day[0] if day else None)
         if start:
             meta["start_time"] = start
-    records = np.asarray(records)
     if "current_A" in column_map and split_header(column_map["current_A"])[0] in INTERVAL_MEANS:
-        out, records = interval_means_held(out, records)
-        notes.append(f"{column_map['current_A']!r} is the mean current over the interval "
-                     "before each record: counted over that interval")
+        meta["current_interval_mean"] = column_map["current_A"]
     meta.update({"column_map": column_map, "units": units, "notes": notes})
-    return TesterRecords(frame=out, records=records, meta=meta)
+    return TesterRecords(frame=out, records=np.asarray(records), meta=meta)
 
 
 #: Current columns that hold the mean over the interval ending at each record, not the
 #: current at it: EC-Lab's ``<I>`` (the brackets mark an average; EC-Lab's own ``Q``
-#: counters are their sums over the intervals).
+#: counters are their sums over the intervals). Flagged for :func:`.steps.finish`.
 INTERVAL_MEANS = ("<i>",)
-
-
-def interval_means_held(frame: pd.DataFrame, records: np.ndarray
-                        ) -> tuple[pd.DataFrame, np.ndarray]:
-    """Records whose current is the mean over the interval before each, as a current held
-    over each interval: every record after the first gets a companion a moment after the
-    record before it (a thousandth of the interval, at most 1 ms) with its own values, so
-    that trapezoids count ``sum(I_k (t_k - t_(k-1)))``. The companions carry their
-    record's number."""
-    t = frame["time_s"].to_numpy(dtype=float)
-    dt = np.diff(t)
-    later = np.flatnonzero(dt > 0) + 1
-    companions = frame.iloc[later].copy()
-    companions["time_s"] = t[later - 1] + np.minimum(1e-3, 1e-3 * dt[later - 1])
-    order = np.argsort(np.r_[np.arange(len(frame)), later - 0.5], kind="stable")
-    held = pd.concat([frame, companions], ignore_index=True).iloc[order]
-    return held.reset_index(drop=True), np.r_[records, records[later]][order]
 
 
 def state_of(column: pd.Series) -> np.ndarray:

@@ -166,6 +166,10 @@ def finish(raw: TesterRecords, name: str, sign: str = "auto") -> TesterFile:
         raise DataError(f"{name}: the test time ({column!r}) stays at {t[0]:g} s over all "
                         f"{len(t)} records: it is not a time (name the time column in the "
                         "export, or export the test time in seconds)")
+    if meta.get("current_interval_mean"):
+        frame, records = interval_means_held(frame, records)
+        meta["notes"].append(f"{meta['current_interval_mean']!r} is the mean current over the "
+                             "interval before each record: counted over that interval")
     flip, source = _discharge_sign(frame, sign)
     if flip:
         frame["current_A"] = -frame["current_A"]
@@ -323,6 +327,23 @@ def _tester_Ah(frame: pd.DataFrame, a: int, b: int, kind: str) -> float | None:
         before = 0.0
     value = end - before
     return float(value) if np.isfinite(value) else None
+
+
+def interval_means_held(frame: pd.DataFrame, records: np.ndarray
+                        ) -> tuple[pd.DataFrame, np.ndarray]:
+    """Records whose current is the mean over the interval before each, as a current held
+    over each interval: every record after the first gets a companion a moment after the
+    record before it (a thousandth of the interval, at most 1 ms) with its own values, so
+    that trapezoids count ``sum(I_k (t_k - t_(k-1)))``. The companions carry their
+    record's number."""
+    t = frame["time_s"].to_numpy(dtype=float)
+    dt = np.diff(t)
+    later = np.flatnonzero(dt > 0) + 1
+    companions = frame.iloc[later].copy()
+    companions["time_s"] = t[later - 1] + np.minimum(1e-3, 1e-3 * dt[later - 1])
+    order = np.argsort(np.r_[np.arange(len(frame)), later - 0.5], kind="stable")
+    held = pd.concat([frame, companions], ignore_index=True).iloc[order]
+    return held.reset_index(drop=True), np.r_[records, records[later]][order]
 
 
 def _discharge_flags(steps: list[dict]) -> None:
