@@ -442,16 +442,28 @@ def _arbin_layouts(source: pd.DataFrame) -> dict[str, str]:
                            "cycle number": source["Cycle_Index"]})
     mpt = ("EC-Lab ASCII FILE\nNb header lines : 4\nAcquisition started on : "
            f"{clock.iloc[0]:%m/%d/%Y %H:%M:%S}\n\n" + ec_lab.to_csv(sep="\t", index=False))
+    state = np.where(source["Current"] > 0.01, "Charge",
+                     np.where(source["Current"] < -0.01, "Discharge", "Pause"))
+    basytec = pd.DataFrame({"~Time[h]": source["Test_Time"] / 3600, "DataSet": source.index + 1,
+                            "Date": clock.dt.strftime("%d.%m.%Y"),
+                            "Time": clock.dt.strftime("%H:%M:%S"),
+                            "t-Step[h]": source["Step_Time"] / 3600, "Line": source["Step_Index"],
+                            "Command": state, "U[V]": source["Voltage"], "I[A]": source["Current"],
+                            "Cyc-Count": source["Cycle_Index"], "T1[°C]": source["Temperature"]})
     return {"pec.csv": "Test Name:,cells\nStart Time:,07/02/2017 14:39:13\n\n"
                        + pec.to_csv(index=False),
-            "novonix.csv": quoted, "eclab.mpt": mpt}
+            "novonix.csv": quoted, "eclab.mpt": mpt,
+            "basytec.txt": "~Resultfile from Basytec Battery Test System\n~Name of Test: cells\n~\n"
+                           + basytec.to_csv(sep="\t", index=False)}
 
 
-@pytest.mark.parametrize("name", ["pec.csv", "novonix.csv", "eclab.mpt"])
+@pytest.mark.parametrize("name", ["pec.csv", "novonix.csv", "eclab.mpt", "basytec.txt"])
 def test_other_testers_text_exports_read_the_same_steps(cyclers, tmp_path, name):
     """PEC (a ``Test`` number column, time as ``Hours in hh:mm:ss.xxx``), Novonix (every
-    line wrapped in quotes) and EC-Lab with a reference electrode (``Ewe`` against the
-    reference beside the cell's ``Ewe-Ece``) read the steps of the same records."""
+    line wrapped in quotes), EC-Lab with a reference electrode (``Ewe`` against the
+    reference beside the cell's ``Ewe-Ece``) and BaSyTec (``~`` before its header, its
+    program's ``Line`` a step, a day-first ``Date`` beside a ``Time``) read the steps of the
+    same records."""
     source = pd.read_csv(cyclers / "arbin/arbin_example.csv")
     original = read_tester(cyclers / "arbin/arbin_example.csv")
     path = tmp_path / name
@@ -459,7 +471,8 @@ def test_other_testers_text_exports_read_the_same_steps(cyclers, tmp_path, name)
     assert detect_tester(path) == "text"
     tester = read_tester(path)
     assert tester.meta["format"] == {"pec.csv": "pec-text", "novonix.csv": "novonix-text",
-                                     "eclab.mpt": "ec-lab-text"}[name]
+                                     "eclab.mpt": "ec-lab-text",
+                                     "basytec.txt": "basytec-text"}[name]
     assert [s["kind"] for s in tester.steps] == [s["kind"] for s in original.steps]
     assert [s["charge_Ah"] for s in tester.steps] == pytest.approx(
         [s["charge_Ah"] for s in original.steps], rel=CAPACITY_TOLERANCE, abs=1e-9)

@@ -22,7 +22,7 @@ def steps_cmd(file, sign, plot_path, force, as_json):
     """The steps of a battery tester's file: charge, rest and discharge, as numbered.
 
     Reads Neware .nda/.ndax, BioLogic .mpr, Arbin .res/.csv/.xlsx, and text
-    exports (Maccor, EC-Lab .mpt, PEC, Novonix and others whose columns name time,
+    exports (Maccor, EC-Lab .mpt, BaSyTec, PEC, Novonix and others whose columns name time,
     voltage, current and a step or cycle), found from the content. Each step gets
     a number (1, 2, ... in the file) that --step takes in fit and validate; the
     tester's own cycle and step numbers, the kind and control mode, the charge

@@ -46,8 +46,8 @@ from .steps import (
 #: Formats :func:`detect_tester` names (``*-text`` and ``*-xlsx`` also come as
 #: ``tester-text`` / ``tester-xlsx`` for exports of other testers).
 TESTER_FORMATS = ("neware-nda", "neware-ndax", "biologic-mpr", "arbin-res", "arbin-text",
-                  "arbin-xlsx", "maccor-text", "ec-lab-text", "novonix-text", "pec-text",
-                  "tester-text", "tester-xlsx")
+                  "arbin-xlsx", "maccor-text", "basytec-text", "ec-lab-text", "novonix-text",
+                  "pec-text", "tester-text", "tester-xlsx")
 
 #: Columns a step read keeps besides the canonical ones.
 STEP_COLUMNS = ("cycle_index", "step_index")

@@ -62,17 +62,19 @@ ROLES = {
     "current_A": ("current", ("current", "amps", "cell current", "i", "<i>", "amp", "cur",
                               "电流")),
     "cycle_index": (None, ("cycle index", "cycle", "cyc#", "cyc", "cycle number", "cycle id",
-                           "cycle no", "cycle c", "循环号", "循环序号", "循环")),
+                           "cycle no", "cycle c", "cyc-count", "循环号", "循环序号", "循环")),
+    # BaSyTec numbers its program's lines, one a step
     "step_index": (None, ("step index", "step", "step number", "step id", "step no", "ns",
-                          "工步号", "工步序号", "工步")),
-    "state": (None, ("state", "status", "md", "step type", "step name", "mode", "工步类型",
-                     "工步状态", "状态")),
+                          "line", "工步号", "工步序号", "工步")),
+    "state": (None, ("state", "status", "md", "step type", "step name", "mode", "command",
+                     "工步类型", "工步状态", "状态")),
     "tester_charge_Ah": ("capacity", ("charge capacity", "chg capacity", "charge cap",
                                       "q charge", "chg cap", "充电容量")),
     "tester_discharge_Ah": ("capacity", ("discharge capacity", "dchg capacity",
                                          "discharge cap", "q discharge", "dchg cap",
                                          "放电容量")),
-    "tester_step_Ah": ("capacity", ("amp hr", "amp-hr", "capacity", "ah", "cap", "容量")),
+    "tester_step_Ah": ("capacity", ("ah-step", "amp hr", "amp-hr", "capacity", "ah", "cap",
+                                    "容量")),
     "temperature_C": ("temperature", ("temperature", "temp", "aux temperature", "t1",
                                       "aux temperature 1", "cell temperature", "温度")),
     "datetime": (None, ("date time", "datetime", "dpt time", "timestamp", "realtime",
@@ -92,7 +94,8 @@ PLAUSIBLE_C = (-60.0, 150.0)
 def split_header(name: str) -> tuple[str, str | None]:
     """``"Current(mA)"`` -> ``("current", "ma")``; ``"Q charge/discharge/mA.h"`` ->
     ``("q charge/discharge", "ma.h")``; ``"Cyc#"`` -> ``("cyc#", None)``."""
-    text = str(name).strip().lstrip("\ufeff").replace("（", "(").replace("）", ")")
+    # BaSyTec marks its header line (and the lines above it) with a leading "~"
+    text = str(name).strip().lstrip("\ufeff~").replace("（", "(").replace("）", ")")
     unit = None
     match = _BRACKET.match(text)
     if match and match.group(1):
@@ -283,7 +286,7 @@ def preamble_start(preamble: list[str]) -> tuple[str, str] | None:
             continue
         with warnings.catch_warnings():   # pandas' format inference warning
             warnings.simplefilter("ignore", UserWarning)
-            stamp = pd.to_datetime(match.group(2), errors="coerce")
+            stamp = _stamps(pd.Series([match.group(2)])).iloc[0]
         if stamp is not pd.NaT and not pd.isna(stamp):
             return stamp.isoformat(timespec="seconds"), " ".join(match.group(0).split())
     return None
@@ -321,6 +324,8 @@ def _vendor(names: list[str], preamble: list[str]) -> str | None:
     if {"data_point", "test_time", "step_index", "test_time(s)"} & lowered or any(
             str(n).lower().startswith(("test_time", "step_index")) for n in names):
         return "arbin"
+    if any("basytec" in p.lower() for p in preamble[:3]):
+        return "basytec"
     if any(p.startswith("EC-Lab ASCII FILE") for p in preamble[:1]):
         return "ec-lab"
     if any(p.startswith("[Summary]") for p in preamble[:1]) and "step number" in {
@@ -443,8 +448,8 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
             notes.append(f"the {role.replace('_', ' ')} column {column_map[role]!r} is empty: "
                          f"every record counted as {role.split('_')[0]} 0")
         out[role] = out[role].fillna(0).astype(np.int64)
-    clock = (_clock_seconds(table.iloc[:, roles["datetime"][0]]) if "datetime" in roles
-             else None)
+    stamps = _date_time_column(table, roles) if "datetime" in roles else None
+    clock = _clock_seconds(stamps) if stamps is not None else None
     bounds = step_bounds(out)
     if "time_s" not in out:
         if clock is None:
@@ -462,8 +467,7 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
                         "two steps is not known without a date-time column)"))
     if "datetime" in roles:
         day = preamble_start(meta.get("preamble") or [])
-        start = _start_time(table.iloc[:, roles["datetime"][0]], out.get("time_s"),
-                            day[0] if day else None)
+        start = _start_time(stamps, out.get("time_s"), day[0] if day else None)
         if start:
             meta["start_time"] = start
     if "current_A" in column_map and split_header(column_map["current_A"])[0] in INTERVAL_MEANS:
@@ -562,6 +566,32 @@ def test_time_from_steps(step_s: np.ndarray, bounds: list[tuple[int, int]],
     return out
 
 
+#: A date written day first with dots (``05.05.2025``: BaSyTec, German locales).
+_DOTTED_DATE = re.compile(r"^\s*\d{1,2}\.\d{1,2}\.\d{2,4}\b")
+
+
+def _stamps(text: pd.Series) -> pd.Series:
+    """Date-times from text, NaT where they do not parse; a date with dots is day first."""
+    first = text.dropna()
+    dayfirst = bool(len(first)) and bool(_DOTTED_DATE.match(str(first.iloc[0])))
+    return pd.to_datetime(text, errors="coerce", dayfirst=dayfirst)
+
+
+def _date_time_column(table: pd.DataFrame, roles: dict) -> pd.Series:
+    """The date-time column, or a date column joined with a column of clock times beside
+    it (BaSyTec's ``Date`` and ``Time``)."""
+    column = table.iloc[:, roles["datetime"][0]]
+    if split_header(str(table.columns[roles["datetime"][0]]))[0] != "date":
+        return column
+    for k, name in enumerate(table.columns):
+        base, unit = split_header(str(name))
+        values = table.iloc[:, k].dropna()
+        if base == "time" and unit is None and len(values) and \
+                _CLOCK_ONLY.match(str(values.iloc[0])):
+            return column.astype(str).str.strip() + " " + table.iloc[:, k].astype(str)
+    return column
+
+
 def _clock_seconds(column: pd.Series) -> np.ndarray | None:
     """Seconds since the first date-time of a date-time column, or None when under 90 %
     of it parses (text, UNIX seconds or Excel days)."""
@@ -576,7 +606,7 @@ def _clock_seconds(column: pd.Series) -> np.ndarray | None:
         return None
     with warnings.catch_warnings():   # pandas' format inference warning is not the user's
         warnings.simplefilter("ignore", UserWarning)
-        stamps = pd.to_datetime(column.astype(str), errors="coerce")
+        stamps = _stamps(column.astype(str))
     if stamps.notna().mean() <= 0.9:
         return None
     seconds = (stamps - stamps.dropna().iloc[0]).dt.total_seconds()
@@ -603,7 +633,9 @@ def _start_time(column: pd.Series, time_s, day: str | None = None) -> str | None
         stamp = pd.to_datetime(f"{pd.Timestamp(day):%Y-%m-%d} {str(value).strip()}",
                                errors="coerce")
     else:
-        stamp = pd.to_datetime(str(value), errors="coerce")
+        with warnings.catch_warnings():   # pandas' format inference warning
+            warnings.simplefilter("ignore", UserWarning)
+            stamp = _stamps(pd.Series([str(value)])).iloc[0]
         if stamp is pd.NaT:
             stamp = None
     if stamp is None or pd.isna(stamp):

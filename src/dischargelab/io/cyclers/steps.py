@@ -325,7 +325,7 @@ def _tester_Ah(frame: pd.DataFrame, a: int, b: int, kind: str) -> float | None:
     # there; one that runs on over the test (some Maccor exports) from the step before
     if counter[a] < before or not np.isfinite(before):
         before = 0.0
-    value = end - before
+    value = abs(end - before)    # some counters count a discharge down (BaSyTec's Ah-Step)
     return float(value) if np.isfinite(value) else None
 
 
