@@ -751,7 +751,8 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
     from .cells import drift_flags
 
     ordered = order_events(events)
-    counts = _cell_counts(ordered, cells, chemistry)
+    counted_as = chemistry       # the chemistry the cells of each event are counted for
+    counts = _cell_counts(ordered, cells, counted_as)
     out = _classify(ordered, counts, chemistry)
     read = None
     if chemistry is None and not any(h.full for h in out):
@@ -759,11 +760,11 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
         # pack's full rest is empty there), and a LiFePO4 pack's events are classified again
         read = _chemistry_from_loads(ordered, cells)
         if read[0] == "lifepo4":
-            counts = _cell_counts(ordered, cells, read[0])
+            counted_as = read[0]
+            counts = _cell_counts(ordered, cells, counted_as)
             out = _classify(ordered, counts, read[0])
     rate_kinds(ordered, out)
     ctx = _context(ordered, out, cells, chemistry, model, label_capacity_Ah, read)
-    counted_as = read[0] if read and read[0] == "lifepo4" else chemistry
     if ctx.chemistry != counted_as:
         counts, counted_as = _cell_counts(ordered, cells, ctx.chemistry), ctx.chemistry
     if demote_part_charged(ordered, out, counts, ctx):

@@ -149,18 +149,23 @@ class AddResult:
                 "notes": [{"file": f, "note": n} for f, n in self.notes]}
 
 
+def _is_documentation(path: Path) -> bool:
+    """A file in a folder that is not data whatever its suffix: a licence, a README..., or
+    a hidden file."""
+    return path.name.lower().startswith((*SKIP_PREFIXES, "."))
+
+
 def _is_data_file(path: Path) -> bool:
-    name = path.name.lower()
     suffix = path.suffix.lower()
     return (suffix in DATA_SUFFIXES or (len(suffix) == 4 and suffix[1:].isdigit())) \
-        and not name.startswith(SKIP_PREFIXES) and not name.startswith(".")
+        and not _is_documentation(path)
 
 
 def list_files(paths, *, pack: str | None, pack_from: str | None, recursive: bool
-               ) -> tuple[list[tuple[Path, str]], list[tuple[str, str]], list[str]]:
+               ) -> tuple[list[tuple[Path, str]], list[tuple[str, str]], list[Path]]:
     """``[(file, pack name)]`` for the paths given, ``[(path, reason)]`` for missing ones,
-    and the paths of the files in folders not taken for their suffix (documentation files
-    and hidden ones aside)."""
+    and the files in folders not taken for their suffix (documentation files and hidden
+    ones aside)."""
     if isinstance(paths, (str, Path)):
         paths = [paths]
     if pack is None and pack_from is None:
@@ -178,12 +183,9 @@ def list_files(paths, *, pack: str | None, pack_from: str | None, recursive: boo
         if path.is_dir():
             found = path.rglob("*") if recursive else path.glob("*")
             for item in sorted(found):
-                if not item.is_file():
+                if not item.is_file() or _is_documentation(item):
                     continue
-                if _is_data_file(item):
-                    files.append(item)
-                elif not item.name.lower().startswith(SKIP_PREFIXES + (".",)):
-                    not_tried.append(str(item))
+                (files if _is_data_file(item) else not_tried).append(item)
         elif path.is_file():
             files.append(path)
         else:
@@ -388,7 +390,7 @@ def add_files(engine, paths, *, pack=None, pack_from=None, recursive=False, exec
     files, missing, not_tried = list_files(paths, pack=pack, pack_from=pack_from,
                                            recursive=recursive)
     schema.check_writable(engine)       # a read-only logbook says so before any file is read
-    result = AddResult(rejected=list(missing), not_tried=[Path(p).name for p in not_tried])
+    result = AddResult(rejected=list(missing), not_tried=[p.name for p in not_tried])
     total = len(files)
     hashed: dict[str, tuple[Path, str, str]] = {}
     for path, pack_name in files:

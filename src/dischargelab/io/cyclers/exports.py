@@ -85,7 +85,13 @@ ROLES = {
 _BRACKET = re.compile(r"^(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]\s*$")
 _DAY_CLOCK = re.compile(r"^\s*(?:(\d+)\s*d\s*)?(\d+):(\d{1,2}):(\d{1,2}(?:\.\d*)?)\s*$")
 
+#: A clock time without a date: ``11:49:32``, ``9:05 PM`` (and :data:`_DAY_CLOCK`'s).
 _CLOCK_ONLY = re.compile(r"^\s*\d{1,2}:\d{2}(:\d{2}(\.\d*)?)?\s*([AaPp][Mm])?\s*$")
+
+
+def _is_clock(value) -> bool:
+    """A clock time without a date."""
+    return bool(_DAY_CLOCK.match(str(value)) or _CLOCK_ONLY.match(str(value)))
 
 #: Temperatures outside this range [degC] are not a reading (an unconnected sensor).
 PLAUSIBLE_C = (-60.0, 150.0)
@@ -261,13 +267,7 @@ def read_text_export(path, text: str | None = None) -> TesterRecords:
     records = np.arange(len(table)) + k + 2   # the file's line numbers
     meta = {"format": f"{vendor}-text" if vendor else "tester-text", "preamble": preamble,
             "reader": "dischargelab's tester-table reader (columns by name and unit)"}
-    raw = tester_records(table, records, path.name, meta)
-    if "start_time" not in raw.meta:
-        started = preamble_start(preamble)
-        if started:
-            raw.meta["start_time"], line = started
-            raw.meta["notes"].append(f"start time from the header: {line!r}")
-    return raw
+    return tester_records(table, records, path.name, meta)
 
 
 #: Header lines above a text export's table that give the test's start: EC-Lab's
@@ -284,9 +284,7 @@ def preamble_start(preamble: list[str]) -> tuple[str, str] | None:
         match = _PREAMBLE_START.search(line)
         if not match:
             continue
-        with warnings.catch_warnings():   # pandas' format inference warning
-            warnings.simplefilter("ignore", UserWarning)
-            stamp = _stamps(pd.Series([match.group(2)])).iloc[0]
+        stamp = _stamps(pd.Series([match.group(2)])).iloc[0]
         if stamp is not pd.NaT and not pd.isna(stamp):
             return stamp.isoformat(timespec="seconds"), " ".join(match.group(0).split())
     return None
@@ -465,11 +463,15 @@ def tester_records(table: pd.DataFrame, records: np.ndarray, name: str, meta: di
                      + ("added up over the steps, with the pauses the date-time column shows"
                         if clock is not None else "added up over the steps (a pause between "
                         "two steps is not known without a date-time column)"))
-    if "datetime" in roles:
-        day = preamble_start(meta.get("preamble") or [])
-        start = _start_time(stamps, out.get("time_s"), day[0] if day else None)
-        if start:
-            meta["start_time"] = start
+    # the header's start: the day of a clock-only column, else the start itself
+    day = preamble_start(meta.get("preamble") or [])
+    start = _start_time(stamps, out.get("time_s"), day[0] if day else None) \
+        if stamps is not None else None
+    if start:
+        meta["start_time"] = start
+    elif day:
+        meta["start_time"] = day[0]
+        notes.append(f"start time from the header: {day[1]!r}")
     if "current_A" in column_map and split_header(column_map["current_A"])[0] in INTERVAL_MEANS:
         meta["current_interval_mean"] = column_map["current_A"]
     meta.update({"column_map": column_map, "units": units, "notes": notes})
@@ -574,7 +576,9 @@ def _stamps(text: pd.Series) -> pd.Series:
     """Date-times from text, NaT where they do not parse; a date with dots is day first."""
     first = text.dropna()
     dayfirst = bool(len(first)) and bool(_DOTTED_DATE.match(str(first.iloc[0])))
-    return pd.to_datetime(text, errors="coerce", dayfirst=dayfirst)
+    with warnings.catch_warnings():   # pandas' format inference warning is not the user's
+        warnings.simplefilter("ignore", UserWarning)
+        return pd.to_datetime(text, errors="coerce", dayfirst=dayfirst)
 
 
 def _date_time_column(table: pd.DataFrame, roles: dict) -> pd.Series:
@@ -586,8 +590,7 @@ def _date_time_column(table: pd.DataFrame, roles: dict) -> pd.Series:
     for k, name in enumerate(table.columns):
         base, unit = split_header(str(name))
         values = table.iloc[:, k].dropna()
-        if base == "time" and unit is None and len(values) and \
-                _CLOCK_ONLY.match(str(values.iloc[0])):
+        if base == "time" and unit is None and len(values) and _is_clock(values.iloc[0]):
             return column.astype(str).str.strip() + " " + table.iloc[:, k].astype(str)
     return column
 
@@ -604,9 +607,7 @@ def _clock_seconds(column: pd.Series) -> np.ndarray | None:
         if 20000 < first < 80000:
             return (x - first) * 86400.0
         return None
-    with warnings.catch_warnings():   # pandas' format inference warning is not the user's
-        warnings.simplefilter("ignore", UserWarning)
-        stamps = _stamps(column.astype(str))
+    stamps = _stamps(column.astype(str))
     if stamps.notna().mean() <= 0.9:
         return None
     seconds = (stamps - stamps.dropna().iloc[0]).dt.total_seconds()
@@ -627,15 +628,13 @@ def _start_time(column: pd.Series, time_s, day: str | None = None) -> str | None
             stamp = pd.Timestamp(x, unit="s")
         elif 20000 < x < 80000:                 # Excel / OLE days
             stamp = pd.Timestamp("1899-12-30") + pd.to_timedelta(x, unit="D")
-    elif _DAY_CLOCK.match(str(value)) or _CLOCK_ONLY.match(str(value)):
+    elif _is_clock(value):
         if day is None:      # a clock without a date (Maccor's DPt Time in some exports)
             return None
         stamp = pd.to_datetime(f"{pd.Timestamp(day):%Y-%m-%d} {str(value).strip()}",
                                errors="coerce")
     else:
-        with warnings.catch_warnings():   # pandas' format inference warning
-            warnings.simplefilter("ignore", UserWarning)
-            stamp = _stamps(pd.Series([str(value)])).iloc[0]
+        stamp = _stamps(pd.Series([str(value)])).iloc[0]
         if stamp is pd.NaT:
             stamp = None
     if stamp is None or pd.isna(stamp):
