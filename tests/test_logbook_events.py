@@ -267,6 +267,29 @@ def test_reading_counts_the_idle_draw_and_the_relaxation_left():
     assert sd_left > sd_plain
 
 
+
+def test_a_rest_after_a_charge_carries_the_gap_between_the_branches():
+    """A rest after a charge that stopped short of full sits on the charge branch of the
+    open-circuit voltage, the curves are discharge curves: the reading and what every
+    such reading shares carry HYSTERESIS_SD_CELL_V; a rest after a discharge does not."""
+    from dischargelab.logbook.estimates import HYSTERESIS_SD_CELL_V
+
+    curve = OcvCurve.from_discharge(np.linspace(0, 3, 50), np.linspace(4.15, 3.0, 50),
+                                    np.full(50, 0.6), cells=1, resistance_ohm=0.05)
+    after_load = {"relaxed_V": float(curve.voltage_at(0.8)), "current_A": 0.0}
+    after_charge = dict(after_load, after_charge={"taper": True, "max_voltage_V": 4.0})
+    soc, sd = soc_reading(curve, after_load, 1)
+    soc_c, sd_c = soc_reading(curve, after_charge, 1)
+    slope = curve.slope(soc)
+    assert soc_c == soc
+    assert sd_c ** 2 - sd ** 2 == pytest.approx((HYSTERESIS_SD_CELL_V / slope) ** 2, rel=0.01)
+    plain = systematic_share(curve, [0.8, 0.3], 0.5, None)
+    assert systematic_share(curve, [0.8, 0.3], 0.5, None, [0.0, 0.0]) == plain
+    branch = systematic_share(curve, [0.8, 0.3], 0.5, None, [HYSTERESIS_SD_CELL_V, 0.0])
+    assert branch ** 2 - plain ** 2 == pytest.approx(
+        (HYSTERESIS_SD_CELL_V / slope / 0.5) ** 2, rel=0.05)
+
+
 # --------------------------------------------------------------------------- resistance
 
 def test_resistance_at_reference_temperature_undoes_arrhenius():

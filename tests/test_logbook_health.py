@@ -199,6 +199,36 @@ def test_a_storage_run_between_two_numbered_cycles(shared_data, tmp_path, name, 
     assert health.today["resistance_interval95"][0] >= 0.0
 
 
+def test_a_run_from_a_storage_charge_that_nothing_places_in_the_life(shared_data, tmp_path):
+    """Runs of cycles 110, 310 and 510 from a charge 10 % down (rests 4.15-4.11 V, where
+    an older cell rests full), in files with neither a clock time nor a cycle number,
+    added after the full discharges: each is laid on the full discharges by its curve
+    counted back from its end, taken back from full and measured within 3 %; the full
+    discharges themselves all stay full."""
+    from dischargelab.logbook.health import NOT_FULL_NOTE
+    from lvm_cut import lvm_storage
+
+    folder = shared_data / CELL_C
+    events, truth = [], {}
+    fulls = (1, 100, 200, 300, 400, 500, 600, 660)
+    for k, c in enumerate(fulls):
+        events += stored(summarise_source(folder / f"DischargeCycle{c:03d}.txt"), k)
+    for k, c in enumerate((110, 310, 510)):
+        store = tmp_path / f"run_{'abc'[k]}.txt"
+        truth[store.name] = lvm_storage(folder / f"DischargeCycle{c:03d}.txt", store, 0.1,
+                                        dated=False)
+        events += stored(summarise_source(store), 20 + k)
+    health, _, _ = pack_health(events)
+    assert sum(h.full for h in health) == len(fulls)
+    runs = [h for h in health if h.source in truth]
+    assert len(runs) == 3
+    for h in runs:
+        assert not h.full and h.notes[0].startswith(NOT_FULL_NOTE), h.source
+        assert h.capacity_Ah == pytest.approx(truth[h.source], rel=0.03), h.source
+        lo, hi = h.capacity_interval95
+        assert lo < truth[h.source] < hi
+
+
 # --------------------------------------------------------------------------- forecast
 
 def test_forecast_of_a_straight_fade_centres_on_its_crossing():

@@ -48,6 +48,12 @@ References
    et al., "Degradation diagnostics for lithium ion cells", J. Power Sources 341 (2017)
    373-386 (an aged cell's open-circuit voltage curve under loss of lithium inventory
    and of active material: :data:`OCV_AGEING_SD`).
+.. [6] A. Barai, W. D. Widanage, J. Marco, A. McGordon, P. Jennings, "A study of the open
+   circuit voltage characterization technique and hysteresis assessment of lithium-ion
+   cells", J. Power Sources 295 (2015) 99-107; M. A. Roscher, O. Bohlen, J. Vetter, "OCV
+   hysteresis in Li-ion batteries including two-phase transition materials", Int. J.
+   Electrochem. 2011, 984320 (the gap between the charge and discharge branches:
+   :data:`HYSTERESIS_SD_CELL_V`).
 """
 
 from __future__ import annotations
@@ -71,6 +77,16 @@ PRIOR_CURVE_SD_CELL_V = 0.015
 #: Standard deviation of a curve learned from the pack's own slow full discharge per
 #: cell [V] (the resistive drop added back is known to about half of itself).
 LEARNED_CURVE_SD_CELL_V = 0.005
+
+#: Standard deviation per cell [V] of a rest after a charge read through a discharge
+#: curve. A cell rests higher after a charge than after a discharge to the same state of
+#: charge (open-circuit voltage hysteresis: a gap of 10-20 mV for NMC and LiCoO2 cells
+#: over the middle of the charge, more for LiFePO4; Barai et al. 2015, Roscher et al.
+#: 2011). The learned and the generic curves are discharge curves, and a charge that
+#: stops short of full (a charger set to 4.0 V, a storage charge) leaves its rest on the
+#: other branch; the gap is not measured per pack, so it is carried (in the reading and
+#: in what every such reading shares, :func:`systematic_share`).
+HYSTERESIS_SD_CELL_V = 0.010
 
 #: State of charge after a charge that ends in a constant-voltage taper at the pack's
 #: full voltage, and its standard deviation (full, as the charger defines it).
@@ -270,12 +286,19 @@ def soc_reading(curve: OcvCurve, reading: dict, cells: int, *,
     var = (curve.sd_at(soc) ** 2 + READING_SD_CELL_V ** 2
            + (float(reading.get("half95_V") or 0.0) / Z95 / cells) ** 2
            + (0.5 * r * abs(idle) / cells) ** 2)
+    var += branch_sd_V(reading) ** 2
     temp = reading.get("temperature_C")
     if temp is not None and curve.temperature_C is not None:
         var += (ENTROPIC_V_PER_K * (float(temp) - curve.temperature_C)) ** 2
     slope = curve.slope(soc)
     sd = float(np.sqrt(var)) / slope if slope > 0 else MAX_SOC_SD
     return soc, float(min(sd, MAX_SOC_SD))
+
+
+def branch_sd_V(reading: dict) -> float:
+    """Per-cell standard deviation [V] a rest reading takes from the branch it rests on:
+    :data:`HYSTERESIS_SD_CELL_V` after a charge, else 0."""
+    return HYSTERESIS_SD_CELL_V if reading.get("after_charge") is not None else 0.0
 
 
 # --------------------------------------------------------------------------- charge
@@ -483,7 +506,7 @@ def capacity_between_rests(charge_Ah: float, charge_sd_Ah: float, soc_start: flo
 
 
 def systematic_share(curve: OcvCurve, soc_read: list[float], swing: float,
-                     fade: float | None) -> float:
+                     fade: float | None, branch_V: list[float] | None = None) -> float:
     """Relative standard deviation of a capacity between two rests that every estimate read
     through the same curve shares [-] (it does not average out over many events).
 
@@ -500,8 +523,13 @@ def systematic_share(curve: OcvCurve, soc_read: list[float], swing: float,
         Change in state of charge between the two rests [-].
     fade : float or None
         Capacity lost since the curve was learned, as a share of its capacity [-].
+    branch_V : list of float, optional
+        Per reading, the per-cell standard deviation of the branch it rests on
+        (:func:`branch_sd_V`) [V]; none by default.
     """
-    var = sum((curve.sd_at(s) / max(curve.slope(s), 1e-6)) ** 2 for s in soc_read)
+    branch = branch_V or [0.0] * len(soc_read)
+    var = sum((np.hypot(curve.sd_at(s), b) / max(curve.slope(s), 1e-6)) ** 2
+              for s, b in zip(soc_read, branch))
     rel = np.sqrt(var) / max(abs(swing), 1e-9)
     return float(np.hypot(rel, OCV_AGEING_SD * max(0.0, fade or 0.0)))
 
@@ -750,7 +778,7 @@ __all__ = ["step_resistance", "sample_noise", "regression_resistance",
            "drop_resistance", "OcvCurve",
            "soc_reading",
            "counted_charge", "sampling_figures", "charge_start_corrections",
-           "capacity_between_rests", "systematic_share",
+           "capacity_between_rests", "systematic_share", "branch_sd_V",
            "widen", "OCV_AGEING_SD",
            "resistance_at_reference", "MIN_SWING",
            "REFERENCE_TEMPERATURE_C", "REFERENCE_SOC", "FULL_SOC", "FULL_SOC_SD"]

@@ -86,6 +86,7 @@ from .estimates import (
     MIN_SWING,
     OCV_AGEING_SD,
     OcvCurve,
+    branch_sd_V,
     capacity_between_rests,
     charge_start_corrections,
     drop_resistance,
@@ -377,6 +378,7 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
         soc_a, sd_a = 1.0, FULL_SOC_SD
     else:
         soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
+    read_after = None
     if ends_full:
         soc_b, sd_b = 1.0, FULL_SOC_SD
     else:
@@ -398,9 +400,11 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
         return how
     sampling = details.get("sampling") or {}
     fade = _fade_since(curve, cap, ctx)
-    read = [s for s, anchored in ((soc_a, begins_full), (soc_b, ends_full)) if not anchored]
+    read = [(s, r) for s, r in ((soc_a, None if begins_full else before), (soc_b, read_after))
+            if r is not None]
     # the curve's ageing after the last full discharge is the trend's (over_life.DRIFT_SHARE)
-    h.capacity_systematic = systematic_share(curve, read, soc_a - soc_b, None)
+    h.capacity_systematic = systematic_share(curve, [s for s, _ in read], soc_a - soc_b, None,
+                                             [branch_sd_V(r) for _, r in read])
     if fade:
         interval = widen(cap, interval, OCV_AGEING_SD * fade)
     h.capacity_Ah, h.capacity_interval95 = cap, interval
@@ -480,7 +484,8 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
                                                 soc_a, sd_a, soc_b, sd_b)
     if cap is None:
         return how + " (read from its loaded end: no rest after it)"
-    h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b, None)
+    h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b, None,
+                                             [branch_sd_V(before), 0.0])
     h.capacity_Ah, h.capacity_interval95 = cap, interval
     h.capacity_method = "rest before, loaded end"
     h.notes.append(f"no rest after it: its end is the last loaded voltage plus the resistive "
@@ -521,7 +526,7 @@ def _empty_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int,
     if cap is None:
         return how
     h.soc_start, h.soc_end = soc_a, 0.0
-    h.capacity_systematic = systematic_share(curve, [soc_a], soc_a, None)
+    h.capacity_systematic = systematic_share(curve, [soc_a], soc_a, None, [branch_sd_V(before)])
     h.capacity_Ah, h.capacity_interval95 = cap, interval
     h.capacity_method = "rest before, run to empty"
     h.notes.append(f"from a rest at {soc_a:.0%} to the cutoff, read through {curve.source}")
@@ -646,9 +651,13 @@ def demote_part_charged(ordered: list[dict], out: list[EventHealth], counts: lis
     ended short of full (no taper at the full voltage), or, no charge logged, it delivered
     more than :data:`~.references.FULL_START_SHARE` less than the next full discharge in
     the pack's life at its rate and temperature (a capacity does not grow with age), by
-    their clock times, else their cycle numbers (:func:`.order.later_in_life`; an undated,
-    unnumbered file is placed only by when it was added, and not checked). They are read
-    again as runs to empty. Returns how many were taken back."""
+    their clock times, else their cycle numbers (:func:`.order.later_in_life`); or, wherever
+    it sits in the life (an undated, unnumbered file is placed only by when it was added),
+    it lies on the others by its curve counted back from its end
+    (:func:`~.references.run_to_empty_capacity`): the low end of that capacity's 95 %
+    interval more than ``FULL_START_SHARE`` above what it delivered (cell C's full
+    discharges: at most 1.8 % above; its runs from 10 % down: 5.8 % or more). They are
+    read again as runs to empty. Returns how many were taken back."""
     taken = 0
     fulls = [k for k, h in enumerate(out) if h.full]
     for k in reversed(fulls):
@@ -662,17 +671,35 @@ def demote_part_charged(ordered: list[dict], out: list[EventHealth], counts: lis
         gaps = [(gap, j) for j in fulls if j != k and out[j].full
                 and comparable_runs(e, ordered[j])
                 and (gap := later_in_life(e, ordered[j])) is not None]
-        if not gaps:
-            continue
-        later = min(gaps)[1]
-        mine, theirs = float(h.capacity_Ah or 0.0), float(out[later].capacity_Ah or 0.0)
-        if mine >= (1.0 - FULL_START_SHARE) * theirs:
-            continue
-        _not_full(h, f"it delivered {1.0 - mine / theirs:.0%} less than {out[later].source},"
-                  " a full discharge later in the pack's life (a capacity does not grow with "
-                  "age)")
-        taken += 1
+        why = None
+        if gaps:
+            later = min(gaps)[1]
+            mine, theirs = float(h.capacity_Ah or 0.0), float(out[later].capacity_Ah or 0.0)
+            if mine < (1.0 - FULL_START_SHARE) * theirs:
+                why = (f"it delivered {1.0 - mine / theirs:.0%} less than {out[later].source}, "
+                       "a full discharge later in the pack's life (a capacity does not grow "
+                       "with age)")
+        why = why or _short_by_its_tail(e, h, [(ordered[j], float(out[j].capacity_Ah))
+                                               for j in fulls if j != k and out[j].full
+                                               and comparable_runs(e, ordered[j])], counts[k])
+        if why:
+            _not_full(h, why)
+            taken += 1
     return taken
+
+
+def _short_by_its_tail(e: dict, h: EventHealth, refs: list[tuple[dict, float]], cells: int
+                       ) -> str | None:
+    """Why a discharge taken for full started part-charged, by its curve laid on the
+    pack's other full discharges from its end (:func:`demote_part_charged`), or None."""
+    if not refs:
+        return None
+    cap, interval, _ = run_to_empty_capacity(e, refs, cells)
+    mine = float(h.capacity_Ah or 0.0)
+    if cap is None or mine <= 0 or interval[0] <= (1.0 + FULL_START_SHARE) * mine:
+        return None
+    return (f"its curve, counted back from its end, lies on the pack's full discharges as "
+            f"{1.0 - mine / cap:.0%} of the charge down at its start")
 
 
 def _not_full(h: EventHealth, why: str) -> None:

@@ -359,16 +359,17 @@ def _tail_fit(q, v, total, ref: dict, ref_cap: float, cells: int) -> tuple[float
     soc_ref = 1.0 - rq / ref_cap
     order = np.argsort(soc_ref)
     soc_ref, rv = soc_ref[order], rv[order]
-    left = total - q
-    best = (np.inf, np.nan)
-    for cap in total * _SCALES:
-        soc = left / cap
-        ok = soc <= soc_ref[-1]
-        if ok.sum() < 5:
-            continue
-        rms = float(np.sqrt(np.mean((v[ok] - np.interp(soc[ok], soc_ref, rv)) ** 2)))
-        best = min(best, (rms, float(cap)))
-    return best[1], best[0]
+    caps = total * _SCALES
+    soc = (total - q)[None, :] / caps[:, None]            # one row per capacity tried
+    ok = soc <= soc_ref[-1]
+    counted = ok.sum(axis=1)
+    if not (counted >= 5).any():
+        return np.nan, np.inf
+    off = np.where(ok, v[None, :] - np.interp(soc, soc_ref, rv), 0.0)
+    rms = np.where(counted >= 5, np.sqrt((off ** 2).sum(axis=1) / np.maximum(counted, 1)),
+                   np.inf)
+    best = int(np.argmin(rms))
+    return float(caps[best]), float(rms[best])
 
 
 #: A discharge taken for full that delivered more than this share less than a full
