@@ -296,8 +296,51 @@ def synthetic_life(spec: LifeSpec | None = None) -> Life:
     return Life(frame=frame, cycles=pd.DataFrame(rows), tests=tests)
 
 
-__all__ = ["GENERATOR_VERSION", "cell_ocv", "LifeSpec", "Life", "synthetic_life", "capacity_at",
-           "parameters", "MISSION"]
+def bench_discharge(path, spec: LifeSpec, efc: float, *, current_A: float, down: float = 0.0,
+                    stop_Ah: float | None = None, rest_s: float = 600.0,
+                    storage_rest_s: float = 7200.0, ambient_C: float = 25.0) -> float:
+    """One bench discharge of the cell at ``efc``, written as a tester writes it
+    (``time_s``, ``voltage_V``, ``current_A`` discharge positive, every second): from a
+    full charge, a rest of ``rest_s`` and ``current_A`` to the cutoff; or, with ``down``,
+    that share of the capacity drawn at ``current_A`` first and ``storage_rest_s`` of rest
+    (a storage charge; the log starts ``rest_s`` before the rest's end). ``stop_Ah``
+    stops the discharge after that charge, under load. Returns what a discharge from full
+    to the cutoff at ``current_A`` delivers at that age [Ah] (a full discharge's scale)."""
+    p = parameters(spec, efc)
+
+    def charged() -> _Logger:
+        log = _Logger(spec)     # the cell arrives part-charged: drawn, rested, charged full
+        log.go([Step("current", 0.5 * spec.capacity_Ah, duration_s=1800.0)], p, ambient_C,
+               max_dt_s=20.0)
+        log.rest(spec.rest_s, p, ambient_C)
+        log.charge(p, ambient_C, test=True)
+        return log
+
+    log = charged()
+    if down > 0:
+        log.go([Step("current", current_A, duration_s=down * p["C_Ah"] * 3600.0 / current_A)],
+               p, ambient_C)
+        log.go([Step("rest", duration_s=storage_rest_s - rest_s)], p, ambient_C)
+    start = log.t0
+    log.rest(rest_s, p, ambient_C)
+    if stop_Ah is None:
+        log.go([Step("current", current_A)], p, ambient_C, max_dt_s=5.0)
+    else:
+        log.go([Step("current", current_A, duration_s=stop_Ah * 3600.0 / current_A)], p,
+               ambient_C, max_dt_s=5.0)
+    s = log.series()
+    t = np.arange(start, s["time_s"][-1], 1.0)
+    pd.DataFrame({"time_s": t - start, "voltage_V": np.interp(t, s["time_s"], s["voltage_V"]),
+                  "current_A": np.interp(t, s["time_s"], s["current_A"])}).to_csv(path,
+                                                                                   index=False)
+    full = charged()
+    q0 = full.charge_removed()
+    full.go([Step("current", current_A)], p, ambient_C, max_dt_s=5.0)
+    return full.charge_removed() - q0
+
+
+__all__ = ["GENERATOR_VERSION", "bench_discharge", "cell_ocv", "LifeSpec", "Life",
+           "synthetic_life", "capacity_at", "parameters", "MISSION"]
 
 
 def flight_log(path, loads, *, capacity_Ah: float, cells: int, chemistry: str = "li-ion",

@@ -229,6 +229,41 @@ def test_a_run_from_a_storage_charge_that_nothing_places_in_the_life(shared_data
         assert lo < truth[h.source] < hi
 
 
+def test_partials_from_a_storage_charge_stopped_under_load(tmp_path):
+    """Engine-made bench discharges of one cell at 1C (its slow polarisation relaxing over
+    900 s, its curve 8 mV off the generic one and moving with age): full ones at 0, 100,
+    200 and 300 EFC, and runs from a storage charge 45 % down (two hours' rest) stopped
+    under load after half their charge, at 50, 150 and 250 EFC. Each rest is placed on the
+    full discharges' open-circuit voltage with the drop the load settled to, as the pack's
+    learned curve takes it: within 10 % of the full discharge at that age, inside the band
+    (on the step resistance's drop: 16-19 % low, outside it)."""
+    import synthetic_life as sl
+    from dischargelab.logbook import Logbook
+
+    spec = sl.LifeSpec(ocv_wiggle_V=0.008, season_C=0.0, resistance_growth_per_efc=2e-3,
+                       lli_share=0.3, knee_efc=1e6)
+    files, truth = [], {}
+    for efc in (0, 100, 200, 300):
+        files.append(tmp_path / f"full_{efc:03d}.csv")
+        sl.bench_discharge(files[-1], spec, efc, current_A=3.0)
+    for efc in (50, 150, 250):
+        path = tmp_path / f"storage_{efc:03d}.csv"
+        capacity = sl.capacity_at(spec, efc)
+        truth[path.name] = sl.bench_discharge(path, spec, efc, current_A=3.0, down=0.45,
+                                              stop_Ah=0.5 * 0.55 * capacity)
+        files.append(path)
+    with Logbook(tmp_path / "lb.sqlite") as lb:
+        lb.set_pack("cell", cells=1, chemistry="li-ion")
+        lb.add(files, pack="cell")
+        health = lb.health("cell")
+    runs = [e for e in health.events if e.source in truth]
+    assert len(runs) == 3 and sum(e.full for e in health.events) == 4
+    for e in runs:
+        assert not e.full and e.capacity_Ah == pytest.approx(truth[e.source], rel=0.10)
+        lo, hi = e.capacity_interval95
+        assert lo < truth[e.source] < hi, e.source
+
+
 # --------------------------------------------------------------------------- forecast
 
 def test_forecast_of_a_straight_fade_centres_on_its_crossing():
