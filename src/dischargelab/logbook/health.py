@@ -656,8 +656,11 @@ def demote_part_charged(ordered: list[dict], out: list[EventHealth], counts: lis
     it lies on the others by its curve counted back from its end
     (:func:`~.references.run_to_empty_capacity`): the low end of that capacity's 95 %
     interval more than ``FULL_START_SHARE`` above what it delivered (cell C's full
-    discharges: at most 1.8 % above; its runs from 10 % down: 5.8 % or more). They are
-    read again as runs to empty. Returns how many were taken back."""
+    discharges: at most 1.8 % above; its runs from 10 % down: 5.8 % or more), its curve
+    lying on one of them within :data:`~.references.VOLTAGE_SD_CELL_V` rms (a full discharge
+    300 cycles older than every other lies 25 mV off them, its resistance taken for a later
+    start; a run laid on one of its age: 1.5-2.6 mV). They are read again as runs to
+    empty. Returns how many were taken back."""
     taken = 0
     fulls = [k for k, h in enumerate(out) if h.full]
     for k in reversed(fulls):
@@ -694,7 +697,7 @@ def _short_by_its_tail(e: dict, h: EventHealth, refs: list[tuple[dict, float]], 
     pack's other full discharges from its end (:func:`demote_part_charged`), or None."""
     if not refs:
         return None
-    cap, interval, _ = run_to_empty_capacity(e, refs, cells)
+    cap, interval, _ = run_to_empty_capacity(e, refs, cells, max_rms_V=VOLTAGE_SD_CELL_V)
     mine = float(h.capacity_Ah or 0.0)
     if cap is None or mine <= 0 or interval[0] <= (1.0 + FULL_START_SHARE) * mine:
         return None

@@ -423,14 +423,17 @@ def comparable_runs(a: dict, b: dict) -> bool:
     return ta is None or tb is None or abs(float(ta) - float(tb)) <= FULL_START_SPAN_K
 
 
-def run_to_empty_capacity(event: dict, refs: list[tuple[dict, float]], cells: int
+def run_to_empty_capacity(event: dict, refs: list[tuple[dict, float]], cells: int,
+                          max_rms_V: float | None = None
                           ) -> tuple[float | None, list | None, str]:
     """Capacity of a discharge run from part charge to its cutoff: its loaded curve,
     counted back from its end (empty at that rate), laid on the full discharges at the
     same rate (:data:`SAME_RATE_SHARE`) by state of charge; the capacity that fits best
     over its curve after :data:`SETTLE_S` (the start's polarisation left out), weighted
     ``1 / rms^2`` over the :data:`MATCH_REFERENCES` that fit best. The 95 % interval: the
-    spread between them and the fit of the curve moved by +-2 :data:`VOLTAGE_SD_CELL_V`."""
+    spread between them and the fit of the curve moved by +-2 :data:`VOLTAGE_SD_CELL_V`.
+    ``max_rms_V`` (per cell): no capacity unless the best fit leaves at most that (the
+    curve lies on a full discharge at its stage of life)."""
     c = event.get("curve") or {}
     q = np.asarray(c.get("charge_Ah") or [], dtype=float)
     v = np.asarray(c.get("voltage_V") or [], dtype=float) / cells
@@ -446,7 +449,7 @@ def run_to_empty_capacity(event: dict, refs: list[tuple[dict, float]], cells: in
     fits = sorted((_tail_fit(q[keep], v[keep], total, e, cap, cells) + (e, cap)
                    for e, cap in same), key=lambda f: f[1])[:MATCH_REFERENCES]
     fits = [f for f in fits if np.isfinite(f[0])]
-    if not fits:
+    if not fits or (max_rms_V is not None and fits[0][1] > max_rms_V):
         return None, None, "its curve lies on no full discharge"
     w = np.array([1.0 / max(f[1], 1e-4) ** 2 for f in fits])
     caps = np.array([f[0] for f in fits])
