@@ -85,24 +85,33 @@ class ReferenceCurve:
         return np.where(np.isfinite(drop), drop, self.resistance * self.current)
 
     @property
+    def settled_ohm(self) -> float | None:
+        """The drop [ohm] the load settled to (:func:`settled_drop`, at least the step
+        resistance), or None when :attr:`ocv` does not use it (the pack has a model, or the
+        discharge has no rest before it)."""
+        if self.model is not None or self.event.get("rest_voltage_V") is None or \
+                float(self.event.get("mean_current_A") or 0.0) <= 0:
+            return None
+        return max(settled_drop(self.event), self.resistance)
+
+    @property
     def ocv(self) -> np.ndarray:
         """Open-circuit voltage at each point [V]: the loaded voltage plus the drop the load
-        settled to (:func:`settled_drop`, as :func:`learned_curve` takes it; the step
+        settled to (:attr:`settled_ohm`, as :func:`learned_curve` takes it; the step
         resistance misses the polarisation that builds over minutes, and a rest 45 % down
         read on it came out 0.05 of the charge too full), and over the first
         :data:`SETTLE_S`, where the polarisation is still building, the line from the rest
-        voltage to there; when the discharge has no rest before it or the pack has a model,
-        the loaded voltage plus the model's or the step resistance's drop."""
-        rest, mean_i = self.event.get("rest_voltage_V"), float(self.event.get("mean_current_A")
-                                                                or 0.0)
-        if self.model is not None or rest is None or mean_i <= 0:
+        voltage to there; else the loaded voltage plus the model's or the step
+        resistance's drop."""
+        settled = self.settled_ohm
+        if settled is None:
             return self.voltage + self.drop
-        ocv = self.voltage + max(settled_drop(self.event), self.resistance) * self.current
+        ocv = self.voltage + settled * self.current
+        rest = float(self.event["rest_voltage_V"])
         q = np.asarray(self.event["curve"]["charge_Ah"], dtype=float)
-        q_settle = min(mean_i * SETTLE_S / 3600.0, 0.1 * q[-1])
+        q_settle = min(float(self.event["mean_current_A"]) * SETTLE_S / 3600.0, 0.1 * q[-1])
         early = q < q_settle
-        ocv[early] = float(rest) + (float(np.interp(q_settle, q, ocv)) - float(rest)) \
-            * q[early] / q_settle
+        ocv[early] = rest + (float(np.interp(q_settle, q, ocv)) - rest) * q[early] / q_settle
         return ocv
 
     @property
@@ -110,11 +119,10 @@ class ReferenceCurve:
         """Standard deviation of :attr:`ocv` [V]: half the polarisation that built between
         the step and :data:`SETTLE_S` (as much may still build after it: a slow relaxation
         of 900 s read 0.027 of the charge too full 45 % down), 0 when it is not used."""
-        rest, mean_i = self.event.get("rest_voltage_V"), float(self.event.get("mean_current_A")
-                                                                or 0.0)
-        if self.model is not None or rest is None or mean_i <= 0:
+        settled = self.settled_ohm
+        if settled is None:
             return 0.0
-        return 0.5 * max(settled_drop(self.event) - self.resistance, 0.0) * mean_i
+        return 0.5 * (settled - self.resistance) * float(self.event["mean_current_A"])
 
     def loaded(self, current_A: float, resistance_ohm: float | None) -> np.ndarray:
         """Voltage at ``current_A`` of a pack whose step resistance is now ``resistance_ohm``."""
