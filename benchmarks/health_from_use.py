@@ -482,15 +482,22 @@ def cell_c_section(folder: Path) -> None:
                 for path in fulls + paths:
                     lb.add(path, pack="C")
                 health = lb.health("C")
-            errs, cover = [], []
-            for h in health.events:
-                if h.source in truth and h.capacity_Ah is not None:
-                    errs.append(100 * (h.capacity_Ah / truth[h.source] - 1))
-                    lo, hi = h.capacity_interval95
-                    cover.append(lo <= truth[h.source] <= hi)
+            errs, cover = errors_and_cover(health.events, truth)
             print(f"| {clock} | {start} | {len(errs)}/{len(truth)} | "
                   f"{', '.join(f'{x:+.1f} %' for x in errs)} | {sum(cover)}/{len(cover)} |")
     engine_storage_runs(folder)
+
+
+def errors_and_cover(events, truth: dict) -> tuple[list[float], list[bool]]:
+    """Per event named in ``truth`` that has a capacity: its error [%] against the truth,
+    and whether its 95 % interval holds the truth."""
+    errs, cover = [], []
+    for h in events:
+        if h.source in truth and h.capacity_Ah is not None:
+            errs.append(100 * (h.capacity_Ah / truth[h.source] - 1))
+            lo, hi = h.capacity_interval95
+            cover.append(lo <= truth[h.source] <= hi)
+    return errs, cover
 
 
 def engine_storage_runs(folder: Path) -> None:
@@ -525,12 +532,7 @@ def engine_storage_runs(folder: Path) -> None:
             lb.set_pack("cell", cells=1, chemistry="li-ion")
             lb.add(fulls + paths, pack="cell")
             health = lb.health("cell")
-        errs, cover = [], []
-        for h in health.events:
-            if h.source in truth and h.capacity_Ah is not None:
-                errs.append(100 * (h.capacity_Ah / truth[h.source] - 1))
-                lo, hi = h.capacity_interval95
-                cover.append(lo <= truth[h.source] <= hi)
+        errs, cover = errors_and_cover(health.events, truth)
         start = "full" if down == 0 else f"storage, {100 * down:.0f} % down"
         print(f"| {start} | {100 * stop:.0f} % of its charge | "
               f"{', '.join(f'{x:+.1f} %' for x in errs)} | {sum(cover)}/{len(cover)} |")

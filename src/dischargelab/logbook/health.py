@@ -671,9 +671,10 @@ def demote_part_charged(ordered: list[dict], out: list[EventHealth], counts: lis
                 _not_full(h, "the charge before it stopped short of full")
                 taken += 1
             continue
-        gaps = [(gap, j) for j in fulls if j != k and out[j].full
-                and comparable_runs(e, ordered[j])
-                and (gap := later_in_life(e, ordered[j])) is not None]
+        comparable = [j for j in fulls if j != k and out[j].full
+                      and comparable_runs(e, ordered[j])]
+        gaps = [(gap, j) for j in comparable
+                if (gap := later_in_life(e, ordered[j])) is not None]
         why = None
         if gaps:
             later = min(gaps)[1]
@@ -683,8 +684,7 @@ def demote_part_charged(ordered: list[dict], out: list[EventHealth], counts: lis
                        "a full discharge later in the pack's life (a capacity does not grow "
                        "with age)")
         why = why or _short_by_its_tail(e, h, [(ordered[j], float(out[j].capacity_Ah))
-                                               for j in fulls if j != k and out[j].full
-                                               and comparable_runs(e, ordered[j])], counts[k])
+                                               for j in comparable], counts[k])
         if why:
             _not_full(h, why)
             taken += 1

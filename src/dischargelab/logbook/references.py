@@ -73,6 +73,12 @@ class ReferenceCurve:
         self.resistance = float(self.event.get("resistance_ohm") or 0.0)
         self.drop = self._model_drop(q) if self.model is not None else \
             self.resistance * self.current
+        # the drop the load settled to [ohm] (settled_drop, at least the step resistance),
+        # which ocv uses; None with a pack model or without a rest before the discharge
+        self.settled_ohm = None if (self.model is not None
+                                    or self.event.get("rest_voltage_V") is None
+                                    or float(self.event.get("mean_current_A") or 0.0) <= 0) \
+            else max(settled_drop(self.event), self.resistance)
 
     def _model_drop(self, q: np.ndarray) -> np.ndarray:
         """The model's voltage drop at the reference current [V], at the same charge."""
@@ -83,16 +89,6 @@ class ReferenceCurve:
             loaded = np.asarray(bat.voltage(self.current, qm), dtype=float)
         drop = rest - loaded
         return np.where(np.isfinite(drop), drop, self.resistance * self.current)
-
-    @property
-    def settled_ohm(self) -> float | None:
-        """The drop [ohm] the load settled to (:func:`settled_drop`, at least the step
-        resistance), or None when :attr:`ocv` does not use it (the pack has a model, or the
-        discharge has no rest before it)."""
-        if self.model is not None or self.event.get("rest_voltage_V") is None or \
-                float(self.event.get("mean_current_A") or 0.0) <= 0:
-            return None
-        return max(settled_drop(self.event), self.resistance)
 
     @property
     def ocv(self) -> np.ndarray:
