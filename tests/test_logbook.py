@@ -69,7 +69,7 @@ def test_add_twice_health_and_outlier(url, shared_data):
         "event_id", "event_kind", "cycle", "full", "notes",
         "capacity_method", "capacity_note", "resistance_interval95", "resistance_ref_ohm",
         "resistance_ref_interval95", "charged_Ah", "soc_start", "soc_end", "cells",
-        "capacity_systematic", "resistance_method"}
+        "capacity_systematic", "capacity_own_interval95", "resistance_method"}
     assert {e["kind"] for e in data["events"]} == {"full"}
     by_name = {e["source"]: e for e in data["events"]}
     for path in files:

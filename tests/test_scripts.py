@@ -48,6 +48,8 @@ BENCHMARKS = {
     # with PyBaMM (the `virtual` extra) a short life; without it, says it is skipped
     "pybamm_ocv_drift.py": (["--only", "25 degC", "--cycles", "6", "--cache", "{tmp}"],
                             "open-circuit curve with age"),
+    # with PyBaMM the published cells too; without it the measured cell only
+    "ocv_spread.py": ([], "Deviation from the generic Li-ion curve"),
     # needs Debian's lua5.3 (make lua), as the on-board script tests do
     "onboard.py": (["--quick", "--skip-real"], "largest |DL_TREM - time left|"),
     # needs the `virtual` extra (PyBaMM) to regenerate tests/data/virtual; here its usage only

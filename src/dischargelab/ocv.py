@@ -65,6 +65,22 @@ GENERIC_OCV_V = {
 }
 
 
+#: Spread of real cells' open-circuit curves about :data:`GENERIC_OCV_V` per cell [V] at
+#: :data:`OCV_SOC` (a standard deviation at each state of charge), by chemistry. Li-ion:
+#: the root mean square of five NMC and NCA cells' deviations from the generic curve: the
+#: Sony VTC6 measured in the CMU eVTOL lives (Bills et al. 2023), and the LG M50 (Chen et
+#: al. 2020), an NMC532 pouch (Mohtat et al. 2020), a Kokam NMC pouch (Ecker et al. 2015)
+#: and an NCA cell (Kim et al. 2011) from their published electrode curves
+#: (``benchmarks/ocv_spread.py``, which checks it leaving each cell out). 25-37 mV over the
+#: middle, 62-116 mV from 45 to 20 % where the cells part most (an LG M50 rests 57 mV
+#: above the 30Q at 30 %), 54-55 mV at the top, where the generic curve sits low (its C/10
+#: start). Chemistries not listed carry none beyond the generic curve's own error.
+GENERIC_OCV_SPREAD_V = {
+    "li-ion": np.array([55, 54, 27, 25, 32, 34, 31, 27, 30, 37, 48, 62, 74, 82, 103, 112,
+                        116, 154, 210, 275, 51]) / 1000.0,
+}
+
+
 #: Where each table comes from (for notes and reports).
 OCV_SOURCE = {
     "lipo": "generic LiPo (LiCoO2) OCV from a C/10 discharge (Enertech pouch cell, Ai et al. "

@@ -200,6 +200,16 @@ def load_floor(current_A) -> float:
     return float(min(MIN_LOAD_A, SMALL_LOAD_NOISE_FACTOR * noise))
 
 
+def voltage_jumps_up(voltage_V, current_A, threshold_A: float) -> np.ndarray:
+    """Per step from row ``k - 1`` to row ``k``: the voltage rose by more than
+    :data:`VOLTAGE_JUMP_FRACTION` while the current (discharge positive) did not fall by
+    more than ``threshold_A`` [A]: a pack swap. A load's end lifts the voltage by its
+    resistive drop, 5-10 % at 2C and more (that is a rest beginning, not another pack)."""
+    v = np.asarray(voltage_V, dtype=float)
+    i = np.asarray(current_A, dtype=float)
+    return (np.diff(v) > VOLTAGE_JUMP_FRACTION * v[:-1]) & (i[1:] >= i[:-1] - threshold_A)
+
+
 def find_segments(frame: pd.DataFrame, *, breaks_s=(), threshold_A: float | None = None
                   ) -> SegmentSearch:
     """Split a canonical frame (discharge positive, no NaN) into discharge segments.
@@ -255,8 +265,7 @@ def find_segments(frame: pd.DataFrame, *, breaks_s=(), threshold_A: float | None
         if "soc_pct" in frame:
             soc = frame["soc_pct"].to_numpy(dtype=float)
             step[np.diff(soc) >= SOC_JUMP_PCT] = 1
-        rise = (np.diff(v) > VOLTAGE_JUMP_FRACTION * v[:-1]) & (i[1:] >= i[:-1] - threshold)
-        step[rise & (step == 0)] = 2
+        step[voltage_jumps_up(v, i, threshold) & (step == 0)] = 2
         breaks = np.sort(np.asarray(list(breaks_s), dtype=float))
         if breaks.size:
             # a break strictly after row k-1 and at or before row k
@@ -336,5 +345,6 @@ def voltage_step_rest(voltage_V) -> tuple[bool, str]:
 __all__ = ["detect_sign", "charge_trend_V", "find_segments", "choose_segment",
            "voltage_step_rest", "runs",
            "Segment", "SegmentSearch", "IDLE_FRACTION", "MIN_SEGMENT_ROWS", "SENTINEL_ABS",
-           "SOC_JUMP_PCT", "VOLTAGE_JUMP_FRACTION", "GAP_FACTOR", "REST_STEP_FACTOR",
+           "SOC_JUMP_PCT", "VOLTAGE_JUMP_FRACTION", "voltage_jumps_up", "GAP_FACTOR",
+           "REST_STEP_FACTOR",
            "MIN_LOAD_A"]

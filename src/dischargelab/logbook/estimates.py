@@ -163,6 +163,11 @@ class OcvCurve:
     spread_V : numpy.ndarray or None
         A further standard deviation at each ``soc`` [V per cell] (a chemistry not known:
         half the spread between the curves it may be), in quadrature with ``sd_V``.
+    cells_spread_V : numpy.ndarray or None
+        The spread of real cells' curves about a generic one at each ``soc`` [V per cell]
+        (:data:`dischargelab.ocv.GENERIC_OCV_SPREAD_V`), in quadrature too: one offset
+        for all of a pack's readings (its cells are alike), which does not average out
+        over its events (:func:`systematic_share`).
     """
 
     soc: np.ndarray
@@ -172,26 +177,33 @@ class OcvCurve:
     temperature_C: float | None = None
     capacity_Ah: float | None = None
     spread_V: np.ndarray | None = None
+    cells_spread_V: np.ndarray | None = None
 
-    def sd_at(self, soc: float) -> float:
-        """Standard deviation of the curve per cell at ``soc`` [V]."""
-        if self.spread_V is None:
-            return float(self.sd_V)
-        return float(np.hypot(self.sd_V, np.interp(soc, self.soc, self.spread_V)))
+    def sd_at(self, soc: float, cells_alike: bool = True) -> float:
+        """Standard deviation of the curve per cell at ``soc`` [V]; with ``cells_alike``
+        False, without ``cells_spread_V`` (for what an offset common to the pack's
+        readings cancels in)."""
+        var = float(self.sd_V) ** 2
+        for spread in (self.spread_V, self.cells_spread_V if cells_alike else None):
+            if spread is not None:
+                var += float(np.interp(soc, self.soc, spread)) ** 2
+        return float(np.sqrt(var))
 
     @classmethod
     def unknown(cls) -> OcvCurve:
         """A 4.2 V pack whose chemistry is not known (neither given nor read from a full
         discharge): the mean of the generic LiPo and Li-ion curves, half their difference
         carried as the curve's error at each state of charge (0.22 V apart at 30 %: a
-        LiPo pouch's flat low end against an NMC cylinder's slope)."""
-        from ..ocv import OCV_SOC, generic_ocv
+        LiPo pouch's flat low end against an NMC cylinder's slope), with the Li-ion
+        cells' own spread about theirs (:data:`dischargelab.ocv.GENERIC_OCV_SPREAD_V`)."""
+        from ..ocv import GENERIC_OCV_SPREAD_V, OCV_SOC, generic_ocv
 
         lipo, _ = generic_ocv("lipo")
         li_ion, _ = generic_ocv("li-ion")
         mean = np.maximum.accumulate((0.5 * (lipo + li_ion))[::-1])
         return cls(soc=OCV_SOC[::-1].astype(float), cell_V=mean,
                    sd_V=PRIOR_CURVE_SD_CELL_V, spread_V=(0.5 * np.abs(lipo - li_ion))[::-1],
+                   cells_spread_V=GENERIC_OCV_SPREAD_V["li-ion"][::-1].copy(),
                    source="the mean of the generic LiPo and Li-ion curves (chemistry not "
                           "known: give it to narrow the interval)", temperature_C=25.0)
 
@@ -199,12 +211,21 @@ class OcvCurve:
     def prior(cls, chemistry: str | None, rest_cell_V: float | None = None) -> OcvCurve:
         """The generic curve of a chemistry (:func:`dischargelab.ocv.generic_ocv`): a LiPo
         pack resting above 4.25 V per cell (``rest_cell_V``, its highest rest) gets the
-        high-voltage (LiHV, 4.35 V) curve."""
-        from ..ocv import OCV_SOC, generic_ocv
+        high-voltage (LiHV, 4.35 V) curve. Real cells' spread about it
+        (:data:`dischargelab.ocv.GENERIC_OCV_SPREAD_V`) is carried as ``cells_spread_V``."""
+        from ..ocv import GENERIC_OCV_SPREAD_V, OCV_SOC, check_chemistry, generic_ocv, is_lihv
 
         table, source = generic_ocv(chemistry, rest_cell_V)
+        spread = None if is_lihv(chemistry, rest_cell_V) else \
+            GENERIC_OCV_SPREAD_V.get(check_chemistry(chemistry))
+        if spread is not None:
+            source += (f" (other cells' curves scatter about it by "
+                       f"{1000 * spread[1:-1].min():.0f}-{1000 * spread[1:-1].max():.0f} mV, "
+                       "most near empty: carried in the interval; a slow full discharge of "
+                       "the pack reads its own)")
         return cls(soc=OCV_SOC[::-1].astype(float), cell_V=table[::-1].copy(),
-                   sd_V=PRIOR_CURVE_SD_CELL_V, source=source, temperature_C=25.0)
+                   sd_V=PRIOR_CURVE_SD_CELL_V, source=source, temperature_C=25.0,
+                   cells_spread_V=None if spread is None else spread[::-1].copy())
 
     @classmethod
     def from_discharge(cls, charge_Ah, voltage_V, current_A, *, cells: int,
@@ -260,7 +281,8 @@ class OcvCurve:
 
 
 def soc_reading(curve: OcvCurve, reading: dict, cells: int, *,
-                resistance_ohm: float | None = None) -> tuple[float, float]:
+                resistance_ohm: float | None = None,
+                cells_alike: bool = True) -> tuple[float, float]:
     """State of charge of a rest reading and its standard deviation [-].
 
     Parameters
@@ -274,6 +296,9 @@ def soc_reading(curve: OcvCurve, reading: dict, cells: int, *,
         Cells in series.
     resistance_ohm : float, optional
         Pack resistance [ohm]: the idle draw's drop is added back (``V + R I``).
+    cells_alike : bool
+        False: without real cells' spread about a generic curve (``curve.cells_spread_V``,
+        an offset the pack's readings share: :func:`cells_share`).
 
     Returns
     -------
@@ -283,7 +308,7 @@ def soc_reading(curve: OcvCurve, reading: dict, cells: int, *,
     idle = float(reading.get("current_A") or 0.0)
     cell_v = (float(reading["relaxed_V"]) + r * idle) / cells
     soc = curve.soc_at(cell_v)
-    var = (curve.sd_at(soc) ** 2 + READING_SD_CELL_V ** 2
+    var = (curve.sd_at(soc, cells_alike) ** 2 + READING_SD_CELL_V ** 2
            + (float(reading.get("half95_V") or 0.0) / Z95 / cells) ** 2
            + (0.5 * r * abs(idle) / cells) ** 2)
     var += branch_sd_V(reading) ** 2
@@ -534,6 +559,19 @@ def systematic_share(curve: OcvCurve, soc_read: list[float], swing: float,
     return float(np.hypot(rel, OCV_AGEING_SD * max(0.0, fade or 0.0)))
 
 
+def cells_share(curve: OcvCurve, soc_read: list[float], swing: float) -> float:
+    """Relative standard deviation of a capacity between two rests from real cells' spread
+    about a generic curve alone (``curve.cells_spread_V`` through its slope at each
+    reading, over the swing; 0 for a curve without one) [-]. One offset for all of a
+    pack's readings: it widens each estimate's interval but does not set one estimate
+    apart from another (the trend adds it once, through :func:`systematic_share`)."""
+    if curve.cells_spread_V is None:
+        return 0.0
+    var = sum((float(np.interp(s, curve.soc, curve.cells_spread_V))
+               / max(curve.slope(s), 1e-6)) ** 2 for s in soc_read)
+    return float(np.sqrt(var) / max(abs(swing), 1e-9))
+
+
 def widen(capacity_Ah: float, interval95: list, extra_share: float) -> list:
     """A log-normal 95 % interval with ``extra_share`` (relative sd) added in quadrature."""
     lo, hi = interval95
@@ -689,6 +727,9 @@ def drop_resistance(curve_points: dict, soc_start: float, soc_end: float, ocv: O
     a charge. The resistance of minutes under load (series resistance and the
     polarisation built by then, Plett 2015 ch. 2): larger than a step's, and compared
     only with its own kind. 95 % interval: the curve's error and the points' spread.
+    Real cells' spread about a generic curve (``cells_spread_V``) is left out of both:
+    it shifts every drop of the pack alike and cancels in the resistance's rise, which is
+    what these resistances are compared for.
 
     Returns
     -------
@@ -707,7 +748,7 @@ def drop_resistance(curve_points: dict, soc_start: float, soc_end: float, ocv: O
         return None, None
     soc = soc_start + (soc_end - soc_start) * share[sel]
     drop = direction * (ocv.voltage_at(soc) * cells - v[sel])
-    curve_sd = cells * ocv.sd_at(float(np.median(soc)))
+    curve_sd = cells * ocv.sd_at(float(np.median(soc)), cells_alike=False)
     if not float(np.median(drop)) > DROP_MIN_Z * curve_sd:
         return None, None        # a drop the curve's own error could make (a small load)
     values = drop / i[sel]
@@ -778,7 +819,7 @@ __all__ = ["step_resistance", "sample_noise", "regression_resistance",
            "drop_resistance", "OcvCurve",
            "soc_reading",
            "counted_charge", "sampling_figures", "charge_start_corrections",
-           "capacity_between_rests", "systematic_share", "branch_sd_V",
+           "capacity_between_rests", "systematic_share", "cells_share", "branch_sd_V",
            "widen", "OCV_AGEING_SD",
            "resistance_at_reference", "MIN_SWING",
            "REFERENCE_TEMPERATURE_C", "REFERENCE_SOC", "FULL_SOC", "FULL_SOC_SD"]

@@ -36,7 +36,7 @@ from .results import DEFAULT_EOL, Health, Pack, build_health
 
 #: Version of the figures this code computes: raise it when what build_health,
 #: the fleet row or the model curves hold changes (every stored pack is then redone).
-FIGURES_VERSION = 14
+FIGURES_VERSION = 15
 
 #: C-rates of the model curves on a pack page.
 CURVE_C_RATES = (0.5, 1.0, 2.0)

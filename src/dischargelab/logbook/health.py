@@ -88,6 +88,7 @@ from .estimates import (
     OcvCurve,
     branch_sd_V,
     capacity_between_rests,
+    cells_share,
     charge_start_corrections,
     drop_resistance,
     resistance_at_reference,
@@ -178,6 +179,14 @@ class EventHealth:
     outlier: bool = False
     notes: list[str] = field(default_factory=list)
     capacity_systematic: float | None = None
+    capacity_own_interval95: list | None = None
+
+    @property
+    def own_interval95(self) -> list | None:
+        """The capacity's 95 % interval without what the pack's estimates share alike
+        (real cells' spread about a generic curve: :func:`.estimates.cells_share`), for
+        comparing one estimate with another; else :attr:`capacity_interval95`."""
+        return self.capacity_own_interval95 or self.capacity_interval95
 
     @property
     def health_kind(self) -> str:
@@ -206,7 +215,8 @@ class EventHealth:
                 "resistance_ref_interval95": self.resistance_ref_interval95,
                 "charged_Ah": self.charged_Ah, "soc_start": self.soc_start,
                 "soc_end": self.soc_end, "cells": self.cells, "notes": list(self.notes),
-                "capacity_systematic": self.capacity_systematic}
+                "capacity_systematic": self.capacity_systematic,
+                "capacity_own_interval95": self.capacity_own_interval95}
 
     @classmethod
     def from_dict(cls, data: dict) -> EventHealth:
@@ -226,7 +236,8 @@ class EventHealth:
                    charged_Ah=data.get("charged_Ah"), soc_start=data.get("soc_start"),
                    soc_end=data.get("soc_end"), cells=data.get("cells"), efc=data["efc"],
                    outlier=data["outlier"], notes=list(data["notes"]),
-                   capacity_systematic=data.get("capacity_systematic"))
+                   capacity_systematic=data.get("capacity_systematic"),
+                   capacity_own_interval95=data.get("capacity_own_interval95"))
 
 
 # --------------------------------------------------------------------------- classification
@@ -361,6 +372,16 @@ class PackContext:
         return before[-1] if before else self.curves[0][1]
 
 
+def _set_capacity(h: EventHealth, cap: float, own95: list, curve: OcvCurve,
+                  soc_read: list[float], swing: float) -> None:
+    """A capacity read through ``curve``: its interval widened by real cells' spread about
+    a generic curve (:func:`.estimates.cells_share`), the one without it kept for comparing
+    estimates (:attr:`EventHealth.own_interval95`)."""
+    share = cells_share(curve, soc_read, swing)
+    h.capacity_Ah, h.capacity_interval95 = cap, widen(cap, own95, share) if share else own95
+    h.capacity_own_interval95 = own95 if share else None
+
+
 def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, position: int
                    ) -> str | None:
     """Capacity between the rests around a load (sets ``h``); returns why not, or None."""
@@ -377,13 +398,14 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
     if begins_full:
         soc_a, sd_a = 1.0, FULL_SOC_SD
     else:
-        soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
+        soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r, cells_alike=False)
     read_after = None
     if ends_full:
         soc_b, sd_b = 1.0, FULL_SOC_SD
     else:
         read_after = _soon_after(after, e)
-        soc_b, sd_b = soc_reading(curve, read_after, n_cells, resistance_ohm=r)
+        soc_b, sd_b = soc_reading(curve, read_after, n_cells, resistance_ohm=r,
+                                  cells_alike=False)
         if read_after.get("method") == SHORT_REST_METHOD:
             h.notes.append(f"the log ends {read_after['since_load_s']:.0f} s after a "
                            f"{float(e['duration_s']) / 60:.0f}-minute load: {SHORT_REST_NOTE}"
@@ -407,7 +429,7 @@ def _rest_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int, posi
                                              [branch_sd_V(r) for _, r in read])
     if fade:
         interval = widen(cap, interval, OCV_AGEING_SD * fade)
-    h.capacity_Ah, h.capacity_interval95 = cap, interval
+    _set_capacity(h, cap, interval, curve, [s for s, _ in read], soc_a - soc_b)
     h.capacity_method = "rests before and after" + (" (charge ends full)" if ends_full else "")
     if not sampling.get("resolved", True):
         h.notes.append(f"the samples ({sampling.get('period_s') or 0:.0f} s apart) do not "
@@ -467,7 +489,7 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
     if r is None:
         return "no rest after it and no resistance to read its loaded end"
     curve = ctx.curve_at(position)
-    soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r)
+    soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=r, cells_alike=False)
     drop = float(r) * float(e.get("end_current_A") or 0.0)
     # the polarisation left at the end follows the flight's load, not its last sample
     load = max(abs(float(e.get("end_current_A") or 0.0)), abs(float(e.get("mean_current_A")
@@ -477,7 +499,7 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
     end = {"relaxed_V": float(e["end_voltage_V"]) + drop,
            "half95_V": 1.96 * share * float(r) * load, "current_A": 0.0,
            "temperature_C": e.get("temperature_max_C")}
-    soc_b, sd_b = soc_reading(curve, end, n_cells)
+    soc_b, sd_b = soc_reading(curve, end, n_cells, cells_alike=False)
     h.soc_start, h.soc_end = soc_a, soc_b
     q = float(details.get("counted_Ah") or e.get("discharged_Ah") or 0.0)
     cap, interval, how = capacity_between_rests(q, float(details.get("counted_sd_Ah") or 0.0),
@@ -486,7 +508,7 @@ def _loaded_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int
         return how + " (read from its loaded end: no rest after it)"
     h.capacity_systematic = systematic_share(curve, [soc_a, soc_b], soc_a - soc_b, None,
                                              [branch_sd_V(before), 0.0])
-    h.capacity_Ah, h.capacity_interval95 = cap, interval
+    _set_capacity(h, cap, interval, curve, [soc_a, soc_b], soc_a - soc_b)
     h.capacity_method = "rest before, loaded end"
     h.notes.append(f"no rest after it: its end is the last loaded voltage plus the resistive "
                    f"drop ({drop:.2f} V), read through {curve.source}")
@@ -519,7 +541,8 @@ def _empty_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int,
         h.soc_start, h.soc_end = float(e.get("discharged_Ah") or 0.0) / cap, 0.0
         return None
     curve = ctx.curve_at(position)
-    soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=e.get("resistance_ohm"))
+    soc_a, sd_a = soc_reading(curve, before, n_cells, resistance_ohm=e.get("resistance_ohm"),
+                              cells_alike=False)
     q = float(details.get("counted_Ah") or e.get("discharged_Ah") or 0.0)
     cap, interval, how = capacity_between_rests(q, float(details.get("counted_sd_Ah") or 0.0),
                                                 soc_a, sd_a, 0.0, EMPTY_SOC_SD)
@@ -527,7 +550,7 @@ def _empty_end_capacity(e: dict, h: EventHealth, ctx: PackContext, n_cells: int,
         return how
     h.soc_start, h.soc_end = soc_a, 0.0
     h.capacity_systematic = systematic_share(curve, [soc_a], soc_a, None, [branch_sd_V(before)])
-    h.capacity_Ah, h.capacity_interval95 = cap, interval
+    _set_capacity(h, cap, interval, curve, [soc_a], soc_a)
     h.capacity_method = "rest before, run to empty"
     h.notes.append(f"from a rest at {soc_a:.0%} to the cutoff, read through {curve.source}")
     return None
@@ -845,8 +868,8 @@ def pack_health(events: list[dict], *, label_capacity_Ah: float | None = None,
     for with_cap in groups.values():
         axis = [out[k].efc if out[k].efc is not None else k for k in with_cap]
         flags = flag_outliers(axis, [out[k].capacity_Ah for k in with_cap],
-                              half95=[0.5 * (out[k].capacity_interval95[1]
-                                             - out[k].capacity_interval95[0])
+                              half95=[0.5 * (out[k].own_interval95[1]
+                                             - out[k].own_interval95[0])
                                       for k in with_cap])
         for k, flag in zip(with_cap, flags):
             out[k].outlier = bool(flag)

@@ -83,7 +83,7 @@ def capacity_over_life(with_cap: list[EventHealth], drift_share: float | None = 
     offset_sd = {k: (RATE_OFFSET_SHARE if k == HIGH_RATE_KIND else KIND_OFFSET_SHARE) * scale
                  for k in set(kinds) if k != REFERENCE_KIND}
     trend = _trend(with_cap, [e.capacity_Ah for e in with_cap],
-                   [e.capacity_interval95 for e in with_cap],
+                   [e.own_interval95 for e in with_cap],
                    systematic=shared_errors(with_cap), kinds=kinds, offset_sd=offset_sd)
     if trend is not None:
         share = DRIFT_SHARE if drift_share is None else drift_share

@@ -614,10 +614,8 @@ def _forecast(with_cap: list[EventHealth], trend: Smoothed, reference: float, eo
 
     efc = np.array([e.efc for e in with_cap])
     cap = np.array([e.capacity_Ah for e in with_cap])
-    lo = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[0]
-          for e in with_cap]
-    hi = [np.nan if e.capacity_interval95 is None else e.capacity_interval95[1]
-          for e in with_cap]
+    lo = [np.nan if e.own_interval95 is None else e.own_interval95[0] for e in with_cap]
+    hi = [np.nan if e.own_interval95 is None else e.own_interval95[1] for e in with_cap]
     threshold = eol * reference
     evidence = measure_fade(efc, cap, lo, hi, [estimate_kind(e) for e in with_cap],
                             weights=trend.weights, shared_Ah=trend.systematic,

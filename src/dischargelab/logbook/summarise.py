@@ -393,7 +393,7 @@ def _rests_around(meta: dict, whole, whole_meta: dict | None):
     file read with ``segment="none"``, or None. A rest is the rows below the reader's load
     threshold next to the load, up to a gap, another load or a pack swap; it reads the pack
     at its last quiet row (see :data:`REST_SHARE`)."""
-    from ..io.segment import SOC_JUMP_PCT, VOLTAGE_JUMP_FRACTION
+    from ..io.segment import SOC_JUMP_PCT, voltage_jumps_up
     from .events import gap_limit
 
     if whole is None or whole_meta is None or len(whole) < 2:
@@ -425,12 +425,12 @@ def _rests_around(meta: dict, whole, whole_meta: dict | None):
     while b > a + 2 and low[b - 1]:
         b -= 1
     gap = gap_limit(t)
-    v = log.voltage_V
+    swapped = np.r_[False, voltage_jumps_up(log.voltage_V, log.current_A, threshold)]
     soc = whole["soc_pct"].to_numpy(dtype=float) if "soc_pct" in whole else None
 
     def joined(k: int) -> bool:
         """Rows k-1 and k belong to one stretch (no gap, no pack swap)."""
-        if t[k] - t[k - 1] > gap or v[k] - v[k - 1] > VOLTAGE_JUMP_FRACTION * v[k - 1]:
+        if t[k] - t[k - 1] > gap or swapped[k]:
             return False
         return soc is None or not (soc[k] - soc[k - 1] >= SOC_JUMP_PCT)
 
