@@ -186,8 +186,8 @@ def block_now(block, so_far) -> tuple:
     if not est:
         return None, None, None, 0
     cap = [e.capacity_Ah for e in est]
-    low = [e.capacity_interval95[0] for e in est]
-    high = [e.capacity_interval95[1] for e in est]
+    low = [e.own_interval95[0] for e in est]      # weighed as the trend weighs them
+    high = [e.own_interval95[1] for e in est]
     now, sd = capacity_now(so_far)
     return now, sd, block_mean(cap, low, high)[0], len(est)
 

@@ -61,7 +61,8 @@ def test_an_lg_m50_hover_read_as_li_ion_is_inside_its_band():
         with Logbook(Path(tmp) / "lb.sqlite") as lb:
             lb.set_pack("m50", cells=1, chemistry="li-ion")
             lb.add(Path(tmp) / "hover.csv", pack="m50")
-            (event,) = [e for e in lb.health("m50").events if e.capacity_Ah is not None]
+            health = lb.health("m50")
+            (event,) = [e for e in health.events if e.capacity_Ah is not None]
     low, high = event.capacity_interval95
     assert event.capacity_Ah > 1.04 * truth            # the curve's offset is there ...
     assert low <= truth <= high                         # ... and inside the band
@@ -70,3 +71,4 @@ def test_an_lg_m50_hover_read_as_li_ion_is_inside_its_band():
     own_low, own_high = event.own_interval95
     assert low < own_low and own_high < high
     assert any("other cells' curves scatter" in note for note in event.notes)
+    assert any("read through a generic curve" in note for note in health.notes)

@@ -231,7 +231,8 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
     last = max(e.efc for e in with_cap)
     anchor = _anchor(with_cap)
     tested = _tested(with_cap)
-    notes = _unseen_depth_notes(with_cap, anchor, tested) + _short_rest_notes(with_cap)
+    notes = (_generic_curve_notes(with_cap) + _unseen_depth_notes(with_cap, anchor, tested)
+             + _short_rest_notes(with_cap))
     rise = float(resistance_rise(per_event, anchor, [last])[0])
     hidden = float(hidden_share(rise))
     if hidden > 0.0025:
@@ -258,6 +259,26 @@ def _scale_notes(with_cap: list[EventHealth], trend: Smoothed,
     return [f"capacity today: {last - anchor:.0f} EFC since the last slow full discharge; "
             f"its band includes +-{1.96 * extra / value:.1%} for the curves' ageing since "
             "(another full discharge resets it)"] + notes
+
+
+def _generic_curve_notes(with_cap: list[EventHealth]) -> list[str]:
+    """A note when estimates were read through a generic curve whose real cells scatter
+    about it (their interval wider than their own: :attr:`EventHealth.own_interval95`):
+    by how much, at the median estimate."""
+    shares = [np.sqrt(max(_log_half(e.capacity_interval95) ** 2
+                          - _log_half(e.own_interval95) ** 2, 0.0))
+              for e in with_cap if e.capacity_own_interval95]
+    if not shares:
+        return []
+    return [f"capacity today: read through a generic curve; where these estimates read it, "
+            f"real cells' curves scatter about it by +-{float(np.median(shares)):.0%} of the "
+            "capacity (95 %), carried in the band (a slow full discharge of the pack reads "
+            "its own curve)"]
+
+
+def _log_half(interval95) -> float:
+    """Half the width of a log-normal 95 % interval on the log scale [-]."""
+    return 0.5 * float(np.log(interval95[1] / interval95[0]))
 
 
 #: Lowest state of charge [-] the estimates since the last slow full discharge must reach
