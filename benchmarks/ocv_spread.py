@@ -52,7 +52,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _machine import machine_line  # noqa: E402
+from _machine import machine_line, shared_data  # noqa: E402
 from dischargelab.logbook.estimates import PRIOR_CURVE_SD_CELL_V  # noqa: E402
 from dischargelab.ocv import GENERIC_OCV_SPREAD_V, OCV_SOC, generic_ocv  # noqa: E402
 
@@ -66,10 +66,6 @@ PUBLISHED = {"Chen2020": ("LG M50 (NMC811)", "li-ion"),
 
 #: The eVTOL lives' capacity tests: current [A] and shortest length [s].
 TEST_A, TEST_MIN_S = 0.6, 3 * 3600.0
-
-
-def shared_data() -> Path:
-    return Path(os.environ.get("DISCHARGELAB_SHARED_DATA", ROOT.parent / "shared" / "data"))
 
 
 def _on_grid(soc: np.ndarray, cell_V: np.ndarray) -> np.ndarray:

@@ -20,10 +20,9 @@ os.environ.setdefault("PYBAMM_DISABLE_TELEMETRY", "true")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 
-def test_the_spread_carried_is_the_cells_root_mean_square(shared_data, monkeypatch):
+def test_the_spread_carried_is_the_cells_root_mean_square(shared_data):
     import ocv_spread
 
-    monkeypatch.setenv("DISCHARGELAB_SHARED_DATA", str(shared_data))
     generic = ocv_spread.generic_ocv("li-ion")[0]
     deviations = [ocv_spread.vtc6_curve(shared_data / "cmu_evtol") - generic]
     deviations += [ocv_spread.published_curve(name) - generic

@@ -184,10 +184,17 @@ class OcvCurve:
         False, without ``cells_spread_V`` (for what an offset common to the pack's
         readings cancels in)."""
         var = float(self.sd_V) ** 2
-        for spread in (self.spread_V, self.cells_spread_V if cells_alike else None):
-            if spread is not None:
-                var += float(np.interp(soc, self.soc, spread)) ** 2
+        if self.spread_V is not None:
+            var += float(np.interp(soc, self.soc, self.spread_V)) ** 2
+        if cells_alike:
+            var += self.cells_sd_at(soc) ** 2
         return float(np.sqrt(var))
+
+    def cells_sd_at(self, soc: float) -> float:
+        """Real cells' spread about the curve per cell at ``soc`` [V] (0 without one)."""
+        if self.cells_spread_V is None:
+            return 0.0
+        return float(np.interp(soc, self.soc, self.cells_spread_V))
 
     @classmethod
     def unknown(cls) -> OcvCurve:
@@ -567,15 +574,19 @@ def cells_share(curve: OcvCurve, soc_read: list[float], swing: float) -> float:
     apart from another (the trend adds it once, through :func:`systematic_share`)."""
     if curve.cells_spread_V is None:
         return 0.0
-    var = sum((float(np.interp(s, curve.soc, curve.cells_spread_V))
-               / max(curve.slope(s), 1e-6)) ** 2 for s in soc_read)
+    var = sum((curve.cells_sd_at(s) / max(curve.slope(s), 1e-6)) ** 2 for s in soc_read)
     return float(np.sqrt(var) / max(abs(swing), 1e-9))
+
+
+def log_sd(interval95) -> float:
+    """Relative standard deviation of a log-normal 95 % interval ``[low, high]`` [-]."""
+    lo, hi = interval95
+    return float(np.log(hi / lo) / (2 * Z95))
 
 
 def widen(capacity_Ah: float, interval95: list, extra_share: float) -> list:
     """A log-normal 95 % interval with ``extra_share`` (relative sd) added in quadrature."""
-    lo, hi = interval95
-    rel = float(np.hypot(np.log(hi / lo) / (2 * Z95), extra_share))
+    rel = float(np.hypot(log_sd(interval95), extra_share))
     return [float(capacity_Ah * np.exp(-Z95 * rel)), float(capacity_Ah * np.exp(Z95 * rel))]
 
 
@@ -820,6 +831,6 @@ __all__ = ["step_resistance", "sample_noise", "regression_resistance",
            "soc_reading",
            "counted_charge", "sampling_figures", "charge_start_corrections",
            "capacity_between_rests", "systematic_share", "cells_share", "branch_sd_V",
-           "widen", "OCV_AGEING_SD",
+           "widen", "log_sd", "OCV_AGEING_SD",
            "resistance_at_reference", "MIN_SWING",
            "REFERENCE_TEMPERATURE_C", "REFERENCE_SOC", "FULL_SOC", "FULL_SOC_SD"]

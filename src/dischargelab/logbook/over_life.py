@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .estimates import Z95, log_sd
 from .health import DROP_METHOD, SHORT_REST_NOTE, EventHealth
 from .trend import Smoothed
 
@@ -265,8 +266,8 @@ def _generic_curve_notes(with_cap: list[EventHealth]) -> list[str]:
     """A note when estimates were read through a generic curve whose real cells scatter
     about it (their interval wider than their own: :attr:`EventHealth.own_interval95`):
     by how much, at the median estimate."""
-    shares = [np.sqrt(max(_log_half(e.capacity_interval95) ** 2
-                          - _log_half(e.own_interval95) ** 2, 0.0))
+    shares = [Z95 * np.sqrt(max(log_sd(e.capacity_interval95) ** 2
+                                - log_sd(e.own_interval95) ** 2, 0.0))
               for e in with_cap if e.capacity_own_interval95]
     if not shares:
         return []
@@ -274,11 +275,6 @@ def _generic_curve_notes(with_cap: list[EventHealth]) -> list[str]:
             f"real cells' curves scatter about it by +-{float(np.median(shares)):.0%} of the "
             "capacity (95 %), carried in the band (a slow full discharge of the pack reads "
             "its own curve)"]
-
-
-def _log_half(interval95) -> float:
-    """Half the width of a log-normal 95 % interval on the log scale [-]."""
-    return 0.5 * float(np.log(interval95[1] / interval95[0]))
 
 
 #: Lowest state of charge [-] the estimates since the last slow full discharge must reach
